@@ -1,0 +1,109 @@
+"""Action types (HighwayEnv style): each turns an agent's action into a ``Command``.
+
+Lateral decisions use the paper's sign: k = -1 change left, 0 stay, +1 change right.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from .config import ScenarioConfig
+
+LATERAL = (-1, 0, 1)  # paper's k; index i of a mask or a P-DQN head is LATERAL[i]
+DQN_LON_FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.0)  # of a_max, then (0.25, .5, .75, 1) of a_min
+
+
+@dataclass(frozen=True)
+class Command:
+    """What the agent asks for this step; None means 'leave it to SUMO'."""
+
+    accel: float | None  # [m/s^2] requested longitudinal acceleration
+    lateral: int | None  # requested k in {-1, 0, 1}
+    lc2013: bool  # whether LC2013 decides lane changes
+
+
+class ActionType:
+    name = ""
+    space: spaces.Space
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        self.cfg = cfg
+
+    def decode(self, action) -> Command:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class ParameterizedAction(ActionType):
+    """P-DQN action: (k index in {0,1,2}, accelerations for each k in [a_min, a_max]^3)."""
+
+    name = "parameterized"
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        super().__init__(cfg)
+        self.space = spaces.Tuple((
+            spaces.Discrete(3),
+            spaces.Box(cfg.a_min, cfg.a_max, shape=(3,), dtype=np.float32),
+        ))
+
+    def decode(self, action) -> Command:
+        k_idx, params = action
+        k_idx = int(k_idx)
+        return Command(float(np.clip(params[k_idx], self.cfg.a_min, self.cfg.a_max)), LATERAL[k_idx], False)
+
+
+def dqn_table(a_min: float, a_max: float) -> list[tuple[float, int]]:
+    """The paper's 27 actions: 9 accelerations crossed with k in {-1, 0, 1}, index = lon * 3 + lat."""
+    lon = [f * a_max for f in DQN_LON_FRACTIONS] + [f * a_min for f in (0.25, 0.5, 0.75, 1.0)]
+    return [(a, k) for a in lon for k in LATERAL]
+
+
+class Discrete27Action(ActionType):
+    name = "discrete27"
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        super().__init__(cfg)
+        self.table = dqn_table(cfg.a_min, cfg.a_max)
+        self.space = spaces.Discrete(len(self.table))
+
+    def decode(self, action) -> Command:
+        a, k = self.table[int(action)]
+        return Command(a, k, False)
+
+
+class LongitudinalAction(ActionType):
+    """Acceleration only; LC2013 makes the lane changes (DDPG+LC2013)."""
+
+    name = "longitudinal"
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        super().__init__(cfg)
+        self.space = spaces.Box(cfg.a_min, cfg.a_max, shape=(1,), dtype=np.float32)
+
+    def decode(self, action) -> Command:
+        return Command(float(np.clip(np.asarray(action).reshape(-1)[0], self.cfg.a_min, self.cfg.a_max)), None, True)
+
+
+class SumoAction(ActionType):
+    """No control: SUMO's Krauss + LC2013 drive (baselines). The single action is a no-op."""
+
+    name = "sumo"
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        super().__init__(cfg)
+        self.space = spaces.Discrete(1)
+
+    def decode(self, action) -> Command:
+        return Command(None, None, True)
+
+
+ACTION_TYPES: dict[str, type[ActionType]] = {
+    t.name: t for t in (ParameterizedAction, Discrete27Action, LongitudinalAction, SumoAction)
+}
+
+
+def make_action(name: str, cfg: ScenarioConfig) -> ActionType:
+    if name not in ACTION_TYPES:
+        raise ValueError(f"action={name!r} is not accepted; choose one of {', '.join(ACTION_TYPES)}")
+    return ACTION_TYPES[name](cfg)

@@ -1,0 +1,178 @@
+"""Typed, validated configuration for the corridor scenario, the EV, and the rewards.
+
+Every default is the paper's value (Table 3, section 5) or, where the paper is silent, the
+calibrated value documented in ``docs/calibration.md``. Units are in the field comments.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any, Mapping
+
+SIGNALS = ("coordinated", "uncoordinated")
+REWARDS = ("r1", "r2", "r")
+
+
+class ConfigError(ValueError):
+    """A config key or value that is not accepted; the message names the value and the range."""
+
+
+def _rng(lo: float | None, hi: float | None, *, lo_open: bool = False) -> dict[str, Any]:
+    return {"lo": lo, "hi": hi, "lo_open": lo_open}
+
+
+@dataclass(frozen=True)
+class EVParams:
+    """SUMO `Energy` model parameters of the ego EV (compact EV; calibrated, see docs)."""
+
+    mass: float = field(default=1450.0, metadata=_rng(500, 3500))  # [kg] curb + driver
+    front_surface_area: float = field(default=2.2, metadata=_rng(1.0, 4.0))  # [m^2]
+    air_drag_coefficient: float = field(default=0.28, metadata=_rng(0.15, 0.6))  # [-]
+    roll_drag_coefficient: float = field(default=0.01, metadata=_rng(0.004, 0.03))  # [-]
+    rotating_mass: float = field(default=40.0, metadata=_rng(0, 200))  # [kg]
+    radial_drag_coefficient: float = field(default=0.1, metadata=_rng(0, 1))  # [-]
+    constant_power_intake: float = field(default=300.0, metadata=_rng(0, 3000))  # [W] auxiliaries
+    propulsion_efficiency: float = field(default=0.9, metadata=_rng(0.5, 1.0))  # [-]
+    recuperation_efficiency: float = field(default=0.7, metadata=_rng(0.0, 1.0))  # [-]
+    maximum_power: float = field(default=80000.0, metadata=_rng(10000, 300000))  # [W]
+    battery_capacity: float = field(default=40000.0, metadata=_rng(1000, 200000))  # [Wh]
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Reward form and parameters (section 3, eq. 9-11; final choice of section 5.2)."""
+
+    form: str = field(default="r", metadata={"choices": REWARDS})  # r1 | r2 | r (composite)
+    phi: float = field(default=1.0, metadata=_rng(0.0, 100.0))  # [Wh/s] weight of travel time
+    speed_penalty: float = field(default=40.0, metadata=_rng(0.0, 1000.0))  # |r_p^s| per step
+    jerk_penalty: float = field(default=30.0, metadata=_rng(0.0, 1000.0))  # |r_p^j| per step
+    lane_change_penalty: float = field(default=50.0, metadata=_rng(0.0, 1000.0))  # |r_p^c| per change
+    speed_threshold: float = field(default=1.5, metadata=_rng(0.0, 20.0))  # v_zeta [m/s]
+    jerk_threshold: float = field(default=4.0, metadata=_rng(0.0, 100.0))  # j_zeta [m/s^3]
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """The corridor: geometry, signals, demand, ego, perception, limits."""
+
+    signals: str = field(default="coordinated", metadata={"choices": SIGNALS})
+    n_intersections: int = field(default=5, metadata=_rng(1, 10))  # [-]
+    spacing: float = field(default=440.0, metadata=_rng(100.0, 2000.0))  # [m] between stop lines
+    lanes: int = field(default=5, metadata=_rng(1, 6))  # [-] through lanes per direction
+    side_length: float = field(default=200.0, metadata=_rng(50.0, 1000.0))  # [m] side streets
+    speed_limit: float = field(default=50.0 / 3.6, metadata=_rng(5.0, 40.0))  # V_max [m/s]
+    cycle: float = field(default=90.0, metadata=_rng(30.0, 240.0))  # [s] signal cycle
+    main_green: float = field(default=42.0, metadata=_rng(5.0, 200.0))  # [s] arterial green
+    yellow: float = field(default=3.0, metadata=_rng(0.0, 10.0))  # [s]
+    arterial_flow: float = field(default=1000.0, metadata=_rng(0.0, 5000.0))  # [veh/h] W->E Poisson
+    opposing_flow: float = field(default=0.0, metadata=_rng(0.0, 5000.0))  # [veh/h] E->W Poisson
+    side_flow: float = field(default=60.0, metadata=_rng(0.0, 1000.0))  # [veh/h] per side approach
+    step_length: float = field(default=1.0, metadata=_rng(0.05, 2.0, lo_open=True))  # [s]
+    lane_change_duration: float = field(default=3.0, metadata=_rng(0.0, 10.0))  # T_c [s]
+    insert_min: float = field(default=150.0, metadata=_rng(0.0, 3600.0))  # [s] ego insertion U(lo,.)
+    insert_max: float = field(default=300.0, metadata=_rng(0.0, 3600.0))  # [s] ego insertion U(.,hi)
+    v2i_range: float = field(default=300.0, metadata=_rng(0.0, 2000.0))  # [m]
+    grid_ahead: float = field(default=50.0, metadata=_rng(1.0, 200.0))  # L_head [m]
+    grid_behind: float = field(default=10.0, metadata=_rng(0.0, 100.0))  # L_tail [m]
+    cell_length: float = field(default=1.0, metadata=_rng(0.1, 10.0, lo_open=True))  # L_c [m]
+    vehicle_length: float = field(default=5.0, metadata=_rng(2.0, 20.0))  # [m]
+    a_min: float = field(default=-4.0, metadata=_rng(-10.0, -0.1))  # [m/s^2] max deceleration
+    a_max: float = field(default=3.0, metadata=_rng(0.1, 10.0))  # [m/s^2] max acceleration
+    max_episode_time: float = field(default=900.0, metadata=_rng(10.0, 7200.0))  # [s] truncation
+    glosa: bool = False  # equip the ego with SUMO's GLOSA device (range = v2i_range)
+    ev: EVParams = field(default_factory=EVParams)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+
+    def __post_init__(self) -> None:
+        _validate(self)
+        if self.insert_min > self.insert_max:
+            raise ConfigError(f"insert_min={self.insert_min} must be <= insert_max={self.insert_max}")
+        if self.main_green + 2 * self.yellow >= self.cycle:
+            raise ConfigError(
+                f"main_green={self.main_green} + 2*yellow={2 * self.yellow} must be < cycle={self.cycle}"
+            )
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def grid_shape(self) -> tuple[int, int]:
+        """(cells along the road, lanes) of the occupancy grid."""
+        return (int(round((self.grid_ahead + self.grid_behind) / self.cell_length)), self.lanes)
+
+    @property
+    def offsets(self) -> list[float]:
+        """Signal offsets [s]: green wave (distance / speed limit) or all in sync."""
+        if self.signals == "uncoordinated":
+            return [0.0] * self.n_intersections
+        return [
+            round(math.fmod(k * self.spacing / self.speed_limit, self.cycle), 3)
+            for k in range(self.n_intersections)
+        ]
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def digest(self, keys: tuple[str, ...] | None = None) -> str:
+        d = self.to_dict()
+        if keys is not None:
+            d = {k: d[k] for k in keys}
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "ScenarioConfig":
+        return _from_dict(cls, data, "")
+
+    def replace(self, **overrides: Any) -> "ScenarioConfig":
+        d = self.to_dict()
+        d.update(overrides)
+        return ScenarioConfig.from_dict(d)
+
+
+def _from_dict(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{prefix or 'config'} must be a mapping, got {type(data).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(data) - set(known))
+    if unknown:
+        raise ConfigError(
+            f"unknown config key(s) {', '.join(prefix + k for k in unknown)}; accepted: {', '.join(sorted(known))}"
+        )
+    kwargs: dict[str, Any] = {}
+    for name, value in data.items():
+        sub = {"ev": EVParams, "reward": RewardConfig}.get(name) if cls is ScenarioConfig else None
+        if sub is not None and not isinstance(value, sub):
+            value = _from_dict(sub, value, f"{prefix}{name}.")
+        kwargs[name] = value
+    return cls(**kwargs)
+
+
+def _validate(obj: Any) -> None:
+    for f in fields(obj):
+        value = getattr(obj, f.name)
+        meta = f.metadata
+        name = f.name
+        if "choices" in meta:
+            if value not in meta["choices"]:
+                raise ConfigError(f"{name}={value!r} is not accepted; choose one of {', '.join(meta['choices'])}")
+            continue
+        if "lo" not in meta:
+            if f.type in ("bool",) and not isinstance(value, bool):
+                raise ConfigError(f"{name}={value!r} must be true or false")
+            continue
+        want_int = f.type == "int"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (want_int and not isinstance(value, int)):
+            raise ConfigError(f"{name}={value!r} must be {'an integer' if want_int else 'a number'}")
+        lo, hi = meta["lo"], meta["hi"]
+        bad = (not math.isfinite(value)) or (lo is not None and (value <= lo if meta["lo_open"] else value < lo))
+        bad = bad or (hi is not None and value > hi)
+        if bad:
+            lb = "(" if meta["lo_open"] else "["
+            raise ConfigError(f"{name}={value!r} is out of range; accepted: {lb}{lo}, {hi}]")

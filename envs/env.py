@@ -1,0 +1,197 @@
+"""EcoDrive-v0: one electric CV on the SUMO corridor, driven through a pluggable action type."""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import gymnasium as gym
+import numpy as np
+
+from . import rewards
+from .action import make_action
+from .config import ScenarioConfig
+from .observation import GridLogicObservation
+from .scenario import build
+from .sumo import SumoSession
+from .vehicle import ControlledVehicle, StepMeasure
+
+EGO_ID = "ego"
+SEED_BOUND = 2**31 - 1  # SUMO seeds are drawn in [0, SEED_BOUND)
+
+
+class EcoDriveEnv(gym.Env):
+    """An electric connected vehicle crossing five signalized intersections (SUMO, libsumo).
+
+    ## Observation space
+    ``Dict(grid=Box(0, 1, (60, 5)), logic=Box((9,)))``. ``grid`` is the occupancy grid from
+    10 m behind to 50 m ahead of the ego's front bumper in 1 m cells (row 0 farthest behind),
+    lane 0 rightmost; 0 = occupied, 1 = free. ``logic`` = [lane one-hot (5), distance to the
+    next stop line (m), speed (m/s), red flag, time to green (s)]; red flag and time to green
+    are -1 outside the 300 m V2I range. Raw units: agents normalise.
+
+    ## Action space
+    Set by ``action``: ``parameterized`` ``Tuple(Discrete(3), Box(-4, 3, (3,)))`` (k index,
+    acceleration per k), ``discrete27`` ``Discrete(27)``, ``longitudinal`` ``Box(-4, 3, (1,))``
+    (LC2013 changes lanes) or ``sumo`` ``Discrete(1)`` (SUMO drives). k = -1 left, 0 stay, +1 right.
+    Every request passes the safety layer: the acceleration is clipped to min(Krauss safe,
+    requested) with speed in [0, V_max]; a lane change LC2013 deems unsafe becomes 'stay'.
+    ``info["action_mask"]`` is the mask over k for the next step.
+
+    ## Reward
+    ``reward="r"`` (composite, eq. 11), ``"r2"`` (distance - phi energy) or ``"r1"`` (terminal
+    only); the parts come back in ``info["reward_components"]``.
+
+    ## Starting state
+    SUMO starts with a seed; background traffic runs until the ego's insertion time, drawn from
+    U(150 s, 300 s); the episode starts at the step the ego enters the arterial. Both draws come
+    from ``self.np_random`` unless ``options={"sumo_seed": s, "insert_time": t}`` fixes them.
+
+    ## Episode end
+    Terminates when the ego has left the last intersection (or left the simulation); truncated
+    after ``max_episode_time`` s. Collisions and teleports are counted in ``info``.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        signals: str = "coordinated",
+        action: str = "parameterized",
+        reward: str = "r",
+        config: ScenarioConfig | dict | None = None,
+        **overrides: Any,
+    ) -> None:
+        if isinstance(config, ScenarioConfig):
+            base = config.to_dict()
+        else:
+            base = dict(config or {})
+        base.setdefault("signals", signals)
+        base.setdefault("reward", {})
+        if isinstance(base["reward"], dict):
+            base["reward"] = {**base["reward"], "form": base["reward"].get("form", reward)}
+        base.update(overrides)
+        self.cfg = ScenarioConfig.from_dict(base)
+        self.files = build(self.cfg)
+        self.session = SumoSession(self.cfg, self.files)
+        self.obs_type = GridLogicObservation(self.cfg, self.files)
+        self.action_type = make_action(action, self.cfg)
+        self.observation_space = self.obs_type.space
+        self.action_space = self.action_type.space
+        self.ego: ControlledVehicle | None = None
+        self.recorder: Callable[[dict[str, Any]], None] | None = None
+        self.case: dict[str, float] = {}
+        self.t_depart = 0.0
+        self.collisions = 0  # involving the ego
+        self.teleports = 0  # of the ego
+        self.collisions_all = 0
+        self.teleports_all = 0
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        cfg = self.cfg
+        sumo_seed = int(options.get("sumo_seed", self.np_random.integers(0, SEED_BOUND)))
+        t_ins = float(options.get("insert_time", self.np_random.uniform(cfg.insert_min, cfg.insert_max)))
+        if not 0 <= t_ins <= 86400:
+            raise ValueError(f"insert_time={t_ins} is out of range; accepted: [0, 86400] s")
+        self.case = {"sumo_seed": sumo_seed, "insert_time": t_ins}
+        s = self.session
+        s.start(sumo_seed)
+        dt = cfg.step_length
+        s.step(np.ceil(t_ins / dt) * dt)
+        controlled = self.action_type.name != "sumo"
+        s.add_vehicle(EGO_ID, controlled=controlled, glosa=cfg.glosa)
+        if cfg.glosa:
+            s.set_param(EGO_ID, "device.glosa.range", f"{cfg.v2i_range:g}")
+        if self.action_type.name == "longitudinal":
+            s.lateral_to_sumo(EGO_ID, lc2013=True)
+        for _ in range(int(3600 / dt)):  # wait for a free insertion slot
+            s.step()
+            if EGO_ID in s.departed():
+                break
+        else:
+            raise RuntimeError(f"ego could not be inserted within 3600 s (case {self.case})")
+        self.t_depart = s.time()
+        self.collisions = self.teleports = self.collisions_all = self.teleports_all = 0
+        self.ego = ControlledVehicle(EGO_ID, s, self.obs_type, cfg)
+        obs = self.ego.observe()
+        info = self._info(None, {}, 0.0)
+        if self.recorder is not None:
+            self.recorder(self._record(obs, None, None, 0.0, {}, info))
+        return obs, info
+
+    def step(self, action):
+        if self.ego is None:
+            raise RuntimeError("call reset() before step()")
+        s, ego = self.session, self.ego
+        cmd = self.action_type.decode(action)
+        ego.apply(cmd)
+        s.step()
+        for collider, victim in s.collisions():
+            self.collisions_all += 1
+            self.collisions += EGO_ID in (collider, victim)
+        tel = s.teleports()
+        self.teleports_all += len(tel)
+        self.teleports += EGO_ID in tel
+        gone = EGO_ID in s.arrived() or EGO_ID not in s.vehicle_ids()
+        if gone:
+            m = StepMeasure(cmd.accel or 0.0, cmd.lateral or 0, 0.0, 0, False, False, 0.0, 0.0, 0.0, 0.0)
+            terminated = True
+        else:
+            m = ego.measure()
+            terminated = ego.kin[6] == self.files.exit_edge
+        travel_time = s.time() - self.t_depart
+        truncated = not terminated and travel_time >= self.cfg.max_episode_time
+        r, comps = rewards.reward(
+            self.cfg.reward, speed=m.speed, jerk=m.jerk, lane_changed=m.lane_changed, distance=m.distance,
+            energy=m.energy, terminated=terminated, total_energy=ego.energy, travel_time=travel_time,
+        )
+        obs = self._last_obs if gone else ego.observe()
+        self._last_obs = obs
+        info = self._info(m, comps, travel_time)
+        info["ego_left_simulation"] = gone
+        if self.recorder is not None:
+            self.recorder(self._record(obs, m, action, r, comps, info))
+        return obs, float(r), bool(terminated), bool(truncated), info
+
+    def close(self) -> None:
+        self.session.close()
+        super().close()
+
+    # ------------------------------------------------------------------ helpers
+    def _info(self, m: StepMeasure | None, comps: dict, travel_time: float) -> dict[str, Any]:
+        ego = self.ego
+        assert ego is not None
+        return {
+            "action_mask": ego.mask.copy(),
+            "time": self.session.time(),
+            "travel_time": travel_time,
+            "energy": ego.energy,
+            "energy_step": 0.0 if m is None else m.energy,
+            "requested": None if m is None else (m.requested_lateral, m.requested_accel),
+            "applied": None if m is None else (m.applied_lateral, m.applied_accel),
+            "clipped": False if m is None else m.clipped,
+            "jerk": 0.0 if m is None else m.jerk,
+            "lane_changes": ego.lane_changes,
+            "clips": ego.clips,
+            "reward_components": comps,
+            "collisions": self.collisions,
+            "teleports": self.teleports,
+            "collisions_all": self.collisions_all,
+            "teleports_all": self.teleports_all,
+            "case": dict(self.case),
+        }
+
+    def _record(self, obs, m, action, r, comps, info) -> dict[str, Any]:
+        """Everything the step logger writes (only built when a recorder is attached)."""
+        ego = self.ego
+        x, y, angle, speed, accel, lane, edge = ego.kin
+        sig = ego.signal
+        return {
+            "time": info["time"], "x": x, "y": y, "angle": angle, "speed": speed, "accel": accel,
+            "lane": lane, "edge": edge, "obs": obs, "measure": m, "reward": r, "components": comps,
+            "info": info, "signal": sig, "others": ego.others,
+            "tls_states": self.session.signal_states(self.files.tls_ids),
+        }
+
+    _last_obs: dict[str, np.ndarray] = {}

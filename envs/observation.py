@@ -1,0 +1,119 @@
+"""Observation type: the paper's occupancy grid plus logic vector (section 3.2).
+
+``occupancy_grid`` and ``logic_vector`` are pure functions of arrays; ``GridLogicObservation``
+gathers those arrays from the SUMO session for any vehicle ID.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from .config import ScenarioConfig
+from .scenario import LANE_WIDTH, ScenarioFiles
+from .sumo import VAR_ANGLE, VAR_LENGTH, VAR_POSITION, SumoSession
+
+NO_V2I = -1.0  # red flag and time to green outside V2I range (paper)
+HEADING_EAST = 90.0  # [deg] SUMO angle of W->E travel
+CROSS_HALF_LENGTH = 1.0  # [m] footprint half-length of a crossing vehicle along the arterial
+_RED = frozenset("rRyYu")
+
+
+def occupancy_grid(
+    ego_x: float, others: np.ndarray, lane_y: np.ndarray, cfg: ScenarioConfig
+) -> np.ndarray:
+    """Grid of shape (rows, lanes); row 0 is ``grid_behind`` m behind the ego's front bumper,
+    the last row ``grid_ahead`` m ahead; lane 0 is the rightmost. 1 = free, 0 = occupied.
+
+    ``others``: (N, 4) array of [x, y, angle (deg), length (m)] of the other vehicles (front
+    bumper positions, as SUMO reports them).
+    """
+    rows, lanes = cfg.grid_shape
+    grid = np.ones((rows, lanes), dtype=np.float32)
+    if len(others) == 0:
+        return grid
+    x, y, angle, length = others.T
+    dy = np.abs(y[:, None] - lane_y[None, :])
+    lane = dy.argmin(axis=1)
+    on_lane = dy[np.arange(len(y)), lane] <= LANE_WIDTH / 2
+    east = np.abs(((angle - HEADING_EAST) + 180.0) % 360.0 - 180.0) < 45.0
+    front = np.where(east, x, x + CROSS_HALF_LENGTH)
+    back = np.where(east, x - length, x - CROSS_HALF_LENGTH)
+    lo = np.floor((back - ego_x + cfg.grid_behind) / cfg.cell_length).astype(np.int64)
+    hi = np.ceil((front - ego_x + cfg.grid_behind) / cfg.cell_length).astype(np.int64)
+    lo = np.clip(lo, 0, rows)
+    hi = np.clip(hi, 0, rows)
+    for i in np.flatnonzero(on_lane & (hi > lo)):
+        grid[lo[i]:hi[i], lane[i]] = 0.0
+    return grid
+
+
+def logic_vector(
+    lane: int, lanes: int, distance: float, speed: float, red: float, time_to_green: float
+) -> np.ndarray:
+    """[lane one-hot (lanes), distance to next stop line [m], speed [m/s], red flag, time to green [s]]."""
+    vec = np.zeros(lanes + 4, dtype=np.float32)
+    if 0 <= lane < lanes:
+        vec[lane] = 1.0
+    vec[lanes:] = (distance, speed, red, time_to_green)
+    return vec
+
+
+@dataclass
+class SignalView:
+    """What V2I tells the vehicle about its next signal (None fields outside the network)."""
+
+    tls: str
+    link: int
+    distance: float  # [m] to the stop line
+    state: str  # SUMO state char of the vehicle's link
+    in_range: bool
+    red: float  # 1 red / 0 green / -1 unknown (out of V2I range)
+    time_to_green: float  # [s]; -1 out of V2I range
+
+
+class GridLogicObservation:
+    """Dict observation {"grid": (rows, lanes) in {0,1}, "logic": (lanes + 4,)}."""
+
+    def __init__(self, cfg: ScenarioConfig, files: ScenarioFiles) -> None:
+        self.cfg = cfg
+        self.lane_y = np.asarray(files.lane_y, dtype=np.float64)
+        rows, lanes = cfg.grid_shape
+        d_max = cfg.spacing * 2 + cfg.side_length  # generous bound on distance to the next stop line
+        low = np.array([0.0] * lanes + [0.0, 0.0, -1.0, -1.0], dtype=np.float32)
+        high = np.array([1.0] * lanes + [d_max, cfg.speed_limit * 1.5, 1.0, cfg.cycle], dtype=np.float32)
+        self.space = spaces.Dict({
+            "grid": spaces.Box(0.0, 1.0, shape=(rows, lanes), dtype=np.float32),
+            "logic": spaces.Box(low, high, dtype=np.float32),
+        })
+        self._low, self._high = low, high
+
+    def signal(self, session: SumoSession, vid: str) -> SignalView | None:
+        nxt = session.next_signal(vid)
+        if nxt is None:
+            return None
+        tls, link, dist, state = nxt
+        if dist > self.cfg.v2i_range:
+            return SignalView(tls, link, dist, state, False, NO_V2I, NO_V2I)
+        red = 1.0 if state in _RED else 0.0
+        ttg = session.time_to_green(tls, link) if red else 0.0
+        return SignalView(tls, link, dist, state, True, red, ttg)
+
+    def observe(
+        self, session: SumoSession, vid: str, kin: tuple, neighbours: dict
+    ) -> tuple[dict[str, np.ndarray], SignalView | None, np.ndarray]:
+        """Observation of ``vid``; also returns its signal view and the others' array."""
+        x, _, _, speed, _, lane, _ = kin
+        others = np.array(
+            [(*v[VAR_POSITION], v[VAR_ANGLE], v[VAR_LENGTH]) for k, v in neighbours.items() if k != vid],
+            dtype=np.float64,
+        ).reshape(-1, 4)
+        grid = occupancy_grid(x, others, self.lane_y, self.cfg)
+        sig = self.signal(session, vid)
+        if sig is None:
+            logic = logic_vector(lane, self.cfg.lanes, 0.0, speed, NO_V2I, NO_V2I)
+        else:
+            logic = logic_vector(lane, self.cfg.lanes, sig.distance, speed, sig.red, sig.time_to_green)
+        np.clip(logic, self._low, self._high, out=logic)
+        return {"grid": grid, "logic": logic}, sig, others

@@ -1,0 +1,228 @@
+"""Builds the corridor (network, signal programs, demand) from a config with SUMO's netconvert.
+
+Files go to a cache folder keyed by a digest of every input, so a build is done once per
+config and is deterministic. Nothing here starts a simulation.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+from .config import ScenarioConfig
+
+EGO_TYPE = "ev"  # vType of the controlled / measured vehicle
+HDV_TYPE = "hdv"  # vType of human-driven background vehicles (Krauss + LC2013, SUMO defaults)
+EGO_ROUTE = "arterial"  # route id W -> E along the whole arterial
+LANE_WIDTH = 3.2  # [m] SUMO default lane width
+BUILD_VERSION = 3  # bump when the generated files change meaning
+
+
+@dataclass(frozen=True)
+class ScenarioFiles:
+    """Paths of a built scenario and the geometry the observation needs."""
+
+    folder: Path
+    net: Path
+    routes: Path
+    additional: Path
+    arterial_edges: tuple[str, ...]  # W->E edges, first is the insertion edge
+    exit_edge: str  # reaching this edge means the ego left the last intersection
+    stop_lines: tuple[float, ...]  # [m] x of each W->E stop line
+    junction_x: tuple[float, ...]  # [m] x of each junction centre
+    tls_ids: tuple[str, ...]
+    lane_y: tuple[float, ...]  # [m] y of each W->E lane centre, index 0 = rightmost
+
+
+def cache_root() -> Path:
+    env = os.environ.get("ECODRIVE_CACHE")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parent.parent / ".cache" / "scenarios"
+
+
+def _sumo_version() -> str:
+    import sumolib  # noqa: PLC0415  (sumolib is pure Python; libsumo stays in envs.sumo)
+
+    return str(getattr(sumolib, "__version__", "unknown"))
+
+
+def _netconvert() -> str:
+    import sumolib  # noqa: PLC0415
+
+    return sumolib.checkBinary("netconvert")
+
+
+def build(cfg: ScenarioConfig) -> ScenarioFiles:
+    """Return the scenario files for ``cfg``, building them into the cache if needed."""
+    key_fields = {k: v for k, v in cfg.to_dict().items() if k not in ("reward", "max_episode_time", "glosa")}
+    key_fields["_build"] = BUILD_VERSION
+    key_fields["_sumo"] = _sumo_version()
+    import hashlib
+
+    digest = hashlib.sha256(json.dumps(key_fields, sort_keys=True).encode()).hexdigest()[:16]
+    folder = cache_root() / digest
+    if not (folder / "done").exists():
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{digest}-", dir=folder.parent))
+        try:
+            _write_all(cfg, tmp)
+            (tmp / "config.json").write_text(json.dumps(key_fields, indent=1, sort_keys=True))
+            (tmp / "done").write_text("ok\n")
+            try:
+                os.rename(tmp, folder)
+            except OSError:  # another process finished the same build first
+                if not (folder / "done").exists():
+                    raise
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return _files(cfg, folder)
+
+
+def _files(cfg: ScenarioConfig, folder: Path) -> ScenarioFiles:
+    n = cfg.n_intersections
+    arterial = tuple(_art_edge(k) for k in range(n + 1))
+    meta = json.loads((folder / "geometry.json").read_text())
+    return ScenarioFiles(
+        folder=folder,
+        net=folder / "corridor.net.xml",
+        routes=folder / "corridor.rou.xml",
+        additional=folder / "signals.add.xml",
+        arterial_edges=arterial,
+        exit_edge=arterial[-1],
+        stop_lines=tuple(meta["stop_lines"]),
+        junction_x=tuple(meta["junction_x"]),
+        tls_ids=tuple(f"J{k}" for k in range(1, n + 1)),
+        lane_y=tuple(meta["lane_y"]),
+    )
+
+
+def _node(k: int, n: int) -> str:
+    return "W" if k == 0 else ("E" if k == n + 1 else f"J{k}")
+
+
+def _art_edge(k: int, n: int | None = None) -> str:
+    """W->E edge from node k to node k+1 (k = 0 is the insertion edge)."""
+    return f"A{k}"
+
+
+def _write_all(cfg: ScenarioConfig, out: Path) -> None:
+    n = cfg.n_intersections
+    nodes = ET.Element("nodes")
+    for k in range(n + 2):
+        ET.SubElement(nodes, "node", id=_node(k, n), x=f"{k * cfg.spacing:.2f}", y="0",
+                      type="traffic_light" if 1 <= k <= n else "priority")
+    for k in range(1, n + 1):
+        x = f"{k * cfg.spacing:.2f}"
+        ET.SubElement(nodes, "node", id=f"N{k}", x=x, y=f"{cfg.side_length:.2f}", type="priority")
+        ET.SubElement(nodes, "node", id=f"S{k}", x=x, y=f"{-cfg.side_length:.2f}", type="priority")
+    edges = ET.Element("edges")
+    v = f"{cfg.speed_limit:.4f}"
+    for k in range(n + 1):
+        a, b = _node(k, n), _node(k + 1, n)
+        ET.SubElement(edges, "edge", id=f"A{k}", attrib={"from": a, "to": b}, numLanes=str(cfg.lanes), speed=v)
+        ET.SubElement(edges, "edge", id=f"B{k}", attrib={"from": b, "to": a}, numLanes=str(cfg.lanes), speed=v)
+    for k in range(1, n + 1):
+        for side in ("N", "S"):
+            ET.SubElement(edges, "edge", id=f"{side}{k}in", attrib={"from": f"{side}{k}", "to": f"J{k}"}, numLanes="1", speed=v)
+            ET.SubElement(edges, "edge", id=f"{side}{k}out", attrib={"from": f"J{k}", "to": f"{side}{k}"}, numLanes="1", speed=v)
+    _write_xml(nodes, out / "corridor.nod.xml")
+    _write_xml(edges, out / "corridor.edg.xml")
+    cmd = [
+        _netconvert(), "-n", str(out / "corridor.nod.xml"), "-e", str(out / "corridor.edg.xml"),
+        "-o", str(out / "corridor.net.xml"), "--tls.cycle.time", f"{cfg.cycle:g}",
+        "--tls.yellow.time", f"{cfg.yellow:g}", "--tls.default-type", "static",
+        "--no-turnarounds", "true", "--no-internal-links", "false", "--output.street-names", "false",
+        "--default.lanewidth", f"{LANE_WIDTH}", "--junctions.corner-detail", "0",
+        "--no-warnings", "true", "--seed", "42",
+    ]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise RuntimeError(f"netconvert failed ({res.returncode}): {res.stderr.strip()[:2000]}")
+    net = ET.parse(out / "corridor.net.xml").getroot()
+    _write_signals(cfg, net, out / "signals.add.xml")
+    _write_routes(cfg, out / "corridor.rou.xml")
+    junction_x = [float(net.find(f"./junction[@id='J{k}']").get("x")) for k in range(1, n + 1)]
+    stop_lines = []
+    for k in range(n):
+        lane = net.find(f"./edge[@id='A{k}']/lane")
+        stop_lines.append(float(lane.get("shape").split()[-1].split(",")[0]))
+    lane_y = [float(l.get("shape").split()[0].split(",")[1]) for l in net.findall("./edge[@id='A0']/lane")]
+    (out / "geometry.json").write_text(json.dumps({"junction_x": junction_x, "stop_lines": stop_lines,
+                                                   "lane_y": lane_y}))
+
+
+def _write_signals(cfg: ScenarioConfig, net: ET.Element, path: Path) -> None:
+    """Copy netconvert's phase states, set the 90 s plan and each junction's offset."""
+    add = ET.Element("additional")
+    side_green = cfg.cycle - cfg.main_green - 2 * cfg.yellow
+    for k, offset in enumerate(cfg.offsets, start=1):
+        tl = net.find(f"./tlLogic[@id='J{k}']")
+        if tl is None:
+            raise RuntimeError(f"netconvert produced no traffic light at J{k}")
+        phases = tl.findall("phase")
+        states = [p.get("state") for p in phases]
+        through = net.find(f"./connection[@from='A{k - 1}'][@to='A{k}']")
+        if through is None or states[0][int(through.get("linkIndex"))] not in "gG":
+            raise RuntimeError(f"phase 0 at J{k} is not the arterial green: {states}")
+        if len(states) != 4:
+            raise RuntimeError(f"expected a 4-phase plan at J{k}, netconvert made {states}")
+        logic = ET.SubElement(add, "tlLogic", id=f"J{k}", type="static", programID=cfg.signals,
+                              offset=f"{offset:g}")
+        for state, dur in zip(states, (cfg.main_green, cfg.yellow, side_green, cfg.yellow)):
+            ET.SubElement(logic, "phase", duration=f"{dur:g}", state=state)
+    _write_xml(add, path)
+
+
+def _ev_params(cfg: ScenarioConfig) -> dict[str, str]:
+    ev = cfg.ev
+    return {
+        "frontSurfaceArea": ev.front_surface_area, "airDragCoefficient": ev.air_drag_coefficient,
+        "rollDragCoefficient": ev.roll_drag_coefficient, "rotatingMass": ev.rotating_mass,
+        "radialDragCoefficient": ev.radial_drag_coefficient, "constantPowerIntake": ev.constant_power_intake,
+        "propulsionEfficiency": ev.propulsion_efficiency, "recuperationEfficiency": ev.recuperation_efficiency,
+        "maximumPower": ev.maximum_power,
+    }
+
+
+def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
+    n = cfg.n_intersections
+    root = ET.Element("routes")
+    for vid, attrs in (
+        (HDV_TYPE, {"length": f"{cfg.vehicle_length:g}"}),
+        (EGO_TYPE, {"length": f"{cfg.vehicle_length:g}", "accel": f"{cfg.a_max:g}", "decel": f"{-cfg.a_min:g}",
+                    "maxSpeed": f"{cfg.speed_limit:.4f}", "speedFactor": "1", "speedDev": "0"}),
+    ):
+        vt = ET.SubElement(root, "vType", id=vid, emissionClass="Energy/unknown", mass=f"{cfg.ev.mass:g}", **attrs)
+        for key, val in _ev_params(cfg).items():
+            ET.SubElement(vt, "param", key=key, value=f"{val:g}")
+        if vid == EGO_TYPE:
+            for key, val in (("has.battery.device", "true"),
+                             ("device.battery.capacity", f"{cfg.ev.battery_capacity:g}"),
+                             ("device.battery.chargeLevel", f"{0.8 * cfg.ev.battery_capacity:g}")):
+                ET.SubElement(vt, "param", key=key, value=val)
+    ET.SubElement(root, "route", id=EGO_ROUTE, edges=" ".join(f"A{k}" for k in range(n + 1)))
+    flows = []
+    if cfg.arterial_flow > 0:
+        flows.append(("art", "A0", f"A{n}", cfg.arterial_flow, str(cfg.lanes)))
+    if cfg.opposing_flow > 0:
+        flows.append(("opp", f"B{n}", "B0", cfg.opposing_flow, str(cfg.lanes)))
+    if cfg.side_flow > 0:
+        for k in range(1, n + 1):
+            flows.append((f"n{k}", f"N{k}in", f"S{k}out", cfg.side_flow, "1"))
+            flows.append((f"s{k}", f"S{k}in", f"N{k}out", cfg.side_flow, "1"))
+    for fid, src, dst, vph, _ in flows:
+        ET.SubElement(root, "flow", id=fid, type=HDV_TYPE, begin="0", end="86400",
+                      period=f"exp({vph / 3600.0:.6f})", departLane="random", departSpeed="max",
+                      attrib={"from": src, "to": dst})
+    _write_xml(root, path)
+
+
+def _write_xml(root: ET.Element, path: Path) -> None:
+    ET.indent(root)
+    path.write_bytes(ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n")

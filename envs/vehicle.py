@@ -1,0 +1,96 @@
+"""Per-vehicle control core: observe, apply a command through the safety layer, measure.
+
+It works for any vehicle ID, so the single-agent env drives one of these and a mixed-traffic
+run drives hundreds with one policy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import safety
+from .action import Command
+from .config import ScenarioConfig
+from .observation import GridLogicObservation, SignalView
+from .sumo import SumoSession
+
+
+@dataclass
+class StepMeasure:
+    """What happened to one vehicle over one simulation step."""
+
+    requested_accel: float  # [m/s^2]; nan under SUMO control
+    requested_lateral: int  # paper k; 0 under SUMO control
+    applied_accel: float  # [m/s^2]
+    applied_lateral: int  # k after the mask (SUMO's own change under LC2013)
+    clipped: bool
+    lane_changed: bool
+    distance: float  # [m]
+    energy: float  # [Wh]
+    jerk: float  # [m/s^3]
+    speed: float  # [m/s] after the step
+
+
+@dataclass
+class ControlledVehicle:
+    vid: str
+    session: SumoSession
+    obs_type: GridLogicObservation
+    cfg: ScenarioConfig
+    mask: np.ndarray = field(default_factory=lambda: np.ones(3, dtype=np.int8))
+    kin: tuple = ()
+    signal: SignalView | None = None
+    others: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    energy: float = 0.0  # [Wh] cumulative
+    lane_changes: int = 0
+    clips: int = 0
+    _prev_accel: float = 0.0
+    _pending: tuple = ()
+
+    def observe(self) -> dict[str, np.ndarray]:
+        s = self.session
+        self.kin = s.kinematics(self.vid)
+        obs, self.signal, self.others = self.obs_type.observe(s, self.vid, self.kin, s.neighbours(self.vid))
+        lane = self.kin[5]
+        self.mask = safety.lane_mask(lane, self.cfg.lanes, s.could_change(self.vid, 1), s.could_change(self.vid, -1))
+        return obs
+
+    def apply(self, cmd: Command) -> None:
+        """Send ``cmd`` to SUMO for the coming step (call ``observe`` first)."""
+        s, cfg = self.session, self.cfg
+        speed = self.kin[3]
+        lateral = 0
+        if cmd.lateral is not None:
+            lateral = safety.mask_lateral(cmd.lateral, self.mask)
+            if lateral:
+                s.change_lane(self.vid, safety.paper_to_sumo(lateral))
+        if cmd.accel is not None:
+            s.set_speed(self.vid, safety.target_speed(speed, cmd.accel, cfg.step_length, cfg.speed_limit))
+        self._pending = (cmd, lateral, speed, self.kin[5], self.kin[0])
+
+    def measure(self) -> StepMeasure:
+        """Read back the step just simulated (call after ``session.step``)."""
+        s, cfg = self.session, self.cfg
+        cmd, lateral, v0, lane0, x0 = self._pending
+        kin = s.kinematics(self.vid)
+        dt = cfg.step_length
+        applied = safety.applied_acceleration(v0, kin[3], dt)
+        clipped = cmd.accel is not None and safety.was_clipped(cmd.accel, applied, v0, dt, cfg.speed_limit)
+        lane_changed = kin[5] != lane0 and kin[6][:1] != ":" and kin[6] != ""
+        if cmd.lateral is None and lane_changed:
+            lateral = -int(np.sign(kin[5] - lane0))  # SUMO lane index grows to the left
+        energy = s.energy_rate(self.vid) * dt
+        self.energy += energy
+        self.lane_changes += bool(lateral) or (cmd.lateral is None and lane_changed)
+        self.clips += clipped
+        jerk = (applied - self._prev_accel) / dt
+        self._prev_accel = applied
+        self.kin = kin
+        return StepMeasure(
+            requested_accel=float("nan") if cmd.accel is None else cmd.accel,
+            requested_lateral=0 if cmd.lateral is None else cmd.lateral,
+            applied_accel=applied, applied_lateral=lateral, clipped=bool(clipped),
+            lane_changed=bool(lateral) or lane_changed, distance=max(0.0, kin[0] - x0),
+            energy=energy, jerk=jerk, speed=kin[3],
+        )
