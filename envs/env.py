@@ -101,8 +101,6 @@ class EcoDriveEnv(gym.Env):
         s.step(np.ceil(t_ins / dt) * dt)
         controlled = self.action_type.name != "sumo"
         s.add_vehicle(EGO_ID, controlled=controlled, glosa=cfg.glosa)
-        if cfg.glosa:
-            s.set_param(EGO_ID, "device.glosa.range", f"{cfg.v2i_range:g}")
         if self.action_type.name == "longitudinal":
             s.lateral_to_sumo(EGO_ID, lc2013=True)
         for _ in range(int(3600 / dt)):  # wait for a free insertion slot
@@ -168,7 +166,7 @@ class EcoDriveEnv(gym.Env):
             "travel_time": travel_time,
             "energy": ego.energy,
             "energy_step": 0.0 if m is None else m.energy,
-            "requested": None if m is None else (m.requested_lateral, m.requested_accel),
+            "requested": None if m is None or np.isnan(m.requested_accel) else (m.requested_lateral, m.requested_accel),
             "applied": None if m is None else (m.applied_lateral, m.applied_accel),
             "clipped": False if m is None else m.clipped,
             "jerk": 0.0 if m is None else m.jerk,

@@ -17,10 +17,11 @@ from pathlib import Path
 from .config import ScenarioConfig
 
 EGO_TYPE = "ev"  # vType of the controlled / measured vehicle
+GLOSA_TYPE = "ev_glosa"  # the same EV with SUMO's GLOSA device (range = V2I range)
 HDV_TYPE = "hdv"  # vType of human-driven background vehicles (Krauss + LC2013, SUMO defaults)
 EGO_ROUTE = "arterial"  # route id W -> E along the whole arterial
 LANE_WIDTH = 3.2  # [m] SUMO default lane width
-BUILD_VERSION = 3  # bump when the generated files change meaning
+BUILD_VERSION = 4  # bump when the generated files change meaning
 
 
 @dataclass(frozen=True)
@@ -193,15 +194,17 @@ def _ev_params(cfg: ScenarioConfig) -> dict[str, str]:
 def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
     n = cfg.n_intersections
     root = ET.Element("routes")
-    for vid, attrs in (
-        (HDV_TYPE, {"length": f"{cfg.vehicle_length:g}"}),
-        (EGO_TYPE, {"length": f"{cfg.vehicle_length:g}", "accel": f"{cfg.a_max:g}", "decel": f"{-cfg.a_min:g}",
-                    "maxSpeed": f"{cfg.speed_limit:.4f}", "speedFactor": "1", "speedDev": "0"}),
-    ):
+    ego_attrs = {"length": f"{cfg.vehicle_length:g}", "accel": f"{cfg.a_max:g}", "decel": f"{-cfg.a_min:g}",
+                 "maxSpeed": f"{cfg.speed_limit:.4f}", "speedFactor": "1", "speedDev": "0"}
+    for vid, attrs in ((HDV_TYPE, {"length": f"{cfg.vehicle_length:g}"}), (EGO_TYPE, ego_attrs),
+                       (GLOSA_TYPE, ego_attrs)):
         vt = ET.SubElement(root, "vType", id=vid, emissionClass="Energy/unknown", mass=f"{cfg.ev.mass:g}", **attrs)
         for key, val in _ev_params(cfg).items():
             ET.SubElement(vt, "param", key=key, value=f"{val:g}")
-        if vid == EGO_TYPE:
+        if vid == GLOSA_TYPE:
+            ET.SubElement(vt, "param", key="has.glosa.device", value="true")
+            ET.SubElement(vt, "param", key="device.glosa.range", value=f"{cfg.v2i_range:g}")
+        if vid != HDV_TYPE:
             for key, val in (("has.battery.device", "true"),
                              ("device.battery.capacity", f"{cfg.ev.battery_capacity:g}"),
                              ("device.battery.chargeLevel", f"{0.8 * cfg.ev.battery_capacity:g}")):

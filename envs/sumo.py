@@ -12,7 +12,7 @@ import libsumo as ls
 from libsumo import constants as tc
 
 from .config import ScenarioConfig
-from .scenario import EGO_ROUTE, EGO_TYPE, ScenarioFiles
+from .scenario import EGO_ROUTE, EGO_TYPE, GLOSA_TYPE, ScenarioFiles
 
 _ACTIVE: "SumoSession | None" = None
 # context-subscription variables, as keys of ``neighbours()`` results
@@ -113,9 +113,8 @@ class SumoSession:
     # ------------------------------------------------------------------ vehicles
     def add_vehicle(self, vid: str, controlled: bool, glosa: bool = False) -> None:
         """Insert a vehicle of the EV type at the arterial's start, now."""
-        ls.vehicle.add(vid, EGO_ROUTE, typeID=EGO_TYPE, depart="now", departLane="best", departSpeed="max")
-        if glosa:
-            ls.vehicle.setParameter(vid, "has.glosa.device", "true")
+        vtype = GLOSA_TYPE if glosa else EGO_TYPE
+        ls.vehicle.add(vid, EGO_ROUTE, typeID=vtype, depart="now", departLane="best", departSpeed="max")
         ls.vehicle.subscribeContext(
             vid, tc.CMD_GET_VEHICLE_VARIABLE, self._context_range,
             [VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED],
@@ -155,10 +154,6 @@ class SumoSession:
         g = ls.vehicle.getParameter
         return (float(g(vid, "device.battery.totalEnergyConsumed")),
                 float(g(vid, "device.battery.totalEnergyRegenerated")))
-
-    @staticmethod
-    def set_param(vid: str, key: str, value: str) -> None:
-        ls.vehicle.setParameter(vid, key, value)
 
     @staticmethod
     def set_speed(vid: str, speed: float) -> None:

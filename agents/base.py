@@ -1,0 +1,43 @@
+"""The ``Agent`` protocol shared by the baselines and the learning agents.
+
+Agents see gymnasium spaces and numpy arrays only, never SUMO.
+"""
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+
+@runtime_checkable
+class Agent(Protocol):
+    name: str
+    action_interface: str  # the env's ``action=`` this agent drives: parameterized | discrete27 | longitudinal | sumo
+    env_overrides: dict[str, Any]  # scenario config overrides the agent needs (e.g. {"glosa": True})
+
+    def act(self, obs: dict[str, np.ndarray], info: dict[str, Any], explore: bool = False) -> Any:
+        """Action for ``obs``; ``info["action_mask"]`` masks the lateral choice."""
+
+    def observe(self, obs, action, reward: float, next_obs, terminated: bool, truncated: bool,
+                info: dict[str, Any]) -> dict[str, float]:
+        """Take one transition (learners store and update); returns training metrics."""
+
+    def state_dict(self) -> dict[str, Any]:
+        ...
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        ...
+
+
+class _NoLearning:
+    """Shared no-op learning half of the rule-based agents."""
+
+    def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
+        return {}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"name": self.name}  # type: ignore[attr-defined]
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state.get("name") != self.name:  # type: ignore[attr-defined]
+            raise ValueError(f"state is for agent {state.get('name')!r}, not {self.name!r}")  # type: ignore[attr-defined]

@@ -1,0 +1,93 @@
+"""Run one episode of an agent on a fixed case, optionally logging every step to MCAP."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agents.base import Agent
+from envs.env import EcoDriveEnv
+from envs.sumo import sumo_version
+
+from .cases import Case
+from .mcaplog import EpisodeLog, meta_json
+from .provenance import git_sha, package_versions
+
+STOP_SPEED = 0.1  # [m/s] below this the ego counts as stopped
+
+
+def make_env(agent: Agent, signals: str, config: dict[str, Any] | None = None) -> EcoDriveEnv:
+    cfg = dict(config or {})
+    cfg.update(agent.env_overrides)
+    env = gym.make("EcoDrive-v0", signals=signals, action=agent.action_interface, config=cfg)
+    return env.unwrapped  # the harness steps the raw env: no wrappers in the timed loop
+
+
+def run_episode(
+    env: EcoDriveEnv, agent: Agent, case: Case, method: str, log_path: Path | None = None,
+    agent_sha256: str = "",
+) -> dict[str, Any]:
+    """Greedy episode of ``agent`` on ``case``; returns the summary row (also the /episode record)."""
+    log = None
+    if log_path is not None:
+        meta = {
+            "config_json": meta_json(env.cfg.to_dict()), "method": method, "signals": env.cfg.signals,
+            "case_index": case.index, "sumo_seed": case.sumo_seed, "insert_time": case.insert_time,
+            "sumo_version": sumo_version(), "git_sha": git_sha(), "packages_json": meta_json(package_versions()),
+            "agent_sha256": agent_sha256,
+        }
+        log = EpisodeLog(log_path, meta)
+        env.recorder = log.record
+    try:
+        obs, info = env.reset(seed=case.sumo_seed, options=case.options())
+        depart = env.t_depart
+        steps = stops = jerk_ex = lc_req = 0
+        time_stopped = ret = 0.0
+        moving = True
+        jerk_max = env.cfg.reward.jerk_threshold
+        while True:
+            action = agent.act(obs, info, explore=False)
+            if log is not None:
+                log.raw_action = _flatten(action)
+            obs, r, terminated, truncated, info = env.step(action)
+            steps += 1
+            ret += r
+            speed = float(obs["logic"][env.cfg.lanes + 1])
+            if speed < STOP_SPEED:
+                time_stopped += env.cfg.step_length
+                stops += moving
+                moving = False
+            else:
+                moving = True
+            jerk_ex += abs(info["jerk"]) > jerk_max
+            lc_req += bool(info["requested"] and info["requested"][0])
+            if terminated or truncated:
+                break
+        consumed, regenerated = (env.session.battery_totals(env.ego.vid)
+                                 if not info["ego_left_simulation"] else (float("nan"), float("nan")))
+        summary = {
+            "method": method, "signals": env.cfg.signals, "case_index": case.index, "sumo_seed": case.sumo_seed,
+            "insert_time": case.insert_time, "depart_time": depart, "energy": info["energy"],
+            "travel_time": info["travel_time"], "steps": steps, "terminated": terminated, "truncated": truncated,
+            "return_": ret, "stops": stops, "time_stopped": time_stopped, "lane_changes_requested": lc_req,
+            "lane_changes_applied": info["lane_changes"], "clips": info["clips"], "jerk_exceedances": jerk_ex,
+            "collisions": info["collisions"], "teleports": info["teleports"],
+            "battery_consumed": consumed, "battery_regenerated": regenerated,
+        }
+        if log is not None:
+            log.finish(summary)
+        return summary
+    except BaseException:
+        if log is not None:
+            log.abort()
+        raise
+    finally:
+        env.recorder = None
+
+
+def _flatten(action: Any) -> list[float]:
+    if isinstance(action, tuple):
+        return [float(v) for part in action for v in np.ravel(part)]
+    return [float(v) for v in np.ravel(action)]
