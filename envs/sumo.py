@@ -12,7 +12,7 @@ import libsumo as ls
 from libsumo import constants as tc
 
 from .config import ScenarioConfig
-from .scenario import EGO_ROUTE, EGO_TYPE, GLOSA_TYPE, ScenarioFiles
+from .scenario import EGO_ROUTE, EGO_TYPE, GLOSA_TYPE, HDV_TYPE, ScenarioFiles
 
 _ACTIVE: "SumoSession | None" = None
 # context-subscription variables, as keys of ``neighbours()`` results
@@ -121,6 +121,16 @@ class SumoSession:
         )
         if controlled:
             self.take_control(vid)
+
+    @staticmethod
+    def add_scripted(vid: str, lane: int, pos: float, speed: float) -> None:
+        """Insert a human-driven vehicle at an exact spot of the arterial's first edge, held at
+        ``speed`` with its own safety checks off and no lane changes (scripted scenarios, tests)."""
+        ls.vehicle.add(vid, EGO_ROUTE, typeID=HDV_TYPE, depart="now", departLane=str(lane),
+                       departPos=f"{pos:.2f}", departSpeed=f"{speed:.3f}")
+        ls.vehicle.setSpeedMode(vid, 0)
+        ls.vehicle.setLaneChangeMode(vid, 0)
+        ls.vehicle.setSpeed(vid, speed)
 
     @staticmethod
     def take_control(vid: str) -> None:

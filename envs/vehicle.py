@@ -78,11 +78,11 @@ class ControlledVehicle:
         applied = safety.applied_acceleration(v0, kin[3], dt)
         clipped = cmd.accel is not None and safety.was_clipped(cmd.accel, applied, v0, dt, cfg.speed_limit)
         lane_changed = kin[5] != lane0 and kin[6][:1] != ":" and kin[6] != ""
-        if cmd.lateral is None and lane_changed:
-            lateral = -int(np.sign(kin[5] - lane0))  # SUMO lane index grows to the left
+        # what happened, not what was asked: SUMO re-checks safety when it executes a change
+        lateral = -int(np.sign(kin[5] - lane0)) if lane_changed else 0  # SUMO index grows to the left
         energy = s.energy_rate(self.vid) * dt
         self.energy += energy
-        self.lane_changes += bool(lateral) or (cmd.lateral is None and lane_changed)
+        self.lane_changes += lane_changed
         self.clips += clipped
         jerk = (applied - self._prev_accel) / dt
         self._prev_accel = applied
@@ -91,6 +91,6 @@ class ControlledVehicle:
             requested_accel=float("nan") if cmd.accel is None else cmd.accel,
             requested_lateral=0 if cmd.lateral is None else cmd.lateral,
             applied_accel=applied, applied_lateral=lateral, clipped=bool(clipped),
-            lane_changed=bool(lateral) or lane_changed, distance=max(0.0, kin[0] - x0),
+            lane_changed=lane_changed, distance=max(0.0, kin[0] - x0),
             energy=energy, jerk=jerk, speed=kin[3],
         )

@@ -1,0 +1,42 @@
+from __future__ import annotations
+
+import pytest
+
+from envs.config import ConfigError, ScenarioConfig
+
+
+def test_defaults_are_paper_values():
+    c = ScenarioConfig()
+    assert (c.n_intersections, c.lanes, c.cycle, c.v2i_range) == (5, 5, 90.0, 300.0)
+    assert c.speed_limit == pytest.approx(50 / 3.6)
+    assert (c.a_min, c.a_max, c.grid_ahead, c.grid_behind, c.cell_length) == (-4.0, 3.0, 50.0, 10.0, 1.0)
+    assert c.grid_shape == (60, 5)
+    assert (c.reward.speed_threshold, c.reward.jerk_threshold, c.lane_change_duration) == (1.5, 4.0, 3.0)
+
+
+def test_green_wave_offsets():
+    c = ScenarioConfig(signals="coordinated")
+    assert c.offsets[1] == pytest.approx(c.spacing / c.speed_limit % c.cycle, abs=1e-3)
+    assert ScenarioConfig(signals="uncoordinated").offsets == [0.0] * 5
+
+
+@pytest.mark.parametrize("bad, words", [
+    ({"spacing": -1}, ["spacing=-1", "[100.0, 2000.0]"]),
+    ({"signals": "green"}, ["signals='green'", "coordinated, uncoordinated"]),
+    ({"nope": 1}, ["nope", "accepted"]),
+    ({"lanes": 2.5}, ["lanes=2.5", "integer"]),
+    ({"ev": {"mass": 0}}, ["mass=0", "[500, 3500]"]),
+    ({"reward": {"form": "r3"}}, ["form='r3'", "r1, r2, r"]),
+    ({"insert_min": 300, "insert_max": 150}, ["insert_min=300"]),
+    ({"step_length": 0}, ["step_length=0", "(0.05"]),
+])
+def test_bad_config_is_a_clear_error(bad, words):
+    with pytest.raises(ConfigError) as e:
+        ScenarioConfig.from_dict(bad)
+    for w in words:
+        assert w in str(e.value)
+
+
+def test_override_round_trip():
+    c = ScenarioConfig().replace(spacing=500.0)
+    assert c.spacing == 500.0 and ScenarioConfig.from_dict(c.to_dict()) == c
