@@ -18,13 +18,19 @@ import numpy as np
 from mcap.exceptions import McapError
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
-from mcap_protobuf.writer import Writer
+from mcap.well_known import MessageEncoding
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+from mcap_protobuf.schema import build_file_descriptor_set
 
 from . import schema
 
 CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
 TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode}
 PART = ".part"
+# serialized FileDescriptorSets, built once per process (they are the same for every file)
+_SCHEMAS = {topic: (cls.DESCRIPTOR.full_name, build_file_descriptor_set(cls).SerializeToString())
+            for topic, cls in TOPICS.items()}
 
 
 class LogError(RuntimeError):
@@ -43,12 +49,24 @@ class EpisodeLog:
         self.part = self.path.with_name(self.path.name + PART)
         self.part.parent.mkdir(parents=True, exist_ok=True)
         self._f = open(self.part, "wb")
-        self._w = Writer(self._f, chunk_size=CHUNK_SIZE)
+        self._w = McapWriter(self._f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        self._w.start(profile="", library="ecodrive-bench")
+        self._channels = {
+            topic: self._w.register_channel(
+                topic=topic, message_encoding=MessageEncoding.Protobuf,
+                schema_id=self._w.register_schema(name=name, encoding="protobuf", data=data))
+            for topic, (name, data) in _SCHEMAS.items()
+        }
+        self._step_channel = self._channels["/step"]
         self._w.add_metadata("ecodrive", {k: str(v) for k, v in meta.items()})
         m = schema.Metadata(**{k: v for k, v in meta.items() if k in schema.Metadata.DESCRIPTOR.fields_by_name})
-        self._w.write_message("/meta", m, log_time=0, publish_time=0)
+        self._write("/meta", m, 0)
         self._last_time = 0.0
         self.raw_action: list[float] = []
+
+    def _write(self, topic: str, msg: Any, t: int) -> None:
+        self._w.add_message(channel_id=self._channels[topic], log_time=t, data=msg.SerializeToString(),
+                            publish_time=t)
 
     def record(self, rec: dict[str, Any]) -> None:
         info, m, obs, sig = rec["info"], rec["measure"], rec["obs"], rec["signal"]
@@ -64,28 +82,35 @@ class EpisodeLog:
         if m is not None:
             s.has_request = info["requested"] is not None
             s.requested_lateral = m.requested_lateral
-            s.requested_accel = 0.0 if np.isnan(m.requested_accel) else m.requested_accel
+            s.requested_accel = 0.0 if m.requested_accel != m.requested_accel else m.requested_accel  # nan -> 0
             s.applied_lateral, s.applied_accel, s.clipped = m.applied_lateral, m.applied_accel, m.clipped
-        if rec["components"]:
-            s.components.CopyFrom(schema.RewardComponents(**rec["components"]))
+        comps = rec["components"]
+        if comps:
+            c = s.components
+            c.speed, c.jerk, c.lane_change = comps["speed"], comps["jerk"], comps["lane_change"]
+            c.distance, c.energy, c.terminal = comps["distance"], comps["energy"], comps["terminal"]
         if sig is not None:
-            s.signal.CopyFrom(schema.Signal(tls=sig.tls, link=sig.link, distance=sig.distance, state=sig.state,
-                                            in_range=sig.in_range, red=sig.red, time_to_green=sig.time_to_green))
-        for x, y, a, length in rec["others"].tolist():
-            s.neighbours.add(x=x, y=y, angle=a, length=length)
+            g = s.signal
+            g.tls, g.link, g.distance, g.state = sig.tls, sig.link, sig.distance, sig.state
+            g.in_range, g.red, g.time_to_green = sig.in_range, sig.red, sig.time_to_green
+        others = rec["others"]
+        if others:
+            xs, ys, angles, lengths = zip(*others)
+            s.neighbour_x.extend(xs)
+            s.neighbour_y.extend(ys)
+            s.neighbour_angle.extend(angles)
+            s.neighbour_length.extend(lengths)
         self._last_time = rec["time"]
         t = _ns(rec["time"])
-        self._w.write_message("/step", s, log_time=t, publish_time=t)
+        self._w.add_message(channel_id=self._step_channel, log_time=t, data=s.SerializeToString(), publish_time=t)
 
     def finish(self, summary: dict[str, Any]) -> Path:
         """Write the episode summary, close, and publish the file under its final name."""
         t = _ns(self._last_time)
-        self._w.write_message("/episode", schema.Episode(**summary), log_time=t, publish_time=t)
+        self._write("/episode", schema.Episode(**summary), t)
         self._w.finish()
-        self._f.flush()
-        os.fsync(self._f.fileno())
         self._f.close()
-        os.replace(self.part, self.path)
+        os.replace(self.part, self.path)  # atomic against a killed process (no fsync: not power loss)
         return self.path
 
     def abort(self) -> None:

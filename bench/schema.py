@@ -15,8 +15,6 @@ _TYPES = {
 
 # message -> [(field, type, repeated)]; a type that is not a scalar names another message
 MESSAGES: dict[str, list[tuple[str, str, bool]]] = {
-    "Neighbour": [("x", "double", False), ("y", "double", False), ("angle", "double", False),
-                  ("length", "double", False)],
     "RewardComponents": [(n, "double", False) for n in ("speed", "jerk", "lane_change", "distance", "energy", "terminal")],
     "Signal": [("tls", "string", False), ("link", "int32", False), ("distance", "double", False),
                ("state", "string", False), ("in_range", "bool", False), ("red", "double", False),
@@ -32,7 +30,8 @@ MESSAGES: dict[str, list[tuple[str, str, bool]]] = {
         ("action_mask", "int32", True), ("raw_action", "double", True),
         ("energy_step", "double", False), ("energy_total", "double", False), ("jerk", "double", False),
         ("reward", "double", False), ("components", "RewardComponents", False),
-        ("signal", "Signal", False), ("neighbours", "Neighbour", True), ("tls_states", "string", True),
+        ("signal", "Signal", False), ("neighbour_x", "double", True), ("neighbour_y", "double", True),
+        ("neighbour_angle", "double", True), ("neighbour_length", "double", True), ("tls_states", "string", True),
         ("collisions", "uint32", False), ("teleports", "uint32", False),
     ],
     "Episode": [
@@ -71,7 +70,7 @@ def _file_proto() -> descriptor_pb2.FileDescriptorProto:
 
 _POOL = descriptor_pool.DescriptorPool()
 _POOL.Add(_file_proto())
-Neighbour, RewardComponents, Signal, Step, Episode, Metadata = (
+RewardComponents, Signal, Step, Episode, Metadata = (
     message_factory.GetMessageClass(_POOL.FindMessageTypeByName(f"{PACKAGE}.{n}"))
-    for n in ("Neighbour", "RewardComponents", "Signal", "Step", "Episode", "Metadata")
+    for n in ("RewardComponents", "Signal", "Step", "Episode", "Metadata")
 )

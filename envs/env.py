@@ -42,7 +42,8 @@ class EcoDriveEnv(gym.Env):
 
     ## Starting state
     SUMO starts with a seed; background traffic runs until the ego's insertion time, drawn from
-    U(150 s, 300 s); the episode starts at the step the ego enters the arterial. Both draws come
+    U(150 s, 300 s) and rounded up to the step; the ego is added then, and the episode starts at
+    the step it enters the arterial. Both draws come
     from ``self.np_random`` unless ``options={"sumo_seed": s, "insert_time": t}`` fixes them.
 
     ## Episode end
@@ -96,9 +97,10 @@ class EcoDriveEnv(gym.Env):
             raise ValueError(f"insert_time={t_ins} is out of range; accepted: [0, 86400] s")
         self.case = {"sumo_seed": sumo_seed, "insert_time": t_ins}
         s = self.session
-        s.start(sumo_seed)
         dt = cfg.step_length
-        s.step(np.ceil(t_ins / dt) * dt)
+        t_start = float(np.ceil(t_ins / dt) * dt)
+        s.start(sumo_seed)
+        s.step(t_start)  # simulated, not loaded: SUMO's loadState is not replay-exact here
         controlled = self.action_type.name != "sumo"
         s.add_vehicle(EGO_ID, controlled=controlled, glosa=cfg.glosa)
         if self.action_type.name == "longitudinal":

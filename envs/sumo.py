@@ -27,7 +27,8 @@ LC_MODE_DEFAULT = 1621  # SUMO's default (LC2013 decides)
 
 
 def sumo_version() -> str:
-    return str(ls.getVersion()[1])
+    """SUMO's version number, e.g. '1.28.0'."""
+    return str(ls.getVersion()[1]).removeprefix("SUMO ").strip()
 
 
 @dataclass

@@ -41,7 +41,7 @@ class ControlledVehicle:
     mask: np.ndarray = field(default_factory=lambda: np.ones(3, dtype=np.int8))
     kin: tuple = ()
     signal: SignalView | None = None
-    others: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    others: list = field(default_factory=list)  # [(x, y, angle, length)] of the neighbours
     energy: float = 0.0  # [Wh] cumulative
     lane_changes: int = 0
     clips: int = 0

@@ -1,0 +1,54 @@
+"""Ratios from one pytest-benchmark JSON file (all numbers from the same run).
+
+    python -m bench.perf .benchmarks/perf.json
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+TARGETS = {  # name: (numerator, denominator, limit, what)
+    "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
+    "env_step_over_sim_in_run": ("", "", 2.0, "env.step / its own simulationStep"),
+    "logging_overhead": ("test_episode_logged", "test_episode_unlogged", 1.05, "episode with / without MCAP"),
+    "log_overhead_in_run": ("", "", 1.05, "episode incl. logger / excl. logger"),
+}
+
+
+def ratios(path: Path) -> dict[str, float]:
+    data = json.loads(path.read_text())
+    med = {b["name"]: b["stats"]["median"] for b in data["benchmarks"]}
+    out = {k: med[n] / med[d] for k, (n, d, _, _) in TARGETS.items() if n in med and d in med}
+
+    extra = {b["name"]: b.get("extra_info", {}) for b in data["benchmarks"]}
+    if "step_over_sim" in extra.get("test_env_step", {}):
+        out["env_step_over_sim_in_run"] = extra["test_env_step"]["step_over_sim"]
+    if "log_overhead" in extra.get("test_episode_logged", {}):
+        out["log_overhead_in_run"] = 1.0 + extra["test_episode_logged"]["log_overhead"]
+    if "test_env_reset" in med:
+        out["reset_ms"] = med["test_env_reset"] * 1e3
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1 or not Path(argv[0]).is_file():
+        print("usage: python -m bench.perf BENCHMARK_JSON (a file written by --benchmark-json)")
+        return 2
+    r = ratios(Path(argv[0]))
+    ok = True
+    for key, (_, _, limit, what) in TARGETS.items():
+        if key in r:
+            good = r[key] <= limit
+            ok &= good
+            print(f"{what:40s} {r[key]:6.3f}x  (target <= {limit}x) {'ok' if good else 'MISSED'}")
+    if "reset_ms" in r:
+        good = r["reset_ms"] <= 50
+        ok &= good
+        print(f"{'env.reset':40s} {r['reset_ms']:6.1f} ms (target <= 50 ms) {'ok' if good else 'MISSED'}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
