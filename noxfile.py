@@ -1,0 +1,36 @@
+"""Sessions run in the current environment (``pip install -e ".[dev]"`` first): torch is pinned
+to a local CPU wheel, and a fresh virtualenv per session would only reinstall it."""
+from __future__ import annotations
+
+import nox
+
+nox.options.default_venv_backend = "none"
+nox.options.sessions = ["tests"]
+
+
+@nox.session
+def tests(session: nox.Session) -> None:
+    """The test suite (CI runs this)."""
+    session.run("python", "-m", "bench.cases", "--check")
+    session.run("python", "-m", "pytest", "-q", *session.posargs)
+
+
+@nox.session
+def benchmark(session: nox.Session) -> None:
+    """The main job: every available method over the fixed cases, MCAP logs + results table."""
+    session.run("python", "-m", "bench.run", *session.posargs)
+
+
+@nox.session
+def perf(session: nox.Session) -> None:
+    """pytest-benchmark of env.step vs raw SUMO, reset, logging; saves JSON and prints ratios."""
+    session.run("mkdir", "-p", ".benchmarks", external=True)
+    session.run("python", "-m", "pytest", "tests/benchmarks", "-q", "--benchmark-only",
+                "--benchmark-json=.benchmarks/perf.json", *session.posargs)
+    session.run("python", "-m", "bench.perf", ".benchmarks/perf.json", success_codes=[0, 1])
+
+
+@nox.session
+def calibrate(session: nox.Session) -> None:
+    """SUMO's default driving over the fixed cases against Table 4's baseline row."""
+    session.run("python", "-m", "bench.calibrate", *session.posargs)
