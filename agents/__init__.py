@@ -5,6 +5,6 @@ from .base import Agent
 from .baseline import BaselineAgent
 from .glosa import GlosaAgent
 
-RULE_BASED = {"baseline": BaselineAgent, "glosa": GlosaAgent}
+RULE_BASED = {"baseline": BaselineAgent, "glosa": GlosaAgent}  # name -> class, no learning
 
 __all__ = ["Agent", "BaselineAgent", "GlosaAgent", "RULE_BASED"]

@@ -18,10 +18,23 @@ from .provenance import git_sha, package_versions
 STOP_SPEED = 0.1  # [m/s] below this the ego counts as stopped
 
 
-def make_env(agent: Agent, signals: str, config: dict[str, Any] | None = None) -> EcoDriveEnv:
-    cfg = dict(config or {})
-    cfg.update(agent.env_overrides)
-    env = gym.make("EcoDrive-v0", signals=signals, action=agent.action_interface, config=cfg)
+def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = None) -> EcoDriveEnv:
+    """The raw env for an agent (or a method name), with the agent's scenario overrides."""
+    from agents.registry import ACTION_INTERFACE, ENV_OVERRIDES
+
+    if isinstance(agent, str):
+        interface, overrides = ACTION_INTERFACE[agent], ENV_OVERRIDES.get(agent, {})
+    else:
+        interface, overrides = agent.action_interface, agent.env_overrides
+    cfg = deep_merge(config or {}, overrides)
+    env = gym.make("EcoDrive-v0", signals=signals, action=interface, config=cfg)
     return env.unwrapped  # the harness steps the raw env: no wrappers in the timed loop
 
 

@@ -26,7 +26,8 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from . import schema
 
 CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
-TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode}
+TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode,
+          "/train": schema.TrainEpisode}
 PART = ".part"
 # serialized FileDescriptorSets, built once per process (they are the same for every file)
 _SCHEMAS = {topic: (cls.DESCRIPTOR.full_name, build_file_descriptor_set(cls).SerializeToString())
@@ -176,6 +177,25 @@ def read_log(path: str | Path) -> LogData:
     if not data.complete and not data.warning:
         data.warning = f"{path}: log is incomplete ({len(data.steps)} steps, no episode summary)"
     return data
+
+
+def write_train_log(path: Path, rows: list[dict[str, Any]], meta: dict[str, Any]) -> None:
+    """All training episodes so far as a ``/train`` channel (rewritten whole, atomically)."""
+    tmp = path.with_name(path.name + PART)
+    with open(tmp, "wb") as f:
+        w = McapWriter(f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        w.start(profile="", library="ecodrive-bench")
+        name, data = _SCHEMAS["/train"]
+        ch = w.register_channel(topic="/train", message_encoding=MessageEncoding.Protobuf,
+                                schema_id=w.register_schema(name=name, encoding="protobuf", data=data))
+        w.add_metadata("ecodrive", {k: str(v) for k, v in meta.items()})
+        fields = schema.TrainEpisode.DESCRIPTOR.fields_by_name
+        for row in rows:
+            msg = schema.TrainEpisode(**{k: v for k, v in row.items() if k in fields})
+            w.add_message(channel_id=ch, log_time=int(row["episode"]), data=msg.SerializeToString(),
+                          publish_time=int(row["episode"]))
+        w.finish()
+    os.replace(tmp, path)
 
 
 def is_complete(path: str | Path) -> bool:

@@ -44,6 +44,12 @@ MESSAGES: dict[str, list[tuple[str, str, bool]]] = {
         ("collisions", "uint32", False), ("teleports", "uint32", False),
         ("battery_consumed", "double", False), ("battery_regenerated", "double", False),
     ],
+    "TrainEpisode": [
+        ("episode", "uint32", False), ("energy", "double", False), ("travel_time", "double", False),
+        ("return_", "double", False), ("epsilon", "double", False), ("loss_q", "double", False),
+        ("loss_param", "double", False), ("lane_changes", "uint32", False), ("collisions", "uint32", False),
+        ("steps", "uint32", False), ("updates", "uint32", False), ("truncated", "bool", False),
+    ],
     "Metadata": [
         ("config_json", "string", False), ("method", "string", False), ("signals", "string", False),
         ("case_index", "int32", False), ("sumo_seed", "int64", False), ("insert_time", "double", False),
@@ -70,7 +76,7 @@ def _file_proto() -> descriptor_pb2.FileDescriptorProto:
 
 _POOL = descriptor_pool.DescriptorPool()
 _POOL.Add(_file_proto())
-RewardComponents, Signal, Step, Episode, Metadata = (
+RewardComponents, Signal, Step, Episode, TrainEpisode, Metadata = (
     message_factory.GetMessageClass(_POOL.FindMessageTypeByName(f"{PACKAGE}.{n}"))
-    for n in ("RewardComponents", "Signal", "Step", "Episode", "Metadata")
+    for n in ("RewardComponents", "Signal", "Step", "Episode", "TrainEpisode", "Metadata")
 )

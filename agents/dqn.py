@@ -1,0 +1,121 @@
+"""DQN over the paper's 27 discrete actions (section 5.3): 9 accelerations x 3 lateral choices.
+
+Same conv trunk, hyperparameters and eps schedule as PRL (Table 2, eq. 12); the LC2013 mask
+removes the actions whose lateral part is unsafe, when acting and in the target max.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from gymnasium import spaces
+
+from .nets import Head, ObsScaler, features, linear_epsilon, soft_update
+from .replay import Replay
+
+N_LAT = 3  # action index = lon * 3 + lat, lat index i is k = (-1, 0, +1)[i]
+
+
+@dataclass
+class DQNConfig:
+    gamma: float = 0.99  # discount factor (Table 2)
+    tau: float = 0.01  # soft-update rate of the target network, tau_1 (Table 2)
+    lr: float = 1e-4  # Adam step size, alpha (Table 2)
+    batch_size: int = 128  # minibatch size (Table 2)
+    replay_size: int = 500_000  # replay capacity (Table 2)
+    eps_init: float = 1.0  # initial exploration factor (Table 2)
+    eps_end: float = 0.01  # final exploration factor (Table 2)
+    eps_decay_episodes: int = 1000  # episodes of linear decay (eq. 12)
+    learning_starts: int = 1000  # transitions stored before the first update (not in the paper)
+    reward_scale: float = 0.01  # rewards are multiplied by this for learning
+    grad_clip: float = 10.0  # max gradient norm (not in the paper)
+    seed: int = 0  # seeds network initialisation and the agent's numpy Generator
+
+
+class DQNAgent:
+    name = "dqn"
+    action_interface = "discrete27"
+    env_overrides: dict[str, Any] = {}
+
+    def __init__(self, observation_space: spaces.Dict, action_space: spaces.Discrete, cfg: DQNConfig | None = None):
+        self.cfg = cfg = cfg or DQNConfig()
+        self.n = int(action_space.n)
+        grid_shape, logic = observation_space["grid"].shape, observation_space["logic"]
+        self.scaler = ObsScaler(logic.low, logic.high)
+        with torch.random.fork_rng():
+            torch.manual_seed(cfg.seed)
+            self.q = Head(grid_shape, logic.shape[0], 0, (256, 64), self.n)
+            self.q_target = Head(grid_shape, logic.shape[0], 0, (256, 64), self.n)
+        self.q_target.load_state_dict(self.q.state_dict())
+        self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1)
+        self.epsilon = cfg.eps_init
+        self.updates = 0
+
+    def action_mask(self, lateral_mask: np.ndarray) -> np.ndarray:
+        """The 27-action mask from the mask over k."""
+        return np.tile(np.asarray(lateral_mask, dtype=bool), self.n // N_LAT)
+
+    def begin_episode(self, episode: int) -> None:
+        c = self.cfg
+        self.epsilon = linear_epsilon(episode, c.eps_init, c.eps_end, c.eps_decay_episodes)
+
+    def act(self, obs, info, explore: bool = False) -> int:
+        mask = self.action_mask(info["action_mask"])
+        if explore and self.rng.random() < self.epsilon:
+            return int(self.rng.choice(np.flatnonzero(mask)))
+        with torch.no_grad():
+            g = torch.as_tensor(obs["grid"], dtype=torch.float32)[None]
+            l = torch.as_tensor(self.scaler.logic(obs["logic"]))[None]
+            q = self.q(g, l)[0].numpy()
+        return int(np.argmax(np.where(mask, q, -np.inf)))
+
+    def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
+        self.replay.add(obs["grid"], self.scaler.logic(obs["logic"]), [action], reward * self.cfg.reward_scale,
+                        next_obs["grid"], self.scaler.logic(next_obs["logic"]), float(terminated),
+                        np.asarray(info["action_mask"], dtype=bool))
+        if self.replay.size < max(self.cfg.learning_starts, self.cfg.batch_size):
+            return {}
+        return self.update()
+
+    def update(self) -> dict[str, float]:
+        c = self.cfg
+        b = self.replay.sample(self.rng, c.batch_size)
+        a = torch.as_tensor(b["action"][:, 0]).long()
+        with torch.no_grad():
+            (f2,) = features(torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"]),
+                             [self.q_target])
+            mask2 = torch.as_tensor(b["next_mask"]).repeat(1, self.n // N_LAT)
+            q2 = self.q_target.from_features(f2).masked_fill(~mask2, -torch.inf).max(1).values
+            y = torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * q2
+        (f,) = features(torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"]), [self.q])
+        q = self.q.from_features(f).gather(1, a[:, None]).squeeze(1)
+        loss = 0.5 * F.mse_loss(q, y)
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.q.parameters(), c.grad_clip)
+        self.opt.step()
+        soft_update(self.q_target, self.q, c.tau)
+        self.updates += 1
+        return {"loss_q": loss.item()}
+
+    def state_dict(self, with_training: bool = True) -> dict[str, Any]:
+        state = {"name": self.name, "config": asdict(self.cfg), "q": self.q.state_dict()}
+        if with_training:
+            state.update({"q_target": self.q_target.state_dict(), "opt": self.opt.state_dict(),
+                          "rng": self.rng.bit_generator.state, "epsilon": self.epsilon, "updates": self.updates})
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state.get("name") != self.name:
+            raise ValueError(f"checkpoint is for method {state.get('name')!r}, not {self.name!r}")
+        self.q.load_state_dict(state["q"])
+        self.q_target.load_state_dict(state.get("q_target", state["q"]))
+        if "opt" in state:
+            self.opt.load_state_dict(state["opt"])
+            self.rng.bit_generator.state = state["rng"]
+            self.epsilon, self.updates = state["epsilon"], state["updates"]

@@ -1,0 +1,196 @@
+"""PRL: P-DQN over the parameterized action space (section 4, Algorithm 1, Table 2).
+
+Action: (k index in {0,1,2} for k = -1/0/+1, accelerations for every k). The parameter network
+x(s; w) outputs the three accelerations, the Q network Q(s, k, x; theta) scores each k. Losses:
+eq. 7 (MSE Bellman error against the target networks) and eq. 8 (-sum_k Q(s, k, x_k(s))).
+Exploration: eps-greedy over k with the linear schedule of eq. 12, OU noise on the parameters
+(eq. 13). The LC2013 mask applies to the greedy argmax, to random choices and, stored with the
+next state, to the target max. ``multipass=True`` gives MP-DQN (Bester et al. 2019): Q_k is
+evaluated with only x_k non-zero, so the other parameters cannot leak into it.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch.func import functional_call
+from gymnasium import spaces
+
+from .nets import Head, ObsScaler, OUNoise, features, linear_epsilon, soft_update
+from .replay import Replay
+
+K = 3  # lateral choices: k = -1, 0, +1
+
+
+@dataclass
+class PDQNConfig:
+    gamma: float = 0.99  # discount factor (Table 2)
+    tau_q: float = 0.01  # soft-update rate of the target Q network, tau_1 (Table 2)
+    tau_param: float = 0.001  # soft-update rate of the target parameter network, tau_2 (Table 2)
+    lr_q: float = 1e-4  # Adam step size of the Q network, alpha (Table 2)
+    lr_param: float = 1e-5  # Adam step size of the parameter network, beta (Table 2)
+    batch_size: int = 128  # minibatch size B (Table 2)
+    replay_size: int = 500_000  # replay capacity R (Table 2)
+    eps_init: float = 1.0  # initial exploration factor (Table 2)
+    eps_end: float = 0.01  # final exploration factor (Table 2)
+    eps_decay_episodes: int = 1000  # episodes of linear decay, N in eq. 12 (Table 2)
+    ou_theta: float = 0.15  # OU mean reversion per step (eq. 13; not in the paper: DDPG's usual value)
+    ou_sigma: float = 0.2  # OU noise scale, in units of the half action range (not in the paper)
+    learning_starts: int = 1000  # transitions stored before the first update (not in the paper)
+    reward_scale: float = 0.01  # rewards are multiplied by this for learning (raw rewards are ~1e2)
+    grad_clip: float = 10.0  # max gradient norm per network (not in the paper)
+    multipass: bool = False  # MP-DQN's multi-pass Q evaluation (beyond the paper)
+    seed: int = 0  # seeds network initialisation and the agent's numpy Generator
+
+
+class PDQNAgent:
+    """PRL (``multipass=False``) or MP-DQN (``multipass=True``)."""
+
+    action_interface = "parameterized"
+    env_overrides: dict[str, Any] = {}
+
+    def __init__(self, observation_space: spaces.Dict, action_space: spaces.Tuple, cfg: PDQNConfig | None = None):
+        self.cfg = cfg = cfg or PDQNConfig()
+        self.name = "mpdqn" if cfg.multipass else "prl"
+        grid_shape = observation_space["grid"].shape
+        logic = observation_space["logic"]
+        box = action_space[1]
+        self.a_low, self.a_high = float(box.low[0]), float(box.high[0])
+        self.scaler = ObsScaler(logic.low, logic.high)
+        with torch.random.fork_rng():
+            torch.manual_seed(cfg.seed)
+            self.q = Head(grid_shape, logic.shape[0], K, (256, 64), K)
+            self.param = Head(grid_shape, logic.shape[0], 0, (128, 64), K)
+            self.q_target = Head(grid_shape, logic.shape[0], K, (256, 64), K)
+            self.param_target = Head(grid_shape, logic.shape[0], 0, (128, 64), K)
+        self.q_target.load_state_dict(self.q.state_dict())
+        self.param_target.load_state_dict(self.param.state_dict())
+        self.opt_q = torch.optim.Adam(self.q.parameters(), lr=cfg.lr_q)
+        self.opt_param = torch.optim.Adam(self.param.parameters(), lr=cfg.lr_param)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.noise = OUNoise(K, cfg.ou_theta, cfg.ou_sigma, self.rng)
+        self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1 + K)
+        self.epsilon = cfg.eps_init
+        self.updates = 0
+
+    # ------------------------------------------------------------------ acting
+    def _tensors(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
+        return (torch.as_tensor(obs["grid"], dtype=torch.float32)[None],
+                torch.as_tensor(self.scaler.logic(obs["logic"]))[None])
+
+    def _params(self, net: Head, feats: torch.Tensor) -> torch.Tensor:
+        return torch.tanh(net.from_features(feats))  # normalised accelerations in [-1, 1]
+
+    def q_values(self, net: Head, feats: torch.Tensor, x: torch.Tensor, frozen: bool = False) -> torch.Tensor:
+        """Q(s, k, x) for every k, shape (B, K); multi-pass when configured. ``frozen`` runs the
+        MLP with detached weights, so a loss through it trains only what produced ``x``."""
+        def mlp(inp: torch.Tensor) -> torch.Tensor:
+            if not frozen:
+                return net.mlp(inp)
+            return functional_call(net.mlp, {n: p.detach() for n, p in net.mlp.named_parameters()}, (inp,))
+
+        if not self.cfg.multipass:
+            return mlp(torch.cat([feats, x], 1))
+        b = feats.shape[0]
+        eye = torch.eye(K, dtype=x.dtype)
+        xs = (x[None] * eye[:, None, :]).reshape(K * b, K)  # pass k keeps only x_k
+        out = mlp(torch.cat([feats.repeat(K, 1), xs], 1)).reshape(K, b, K)
+        return out[torch.arange(K), :, torch.arange(K)].T  # Q_k from pass k
+
+    def _to_accel(self, x: np.ndarray) -> np.ndarray:
+        return (self.a_low + (x + 1.0) * 0.5 * (self.a_high - self.a_low)).astype(np.float32)
+
+    def begin_episode(self, episode: int) -> None:
+        c = self.cfg
+        self.epsilon = linear_epsilon(episode, c.eps_init, c.eps_end, c.eps_decay_episodes)
+        self.noise.reset()
+
+    def act(self, obs, info, explore: bool = False):
+        mask = np.asarray(info["action_mask"], dtype=bool)
+        with torch.no_grad():
+            g, l = self._tensors(obs)
+            fq, fp = features(g, l, [self.q, self.param])
+            x = self._params(self.param, fp)
+            if explore:
+                x = (x + torch.as_tensor(self.noise.sample(), dtype=torch.float32)).clamp(-1.0, 1.0)
+            if explore and self.rng.random() < self.epsilon:
+                k = int(self.rng.choice(np.flatnonzero(mask)))
+            else:
+                q = self.q_values(self.q, fq, x)[0].numpy()
+                k = int(np.argmax(np.where(mask, q, -np.inf)))
+        xn = x[0].numpy()
+        self._last = (k, xn)
+        return k, self._to_accel(xn)
+
+    # ------------------------------------------------------------------ learning
+    def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
+        k, xn = self._last
+        self.replay.add(obs["grid"], self.scaler.logic(obs["logic"]), np.concatenate([[k], xn]),
+                        reward * self.cfg.reward_scale, next_obs["grid"], self.scaler.logic(next_obs["logic"]),
+                        float(terminated), np.asarray(info["action_mask"], dtype=bool))
+        if self.replay.size < max(self.cfg.learning_starts, self.cfg.batch_size):
+            return {}
+        return self.update()
+
+    def update(self) -> dict[str, float]:
+        c = self.cfg
+        b = self.replay.sample(self.rng, c.batch_size)
+        g, l = torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"])
+        g2, l2 = torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"])
+        act = torch.as_tensor(b["action"])
+        k, x_b = act[:, 0].long(), act[:, 1:]
+        with torch.no_grad():
+            f2, fp2 = features(g2, l2, [self.q_target, self.param_target])
+            x2 = self._params(self.param_target, fp2)
+            q2 = self.q_values(self.q_target, f2, x2).masked_fill(~torch.as_tensor(b["next_mask"]), -torch.inf)
+            y = torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
+        feats, fp = features(g, l, [self.q, self.param])
+        q_sa = self.q_values(self.q, feats, x_b).gather(1, k[:, None]).squeeze(1)
+        loss_q = 0.5 * F.mse_loss(q_sa, y)  # eq. 7
+        # eq. 8: the parameter loss, with the Q network held fixed (gradients to x(s; w) only)
+        x = self._params(self.param, fp)
+        loss_p = -self.q_values(self.q, feats.detach(), x, frozen=True).sum(1).mean()
+        self.opt_q.zero_grad(set_to_none=True)
+        self.opt_param.zero_grad(set_to_none=True)
+        (loss_q + loss_p).backward()  # one pass: each loss reaches only its own network
+        torch.nn.utils.clip_grad_norm_(self.q.parameters(), c.grad_clip)
+        torch.nn.utils.clip_grad_norm_(self.param.parameters(), c.grad_clip)
+        self.opt_q.step()
+        self.opt_param.step()
+        soft_update(self.q_target, self.q, c.tau_q)
+        soft_update(self.param_target, self.param, c.tau_param)
+        self.updates += 1
+        return {"loss_q": loss_q.item(), "loss_param": loss_p.item()}
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self, with_training: bool = True) -> dict[str, Any]:
+        state = {"name": self.name, "config": asdict(self.cfg), "q": self.q.state_dict(),
+                 "param": self.param.state_dict()}
+        if with_training:
+            state.update({
+                "q_target": self.q_target.state_dict(), "param_target": self.param_target.state_dict(),
+                "opt_q": self.opt_q.state_dict(), "opt_param": self.opt_param.state_dict(),
+                "rng": self.rng.bit_generator.state, "ou": self.noise.state.copy(),
+                "epsilon": self.epsilon, "updates": self.updates,
+            })
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state.get("name") != self.name:
+            raise ValueError(f"checkpoint is for method {state.get('name')!r}, not {self.name!r}")
+        self.q.load_state_dict(state["q"])
+        self.param.load_state_dict(state["param"])
+        if "q_target" in state:
+            self.q_target.load_state_dict(state["q_target"])
+            self.param_target.load_state_dict(state["param_target"])
+            self.opt_q.load_state_dict(state["opt_q"])
+            self.opt_param.load_state_dict(state["opt_param"])
+            self.rng.bit_generator.state = state["rng"]
+            self.noise.state[:] = state["ou"]
+            self.epsilon, self.updates = state["epsilon"], state["updates"]
+        else:
+            self.q_target.load_state_dict(state["q"])
+            self.param_target.load_state_dict(state["param"])

@@ -1,0 +1,77 @@
+"""Shipped policies: ``models/<method>-<signals>/policy.pt`` plus ``manifest.json``.
+
+Loading checks the file's sha256 against the manifest and the method and scenario config
+against what the caller expects; anything else is a ``CheckpointError`` naming the file.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+
+
+class CheckpointError(RuntimeError):
+    pass
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def atomic_torch_save(obj: Any, path: Path) -> None:
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(buf.getvalue())
+    os.replace(tmp, path)
+
+
+def policy_dir(method: str, signals: str, root: Path = MODELS) -> Path:
+    return root / f"{method}-{signals}"
+
+
+def save_policy(folder: Path, state: dict[str, Any], manifest: dict[str, Any]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "policy.pt"
+    atomic_torch_save(state, path)
+    manifest = {**manifest, "file": path.name, "sha256": sha256(path)}
+    tmp = folder / ".manifest.json.tmp"
+    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+    os.replace(tmp, folder / "manifest.json")
+    return path
+
+
+def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = None) -> tuple[dict, dict]:
+    """(state, manifest) of a shipped policy, verified."""
+    man_path, path = folder / "manifest.json", folder / "policy.pt"
+    if not man_path.is_file() or not path.is_file():
+        raise CheckpointError(f"{folder}: no trained policy (expected policy.pt and manifest.json); "
+                              f"train one with the command in the README")
+    try:
+        manifest = json.loads(man_path.read_text())
+    except json.JSONDecodeError as e:
+        raise CheckpointError(f"{man_path}: manifest is not valid JSON ({e})") from None
+    digest = sha256(path)
+    if manifest.get("sha256") != digest:
+        raise CheckpointError(f"{path}: sha256 {digest[:12]}... does not match the manifest's "
+                              f"{str(manifest.get('sha256'))[:12]}...: the file is corrupt or was replaced")
+    if manifest.get("method") != method:
+        raise CheckpointError(f"{path}: policy is for method {manifest.get('method')!r}, not {method!r}")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as e:  # a matching sha256 but unreadable content
+        raise CheckpointError(f"{path}: cannot be loaded ({type(e).__name__}: {e})") from None
+    if scenario is not None:
+        trained = manifest.get("scenario", {})
+        diff = sorted(k for k in set(trained) | set(scenario)
+                      if k not in ("signals", "glosa") and trained.get(k) != scenario.get(k))
+        if diff:
+            raise CheckpointError(f"{path}: trained on a different scenario config (differs in: {', '.join(diff)})")
+    return state, manifest

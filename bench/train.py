@@ -1,0 +1,162 @@
+"""Train a learning method on one signal setting, resumably.
+
+    python -m bench.train --method prl --signals uncoordinated --episodes 1000 --seed 0
+
+Every ``--checkpoint-every`` episodes the run folder (``runs/train/<method>-<signals>-s<seed>``)
+gets a checkpoint: networks, optimizers, epsilon, OU state, episode counter, every RNG state and
+the replay buffer, so a killed run that is started again with the same command continues
+exactly as if it had never stopped. Per-episode metrics go to ``metrics.parquet`` and a
+``/train`` MCAP channel (``train.mcap``). At the end the greedy policy is exported to
+``models/<method>-<signals>/`` with a manifest (command, seed, git SHA, sha256, wall time,
+final metrics).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+from tqdm import tqdm
+
+from agents.registry import LEARNING, make_agent
+from envs.config import SIGNALS
+
+from .checkpoint import MODELS, atomic_torch_save, policy_dir, save_policy
+from .episode import make_env
+from .mcaplog import write_train_log
+from .provenance import git_sha, package_versions
+
+RUNS = Path("runs/train")
+FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
+
+
+def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
+          models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
+          scenario: dict[str, Any] | None = None, command: list[str] | None = None,
+          stop_after: int | None = None, progress: bool = True) -> pd.DataFrame:
+    """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
+    after that many episodes of this call (used to test resumption)."""
+    torch.set_num_threads(1)
+    env = make_env(method, signals, scenario)
+    agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **(agent_config or {}))
+    identity = {"method": method, "signals": signals, "seed": seed, "agent_config": agent_config or {},
+                "scenario": env.cfg.to_dict()}
+    out.mkdir(parents=True, exist_ok=True)
+    ckpt = out / "checkpoint.pt"
+    rng = np.random.default_rng([seed, 7919])  # episode seeds; separate stream from the agent's
+    rows: list[dict[str, Any]] = []
+    start, wall = 0, 0.0
+    if ckpt.exists():
+        state = torch.load(ckpt, map_location="cpu", weights_only=False)
+        if state["identity"] != identity:
+            diff = [k for k in identity if state["identity"].get(k) != identity[k]]
+            raise SystemExit(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
+                             f"use another --out or remove the folder")
+        agent.load_state_dict(state["agent"])
+        agent.replay.load(out / state["replay"])
+        rng.bit_generator.state = state["rng"]
+        rows, start, wall = state["rows"], state["episode"], state["wall_time"]
+    bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
+    done_here = 0
+    t_call = time.perf_counter()
+    for ep in range(start, episodes):
+        agent.begin_episode(ep)
+        obs, info = env.reset(seed=int(rng.integers(0, 2**31 - 1)))
+        ret, steps, losses = 0.0, 0, []
+        while True:
+            action = agent.act(obs, info, explore=True)
+            next_obs, r, terminated, truncated, info = env.step(action)
+            m = agent.observe(obs, action, r, next_obs, terminated, truncated, info)
+            if m:
+                losses.append((m.get("loss_q", np.nan), m.get("loss_param", np.nan)))
+            obs, ret, steps = next_obs, ret + r, steps + 1
+            if terminated or truncated:
+                break
+        lq, lp = (np.mean(losses, axis=0) if losses else (np.nan, np.nan))
+        rows.append({"episode": ep, "energy": info["energy"], "travel_time": info["travel_time"], "return_": ret,
+                     "epsilon": getattr(agent, "epsilon", 0.0), "loss_q": float(lq), "loss_param": float(lp),
+                     "lane_changes": info["lane_changes"], "collisions": info["collisions"], "steps": steps,
+                     "updates": agent.updates, "truncated": bool(truncated)})
+        recent = rows[-20:]
+        bar.set_postfix(E=f"{np.mean([r['energy'] for r in recent]):.0f}Wh",
+                        T=f"{np.mean([r['travel_time'] for r in recent]):.0f}s", eps=f"{rows[-1]['epsilon']:.2f}")
+        bar.update(1)
+        done_here += 1
+        last = ep + 1 == episodes
+        if (ep + 1) % checkpoint_every == 0 or last or (stop_after is not None and done_here >= stop_after):
+            wall_now = wall + time.perf_counter() - t_call
+            _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity)
+        if stop_after is not None and done_here >= stop_after and not last:
+            bar.close()
+            env.close()
+            return pd.DataFrame(rows)
+    bar.close()
+    env.close()
+    wall_total = wall + time.perf_counter() - t_call
+    df = pd.DataFrame(rows)
+    if models is not None and len(df) == episodes:
+        tail = df.tail(FINAL_WINDOW)
+        manifest = {
+            "method": method, "signals": signals, "seed": seed, "episodes": episodes,
+            "command": " ".join(command or sys.argv), "git_sha": git_sha(), "packages": package_versions(),
+            "training_wall_time_s": round(wall_total, 1), "agent_config": agent_config or {},
+            "scenario": identity["scenario"],
+            "final_metrics": {f"mean_last_{FINAL_WINDOW}_{k}": round(float(tail[k].mean()), 3)
+                              for k in ("energy", "travel_time", "return_", "collisions", "lane_changes")},
+        }
+        save_policy(policy_dir(method, signals, models), agent.state_dict(with_training=False), manifest)
+    return df
+
+
+def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict) -> None:
+    replay_name = f"replay-{episode:05d}.npz"
+    agent.replay.save(out / replay_name)
+    state = {"identity": identity, "agent": agent.state_dict(), "replay": replay_name,
+             "rng": rng.bit_generator.state, "rows": rows, "episode": episode, "wall_time": wall}
+    atomic_torch_save(state, out / "checkpoint.pt")  # the commit point: it names the replay file
+    for old in out.glob("replay-*.npz"):
+        if old.name != replay_name:
+            old.unlink()
+    df = pd.DataFrame(rows)
+    df.to_parquet(out / ".metrics.parquet.tmp", index=False)
+    os.replace(out / ".metrics.parquet.tmp", out / "metrics.parquet")
+    write_train_log(out / "train.mcap", rows, {"method": identity["method"], "signals": identity["signals"],
+                                               "seed": identity["seed"], "git_sha": git_sha()})
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--method", required=True, help=f"one of {', '.join(LEARNING)}")
+    ap.add_argument("--signals", required=True, help=f"one of {', '.join(SIGNALS)}")
+    ap.add_argument("--episodes", type=int, default=1000, help="training episodes (1-100000)")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the agent and of the episode draws (>= 0)")
+    ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
+    ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/train/<method>-<signals>-s<seed>)")
+    ap.add_argument("--no-export", action="store_true", help="do not write models/<method>-<signals>/ at the end")
+    args = ap.parse_args(argv)
+    if args.method not in LEARNING:
+        ap.error(f"--method {args.method!r} is not accepted; choose one of {', '.join(LEARNING)}")
+    if args.signals not in SIGNALS:
+        ap.error(f"--signals {args.signals!r} is not accepted; choose one of {', '.join(SIGNALS)}")
+    if not 1 <= args.episodes <= 100_000:
+        ap.error(f"--episodes {args.episodes} is out of range; accepted: 1..100000")
+    if args.seed < 0 or args.checkpoint_every < 1:
+        ap.error(f"--seed {args.seed} must be >= 0 and --checkpoint-every {args.checkpoint_every} >= 1")
+    out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}"
+    df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
+               models=None if args.no_export else MODELS, command=["python", "-m", "bench.train", *sys.argv[1:]])
+    tail = df.tail(FINAL_WINDOW)
+    print(json.dumps({"episodes": len(df), "energy": round(float(tail.energy.mean()), 2),
+                      "travel_time": round(float(tail.travel_time.mean()), 2)}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
