@@ -135,9 +135,10 @@ class PDQNAgent:
             return {}
         return self.update()
 
-    def update(self) -> dict[str, float]:
+    def losses(self, b: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
+        """(eq. 7 Q loss, eq. 8 parameter loss) on a sampled batch. The parameter loss runs Q's
+        layers with detached weights, so each loss has gradients only for its own network."""
         c = self.cfg
-        b = self.replay.sample(self.rng, c.batch_size)
         g, l = torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"])
         g2, l2 = torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"])
         act = torch.as_tensor(b["action"])
@@ -149,13 +150,16 @@ class PDQNAgent:
             y = torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
         feats, fp = features(g, l, [self.q, self.param])
         q_sa = self.q_values(self.q, feats, x_b).gather(1, k[:, None]).squeeze(1)
-        loss_q = 0.5 * F.mse_loss(q_sa, y)  # eq. 7
-        # eq. 8: the parameter loss, with the Q network held fixed (gradients to x(s; w) only)
-        x = self._params(self.param, fp)
-        loss_p = -self.q_values(self.q, feats.detach(), x, frozen=True).sum(1).mean()
+        loss_q = 0.5 * F.mse_loss(q_sa, y)
+        loss_p = -self.q_values(self.q, feats.detach(), self._params(self.param, fp), frozen=True).sum(1).mean()
+        return loss_q, loss_p
+
+    def update(self) -> dict[str, float]:
+        c = self.cfg
+        loss_q, loss_p = self.losses(self.replay.sample(self.rng, c.batch_size))
         self.opt_q.zero_grad(set_to_none=True)
         self.opt_param.zero_grad(set_to_none=True)
-        (loss_q + loss_p).backward()  # one pass: each loss reaches only its own network
+        (loss_q + loss_p).backward()  # one pass through the shared grouped conv
         torch.nn.utils.clip_grad_norm_(self.q.parameters(), c.grad_clip)
         torch.nn.utils.clip_grad_norm_(self.param.parameters(), c.grad_clip)
         self.opt_q.step()

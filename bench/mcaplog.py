@@ -127,6 +127,7 @@ class LogData:
     metadata: Any = None  # the /meta message
     steps: list[Any] = field(default_factory=list)
     episode: Any = None  # the /episode message, None if the run did not finish
+    train: list[Any] = field(default_factory=list)  # /train messages (training logs)
     complete: bool = False  # footer read and episode summary present
     warning: str = ""
 
@@ -163,6 +164,8 @@ def read_log(path: str | Path) -> LogData:
                         data.steps.append(msg)
                     elif topic == "/episode":
                         data.episode = msg
+                    elif topic == "/train":
+                        data.train.append(msg)
                     else:
                         data.metadata = msg
     except (McapError, struct.error, ValueError, EOFError, OSError) as e:  # truncated or corrupt tail

@@ -1,0 +1,160 @@
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+import envs  # noqa: F401
+from agents.nets import linear_epsilon
+from agents.registry import LEARNING, make_agent
+from bench.checkpoint import CheckpointError, load_policy, policy_dir
+from bench.mcaplog import read_log
+from bench.train import train
+
+FAST_AGENT = {"learning_starts": 64, "batch_size": 16}
+FAST_SCENARIO = {"max_episode_time": 60.0}
+
+
+def _env(action: str):
+    return gym.make("EcoDrive-v0", action=action, config=FAST_SCENARIO).unwrapped
+
+
+def _filled_agent(method: str, action: str, n: int = 300):
+    env = _env(action)
+    agent = make_agent(method, env.observation_space, env.action_space, seed=1, **FAST_AGENT)
+    agent.begin_episode(0)
+    obs, info = env.reset(seed=3)
+    for _ in range(n):
+        a = agent.act(obs, info, explore=True)
+        nobs, r, te, tr, info = env.step(a)
+        agent.observe(obs, a, r, nobs, te, tr, info)
+        obs = nobs
+        if te or tr:
+            obs, info = env.reset(seed=4)
+    env.close()
+    return agent, obs, info
+
+
+def test_epsilon_follows_eq_12():
+    assert linear_epsilon(0, 1.0, 0.01, 1000) == 1.0
+    assert linear_epsilon(500, 1.0, 0.01, 1000) == pytest.approx(0.505)
+    assert linear_epsilon(1000, 1.0, 0.01, 1000) == pytest.approx(0.01)
+    assert linear_epsilon(5000, 1.0, 0.01, 1000) == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize("multipass", [False, True])
+def test_each_loss_reaches_only_its_network(multipass):
+    agent, _, _ = _filled_agent("mpdqn" if multipass else "prl", "parameterized", n=100)
+    batch = agent.replay.sample(np.random.default_rng(0), 16)
+    loss_q, loss_p = agent.losses(batch)
+    q_params, p_params = list(agent.q.parameters()), list(agent.param.parameters())
+    gq = torch.autograd.grad(loss_q, q_params + p_params, retain_graph=True, allow_unused=True)
+    gp = torch.autograd.grad(loss_p, q_params + p_params, allow_unused=True)
+    nq = len(q_params)
+    assert any(g is not None and g.abs().sum() > 0 for g in gq[:nq])  # Q loss trains Q ...
+    assert all(g is None or g.abs().sum() == 0 for g in gq[nq:])  # ... and not the parameter net
+    assert any(g is not None and g.abs().sum() > 0 for g in gp[nq:])  # parameter loss trains x(s; w) ...
+    assert all(g is None or g.abs().sum() == 0 for g in gp[:nq])  # ... and not Q
+
+
+def test_multipass_removes_parameter_leakage():
+    agent, obs, info = _filled_agent("mpdqn", "parameterized", n=10)
+    feats = torch.randn(4, agent.q.mlp[0].in_features - 3)
+    x = torch.rand(4, 3)
+    x2 = x.clone()
+    x2[:, 2] += 0.5  # change only k=+1's parameter
+    q1, q2 = agent.q_values(agent.q, feats, x), agent.q_values(agent.q, feats, x2)
+    assert torch.allclose(q1[:, :2], q2[:, :2]) and not torch.allclose(q1[:, 2], q2[:, 2])
+    agent.cfg.multipass = False  # plain P-DQN: every Q_k sees every parameter
+    q1, q2 = agent.q_values(agent.q, feats, x), agent.q_values(agent.q, feats, x2)
+    assert not torch.allclose(q1[:, 0], q2[:, 0])
+
+
+def test_greedy_act_respects_the_mask():
+    agent, obs, info = _filled_agent("prl", "parameterized", n=10)
+    for mask in ([1, 1, 0], [0, 1, 0], [0, 1, 1]):
+        k, accel = agent.act(obs, {"action_mask": np.array(mask, dtype=np.int8)})
+        assert mask[k] == 1 and accel.shape == (3,) and np.all((-4 <= accel) & (accel <= 3))
+    dqn, obs, info = _filled_agent("dqn", "discrete27", n=10)
+    a = dqn.act(obs, {"action_mask": np.array([0, 1, 0], dtype=np.int8)})
+    assert a % 3 == 1  # only 'stay' actions survive
+
+
+@pytest.mark.parametrize("method", LEARNING)
+def test_training_smoke_and_checkpoint_round_trip(method, tmp_path):
+    """Two short episodes with updates, a shipped policy, and identical greedy actions after loading."""
+    df = train(method, "uncoordinated", 2, seed=0, out=tmp_path / "run", checkpoint_every=1, models=tmp_path / "models",
+               agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
+    assert len(df) == 2 and df.updates.iloc[-1] > 0 and np.isfinite(df.loss_q.iloc[-1])
+    assert len(pd.read_parquet(tmp_path / "run" / "metrics.parquet")) == 2
+    train_log = read_log(tmp_path / "run" / "train.mcap")  # a /train-only file: no episode summary
+    assert [m.episode for m in train_log.train] == [0, 1]
+    folder = policy_dir(method, "uncoordinated", tmp_path / "models")
+    manifest = json.loads((folder / "manifest.json").read_text())
+    assert manifest["seed"] == 0 and len(manifest["sha256"]) == 64 and manifest["training_wall_time_s"] > 0
+    state, _ = load_policy(folder, method)
+    env = gym.make("EcoDrive-v0", action=_interface(method), config=FAST_SCENARIO).unwrapped
+    a1 = make_agent(method, env.observation_space, env.action_space, seed=5, **FAST_AGENT)
+    a2 = make_agent(method, env.observation_space, env.action_space, seed=6, **FAST_AGENT)
+    a1.load_state_dict(state)
+    a2.load_state_dict(state)
+    obs, info = env.reset(seed=11)
+    for _ in range(20):
+        x, y = a1.act(obs, info), a2.act(obs, info)
+        assert _same(x, y)
+        obs, r, te, tr, info = env.step(x)
+    env.close()
+
+
+def _interface(method: str) -> str:
+    from agents.registry import ACTION_INTERFACE
+
+    return ACTION_INTERFACE[method]
+
+
+def _same(x, y) -> bool:
+    if isinstance(x, tuple):
+        return x[0] == y[0] and np.array_equal(x[1], y[1])
+    return np.array_equal(np.asarray(x), np.asarray(y))
+
+
+def test_corrupt_or_mismatched_policy_is_a_clear_error(tmp_path):
+    train("dqn", "coordinated", 1, seed=0, out=tmp_path / "run", models=tmp_path / "models",
+          agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
+    folder = policy_dir("dqn", "coordinated", tmp_path / "models")
+    with pytest.raises(CheckpointError, match="not 'prl'"):
+        load_policy(folder, "prl")
+    with pytest.raises(CheckpointError, match="different scenario"):
+        load_policy(folder, "dqn", {**json.loads((folder / "manifest.json").read_text())["scenario"], "spacing": 500.0})
+    data = bytearray((folder / "policy.pt").read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    (folder / "policy.pt").write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match="sha256"):
+        load_policy(folder, "dqn")
+    with pytest.raises(CheckpointError, match="no trained policy"):
+        load_policy(tmp_path / "nothing", "dqn")
+
+
+def test_resumed_training_equals_uninterrupted(tmp_path):
+    kw = dict(checkpoint_every=1, models=None, agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
+    full = train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "full", **kw)
+    part = train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "cut", stop_after=2, **kw)
+    assert len(part) == 2
+    resumed = train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "cut", **kw)
+    pd.testing.assert_frame_equal(full, resumed)
+    a = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=False)["agent"]
+    b = torch.load(tmp_path / "cut" / "checkpoint.pt", weights_only=False)["agent"]
+    for net in ("q", "param"):
+        for k in a[net]:
+            assert torch.equal(a[net][k], b[net][k])
+
+
+def test_resume_refuses_another_run(tmp_path):
+    kw = dict(models=None, agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
+    train("prl", "uncoordinated", 1, seed=2, out=tmp_path / "r", **kw)
+    with pytest.raises(SystemExit, match="differs in seed"):
+        train("prl", "uncoordinated", 2, seed=3, out=tmp_path / "r", **kw)
