@@ -8,6 +8,7 @@ import json
 import sys
 from pathlib import Path
 
+STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes run longer than greedy ones)
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
     "env_step_over_sim_in_run": ("", "", 2.0, "env.step / its own simulationStep"),
@@ -28,6 +29,12 @@ def ratios(path: Path) -> dict[str, float]:
         out["log_overhead_in_run"] = 1.0 + extra["test_episode_logged"]["log_overhead"]
     if "test_env_reset" in med:
         out["reset_ms"] = med["test_env_reset"] * 1e3
+    if "test_learner_update[prl]" in med and "test_training_env_step" in med:
+        mean = {b["name"]: b["stats"]["mean"] for b in data["benchmarks"]}
+        per_step = mean["test_learner_update[prl]"] + mean["test_training_env_step"]
+        out["updates_per_s"] = 1.0 / mean["test_learner_update[prl]"]
+        out["env_steps_per_s"] = 1.0 / mean["test_training_env_step"]
+        out["prl_1000_episodes_min"] = per_step * STEPS_PER_EPISODE * 1000 / 60
     return out
 
 
@@ -36,7 +43,11 @@ def main(argv: list[str] | None = None) -> int:
     if len(argv) != 1 or not Path(argv[0]).is_file():
         print("usage: python -m bench.perf BENCHMARK_JSON (a file written by --benchmark-json)")
         return 2
-    r = ratios(Path(argv[0]))
+    try:
+        r = ratios(Path(argv[0]))
+    except (json.JSONDecodeError, KeyError) as e:
+        print(f"{argv[0]}: not a pytest-benchmark JSON file ({type(e).__name__}: {e})")
+        return 2
     ok = True
     for key, (_, _, limit, what) in TARGETS.items():
         if key in r:
@@ -47,6 +58,13 @@ def main(argv: list[str] | None = None) -> int:
         good = r["reset_ms"] <= 50
         ok &= good
         print(f"{'env.reset':40s} {r['reset_ms']:6.1f} ms (target <= 50 ms) {'ok' if good else 'MISSED'}")
+    if "prl_1000_episodes_min" in r:
+        good = r["prl_1000_episodes_min"] <= 30
+        ok &= good
+        print(f"{'PRL learner updates/s':40s} {r['updates_per_s']:6.1f}")
+        print(f"{'training env steps/s (act+step+store)':40s} {r['env_steps_per_s']:6.1f}")
+        print(f"{'projected 1000-episode PRL run':40s} {r['prl_1000_episodes_min']:6.1f} min "
+              f"(target <= 30 min, {STEPS_PER_EPISODE} steps/episode) {'ok' if good else 'MISSED'}")
     return 0 if ok else 1
 
 

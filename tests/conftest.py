@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pytest
 
+import envs  # noqa: F401  (registers EcoDrive-v0)
+
 # keep Rerun's config/data out of the user's home during tests
 _XDG = Path(tempfile.mkdtemp(prefix="ecodrive-xdg-"))
 os.environ.setdefault("XDG_CONFIG_HOME", str(_XDG / "config"))

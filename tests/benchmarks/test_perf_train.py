@@ -1,0 +1,59 @@
+"""pytest-benchmark: PRL learner updates and training env steps (one thread, as in training).
+
+``nox -s perf`` reports updates/s and env steps/s; ``bench.perf`` turns them into the projected
+wall time of a 1000-episode run (target: 30 minutes on one core).
+"""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from agents.registry import make_agent
+
+
+@pytest.fixture(scope="module")
+def filled():
+    torch.set_num_threads(1)
+    env = gym.make("EcoDrive-v0", signals="uncoordinated", action="parameterized").unwrapped
+    agent = make_agent("prl", env.observation_space, env.action_space, seed=0, learning_starts=10**9)
+    agent.begin_episode(0)
+    obs, info = env.reset(seed=0)
+    for _ in range(2000):
+        a = agent.act(obs, info, explore=True)
+        nobs, r, te, tr, info = env.step(a)
+        agent.observe(obs, a, r, nobs, te, tr, info)
+        obs = nobs
+        if te or tr:
+            obs, info = env.reset(seed=int(agent.rng.integers(1000)))
+    yield env, agent
+    env.close()
+
+
+@pytest.mark.parametrize("method", ["prl", "mpdqn"])
+def test_learner_update(benchmark, filled, method):
+    env, src = filled
+    agent = make_agent(method, env.observation_space, env.action_space, seed=0)
+    agent.replay = src.replay
+    benchmark.pedantic(agent.update, rounds=200, iterations=1, warmup_rounds=5)
+
+
+def test_training_env_step(benchmark, filled):
+    """One exploring act + env.step + store (no update)."""
+    env, agent = filled
+    state = {"obs": None, "info": None}
+
+    def setup():
+        if state["obs"] is None:
+            state["obs"], state["info"] = env.reset(seed=1)
+        return (), {}
+
+    def step():
+        a = agent.act(state["obs"], state["info"], explore=True)
+        nobs, r, te, tr, info = env.step(a)
+        agent.replay.add(state["obs"]["grid"], state["obs"]["logic"], np.zeros(4), r, nobs["grid"], nobs["logic"],
+                         float(te), info["action_mask"].astype(bool))
+        state["obs"], state["info"] = (None, None) if te or tr else (nobs, info)
+
+    benchmark.pedantic(step, setup=setup, rounds=500, iterations=1)
