@@ -202,11 +202,27 @@ def write_train_log(path: Path, rows: list[dict[str, Any]], meta: dict[str, Any]
 
 
 def is_complete(path: str | Path) -> bool:
-    """True for a finished, fully readable log (used to skip cases on resume)."""
+    """True for a finished, fully readable log."""
     try:
         return read_log(path).complete
     except LogError:
         return False
+
+
+def episode_summary(path: str | Path) -> dict[str, Any] | None:
+    """The /episode record of a finished log through the MCAP index (fast), or None when the
+    file is missing, unfinished or damaged (the harness then reruns the case)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f, validate_crcs=True)
+            for _, channel, message in reader.iter_messages(topics=["/episode"]):
+                ep = schema.Episode.FromString(message.data)
+                return {fd.name: getattr(ep, fd.name) for fd in ep.DESCRIPTOR.fields}
+    except Exception:  # any damage means: run the case again
+        return None
+    return None
 
 
 def meta_json(obj: Any) -> str:

@@ -1,89 +1,192 @@
-"""Run methods over the fixed test cases, one MCAP per episode, and a results table.
+"""The benchmark harness: every method over the fixed test cases, one MCAP per episode.
 
-    python -m bench.run [--methods baseline glosa] [--signals coordinated uncoordinated]
-                        [--cases N] [--run-id ID] [--logs logs]
+    python -m bench.run [--profile smoke|paper|full] [--executor local|ray] [--address ADDR]
+                        [--workers N] [--methods ...] [--signals ...] [--run-id ID] [--logs DIR]
 
-Layout: ``logs/<run-id>/<signals>/<method>/case-XXX.mcap`` and ``logs/<run-id>/results.parquet``.
-A rerun skips cases whose MCAP is complete and reruns the rest. This is the sequential
-core; the process pool, Ray executor and profiles are the harness issue's work.
+Writes ``<logs>/<run-id>/<signals>/<method>/case-XXX.mcap``, ``results.parquet`` and
+``manifest.json``. Rerunning the same command skips cases whose MCAP is complete and reruns the
+rest, so a killed run loses nothing that finished. Evaluation is greedy.
 """
 from __future__ import annotations
 
-import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 from tqdm import tqdm
 
-from agents import RULE_BASED
+from agents.registry import LEARNING, METHODS
 from envs.config import SIGNALS
 
 from .cases import load
-from .episode import make_env, run_episode
-from .mcaplog import is_complete, read_log
+from .checkpoint import MODELS, CheckpointError, policy_dir, sha256
+from .executors import EXECUTORS, Task, run_local, run_ray
+from .mcaplog import episode_summary
 from .provenance import git_sha, package_versions
 
+PROFILES = {  # name: cases per setting (and, for full, the further experiments as they land)
+    "smoke": 3,
+    "paper": 100,
+    "full": 100,
+}
+KEEP = ("method", "signals", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
+        "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",
+        "lane_changes_applied", "clips", "jerk_exceedances", "collisions", "teleports", "battery_consumed",
+        "battery_regenerated", "mcap")
 
-def _row_from_log(path: Path) -> dict:
-    ep = read_log(path).episode
-    return {f.name: getattr(ep, f.name) for f in ep.DESCRIPTOR.fields}
+
+class UsageError(Exception):
+    """Bad input; printed as one line, nothing touched."""
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--methods", nargs="+", default=list(RULE_BASED), help=f"any of {', '.join(RULE_BASED)}")
-    ap.add_argument("--signals", nargs="+", default=list(SIGNALS), help=f"any of {', '.join(SIGNALS)}")
-    ap.add_argument("--cases", type=int, default=100, help="first N fixed cases per setting (1-100)")
-    ap.add_argument("--run-id", default="default", help="folder name under --logs")
-    ap.add_argument("--logs", type=Path, default=Path("logs"), help="root folder of the run folders")
-    args = ap.parse_args(argv)
-    for m in args.methods:
-        if m not in RULE_BASED:
-            ap.error(f"unknown method {m!r}; accepted: {', '.join(RULE_BASED)}")
-    for s in args.signals:
-        if s not in SIGNALS:
-            ap.error(f"unknown signals {s!r}; accepted: {', '.join(SIGNALS)}")
-    cases = load()
-    if not 1 <= args.cases <= len(cases):
-        ap.error(f"--cases {args.cases} is out of range; accepted: 1..{len(cases)}")
-    run_dir = args.logs / args.run_id
+def _choice(flag: str, value: str, accepted: tuple[str, ...] | list[str]) -> str:
+    if value not in accepted:
+        raise UsageError(f"{flag} {value!r} is not accepted; choose one of {', '.join(accepted)}")
+    return value
+
+
+def parse(argv: list[str]) -> dict[str, Any]:
+    """A small, strict parser: unknown flags and values are one-line errors (no usage dump)."""
+    opts: dict[str, Any] = {"profile": "paper", "executor": "local", "address": None, "workers": os.cpu_count() or 1,
+                            "methods": None, "signals": list(SIGNALS), "run_id": None, "logs": Path("logs"),
+                            "models": MODELS}
+    multi = {"--methods": "methods", "--signals": "signals"}
+    single = {"--profile": "profile", "--executor": "executor", "--address": "address", "--workers": "workers",
+              "--run-id": "run_id", "--logs": "logs", "--models": "models"}
+    i = 0
+    while i < len(argv):
+        flag = argv[i]
+        if flag in ("-h", "--help"):
+            print(__doc__)
+            raise SystemExit(0)
+        if flag in multi:
+            vals = []
+            while i + 1 < len(argv) and not argv[i + 1].startswith("--"):
+                vals.append(argv[i + 1])
+                i += 1
+            if not vals:
+                raise UsageError(f"{flag} needs at least one value")
+            opts[multi[flag]] = vals
+        elif flag in single:
+            if i + 1 >= len(argv):
+                raise UsageError(f"{flag} needs a value")
+            opts[single[flag]] = argv[i + 1]
+            i += 1
+        else:
+            raise UsageError(f"unknown option {flag!r}; accepted: {', '.join([*single, *multi])}")
+        i += 1
+    _choice("--profile", opts["profile"], tuple(PROFILES))
+    _choice("--executor", opts["executor"], EXECUTORS)
+    try:
+        opts["workers"] = int(opts["workers"])
+    except ValueError:
+        raise UsageError(f"--workers {opts['workers']!r} must be an integer >= 1") from None
+    if opts["workers"] < 1:
+        raise UsageError(f"--workers {opts['workers']} must be >= 1")
+    for s in opts["signals"]:
+        _choice("--signals", s, SIGNALS)
+    opts["logs"], opts["models"] = Path(opts["logs"]), Path(opts["models"])
+    opts["run_id"] = opts["run_id"] or opts["profile"]
+    return opts
+
+
+def resolve_methods(opts: dict[str, Any]) -> tuple[list[str], list[str]]:
+    """(methods to run, learning methods skipped for want of a shipped policy)."""
+    if opts["methods"] is not None:
+        for m in opts["methods"]:
+            _choice("--methods", m, METHODS)
+            for s in opts["signals"]:
+                if m in LEARNING and not (policy_dir(m, s, opts["models"]) / "manifest.json").is_file():
+                    raise UsageError(f"no trained policy for {m} / {s} (expected {policy_dir(m, s, opts['models'])}); "
+                                     f"train it: python -m bench.train --method {m} --signals {s}")
+        return list(opts["methods"]), []
+    have = [m for m in METHODS if m not in LEARNING or all(
+        (policy_dir(m, s, opts["models"]) / "manifest.json").is_file() for s in opts["signals"])]
+    return have, [m for m in METHODS if m not in have]
+
+
+def check_writable(run_dir: Path) -> None:
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
-        probe = run_dir / ".write-test"
+        probe = run_dir / f".write-test-{os.getpid()}"
         probe.write_text("")
         probe.unlink()
     except OSError as e:
-        ap.error(f"log folder {run_dir} is not writable ({e.strerror})")
-    jobs = [(m, s, c) for s in args.signals for m in args.methods for c in cases[: args.cases]]
-    rows = []
-    envs: dict = {}
+        raise UsageError(f"log folder {run_dir} is not writable ({e.strerror})") from None
+
+
+def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
+    methods, skipped = resolve_methods(opts)
+    if skipped:
+        print(f"note: no shipped policy for {', '.join(skipped)}; running {', '.join(methods)}", file=sys.stderr)
+    run_dir = opts["logs"] / opts["run_id"]
+    check_writable(run_dir)
+    cases = load()[: PROFILES[opts["profile"]]]
+    rows, tasks = [], []
+    for signals in opts["signals"]:
+        for method in methods:
+            pdir = str(policy_dir(method, signals, opts["models"])) if method in LEARNING else ""
+            for case in cases:
+                path = run_dir / signals / method / f"case-{case.index:03d}.mcap"
+                done = episode_summary(path)
+                if done is not None:
+                    rows.append({**done, "mcap": str(path), "episode_wall_s": float("nan")})
+                else:
+                    tasks.append(Task(method, signals, case, str(path), pdir))
     t0 = time.perf_counter()
-    for method, signals, case in tqdm(jobs, desc="episodes", unit="ep"):
-        path = run_dir / signals / method / f"case-{case.index:03d}.mcap"
-        if is_complete(path):
-            rows.append({**_row_from_log(path), "mcap": str(path)})
-            continue
-        agent = RULE_BASED[method]()
-        key = (method, signals)
-        if key not in envs:
-            envs[key] = make_env(agent, signals)
-        row = run_episode(envs[key], agent, case, method, log_path=path)
-        rows.append({**row, "mcap": str(path)})
-    for env in envs.values():
-        env.close()
+    it = (run_local(tasks, opts["workers"]) if opts["executor"] == "local"
+          else run_ray(tasks, opts["address"], opts["workers"]))
+    with tqdm(total=len(rows) + len(tasks), initial=len(rows), desc="episodes", unit="ep", disable=not progress) as bar:
+        for row in it:
+            rows.append(row)
+            bar.update(1)
+    wall = time.perf_counter() - t0
     df = pd.DataFrame(rows).rename(columns={"return_": "return", "case_index": "case", "sumo_seed": "seed"})
-    tmp = run_dir / "results.parquet.tmp"
-    df.to_parquet(tmp, index=False)
-    tmp.replace(run_dir / "results.parquet")
-    manifest = {"command": sys.argv, "git_sha": git_sha(), "packages": package_versions(),
-                "methods": args.methods, "signals": args.signals, "cases": args.cases,
-                "wall_time_s": round(time.perf_counter() - t0, 2)}
-    (run_dir / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    df = df.sort_values(["signals", "method", "case"], ignore_index=True)
+    ran = df["episode_wall_s"].dropna()
+    tmp = run_dir / ".results.parquet.tmp"
+    df[list(KEEP)].to_parquet(tmp, index=False)
+    os.replace(tmp, run_dir / "results.parquet")
+    shas = {f"{m}-{s}": sha256(policy_dir(m, s, opts["models"]) / "policy.pt")
+            for m in methods if m in LEARNING for s in opts["signals"]}
+    manifest = {
+        "command": " ".join(["python", "-m", "bench.run", *opts.get("argv", [])]), "profile": opts["profile"],
+        "executor": opts["executor"], "workers": opts["workers"], "methods": methods, "skipped_methods": skipped,
+        "signals": opts["signals"], "cases_per_setting": len(cases), "git_sha": git_sha(),
+        "packages": package_versions(), "checkpoint_sha256": shas,
+        "episodes_run": int(len(ran)), "episodes_reused": int(len(df) - len(ran)),
+        "wall_time_s": round(wall, 2), "episode_time_sum_s": round(float(ran.sum()), 2),
+        "harness_overhead": round(float(wall * min(opts["workers"], max(len(ran), 1)) / ran.sum() - 1), 4)
+        if len(ran) else None,
+    }
+    from envs.config import ScenarioConfig
+
+    manifest["scenario"] = {s: ScenarioConfig(signals=s).to_dict() for s in opts["signals"]}
+    tmp = run_dir / ".manifest.json.tmp"
+    tmp.write_text(json.dumps(manifest, indent=1))
+    os.replace(tmp, run_dir / "manifest.json")
+    return df
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        opts = parse(argv)
+        opts["argv"] = argv
+        df = run(opts)
+    except (UsageError, CheckpointError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)
+        return 130
     summary = df.groupby(["signals", "method"])[["energy", "travel_time", "collisions"]].mean().round(2)
     print(summary.to_string())
+    print(f"results: {opts['logs'] / opts['run_id'] / 'results.parquet'}")
     return 0
 
 
