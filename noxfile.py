@@ -17,8 +17,12 @@ def tests(session: nox.Session) -> None:
 
 @nox.session
 def benchmark(session: nox.Session) -> None:
-    """The main job: every available method over the fixed cases, MCAP logs + results table."""
+    """The main job: every available method over the fixed cases, MCAP logs, results, report."""
+    from bench.run import parse
+
     session.run("python", "-m", "bench.run", *session.posargs)
+    opts = parse(list(session.posargs))
+    session.run("python", "-m", "reports.build", str(opts["logs"] / opts["run_id"]))
 
 
 @nox.session

@@ -1,0 +1,109 @@
+"""Build the report of a run folder: Table 4, statistics, violin and trajectory figures.
+
+    python -m reports.build logs/<run-id> [--out reports/<run-id>]
+
+Reads only ``results.parquet``, ``manifest.json`` and the step logs; writes ``index.md`` and
+``index.html`` (which shows the figures) plus the tables and figures.
+"""
+from __future__ import annotations
+
+import argparse
+import html
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from bench.mcaplog import LogError
+
+from . import figures, metrics, tables
+from .load import RunError, load_run, load_steps, stop_lines
+
+METHOD_ORDER = ("baseline", "glosa", "prl", "mpdqn", "ddpg", "dqn")
+TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
+
+
+def build(run_dir: Path, out: Path) -> Path:
+    results, manifest = load_run(run_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    methods = [m for m in METHOD_ORDER if m in set(results.method)]
+    t4 = metrics.table4(results)
+    t4 = t4.set_index("method").loc[[m for m in methods if m in set(t4.method)]].reset_index()
+    st = metrics.statistics(results)
+    (out / "table4.md").write_text(tables.table4_markdown(t4))
+    (out / "table4.tex").write_text(tables.table4_latex(t4))
+    (out / "statistics.md").write_text(tables.stats_markdown(st))
+    t4.to_csv(out / "table4.csv", index=False)
+    st.to_csv(out / "statistics.csv", index=False)
+    groups = metrics.group_means(results)
+    md = [f"# Report: {run_dir.name}", "",
+          f"Profile `{manifest.get('profile', '?')}`, git `{manifest.get('git_sha', '?')}`, "
+          f"{len(results)} episodes, methods: {', '.join(methods)}.", ""]
+    if manifest.get("skipped_methods"):
+        md += [f"Not in this run (no shipped policy): {', '.join(manifest['skipped_methods'])}.", ""]
+    md += ["## Table 4", "", tables.table4_markdown(t4), "## Statistics", "",
+           f"Bootstrap (BCa, {metrics.BOOTSTRAP_RESAMPLES} resamples) {int(metrics.CI_LEVEL * 100)}% CIs; IQM = "
+           "25% trimmed mean; P(improve) = chance an episode of the method uses less than one of the baseline.",
+           "", tables.stats_markdown(st), "## Distributions over seed groups (fig:rwd_bar)", ""]
+    images = []
+    for signals in sorted(set(results.signals)):
+        p = figures.violins(groups, methods, signals, out / "figures")
+        images.append((f"violin, {signals}", p[0]))
+        md += [f"![violin {signals}](figures/{p[0].name})", ""]
+    compare = next((m for m in ("prl", "mpdqn", "ddpg", "glosa") if m in methods), None)
+    warnings = []
+    if compare is not None and "baseline" in methods:
+        md += [f"## Trajectories: baseline against {compare} (fig:compare1/2)", ""]
+        if compare != "prl":
+            md += [f"PRL is not in this run; {compare} is shown instead.", ""]
+        for signals in sorted(set(results.signals)):
+            sub = results[results.signals == signals]
+            for case in sorted(set(sub[sub.method == compare].case) & set(sub[sub.method == "baseline"].case))[
+                    :TRAJECTORY_CASES]:
+                trajs, bands, longest = {}, None, 0
+                for method in ("baseline", compare):
+                    path = Path(sub[(sub.method == method) & (sub.case == case)].mcap.iloc[0])
+                    try:
+                        steps, warn = load_steps(path)
+                    except LogError as e:
+                        warnings.append(str(e))
+                        continue
+                    if warn:
+                        warnings.append(warn)
+                    trajs[method] = metrics.trajectory(steps)
+                    if len(steps) > longest:  # bands over the longer drive
+                        longest, bands = len(steps), metrics.signal_bands(steps, *stop_lines(steps))
+                if trajs and bands is not None:
+                    name = f"compare-{signals}-case{case:03d}"
+                    p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
+                    images.append((f"{signals} case {case}", p[0]))
+                    md += [f"![{name}](figures/{p[0].name})", ""]
+    if warnings:
+        md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
+    (out / "index.md").write_text("\n".join(md))
+    body = "".join(f"<h3>{html.escape(t)}</h3><img src='figures/{p.name}' style='max-width:100%'>" for t, p in images)
+    tables_html = "".join(f"<h2>{h}</h2>{df.to_html(index=False, float_format=lambda v: f'{v:.3f}')}"
+                          for h, df in (("Table 4", t4), ("Statistics", st)))
+    (out / "index.html").write_text(f"<html><head><meta charset='utf-8'><title>{html.escape(run_dir.name)}</title>"
+                                    f"</head><body><h1>Report: {html.escape(run_dir.name)}</h1>{tables_html}{body}"
+                                    "</body></html>")
+    return out / "index.md"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("run_dir", type=Path, help="a run folder written by python -m bench.run")
+    ap.add_argument("--out", type=Path, default=None, help="output folder (default reports/<run-id>)")
+    args = ap.parse_args(argv)
+    out = args.out or Path("reports") / args.run_dir.name
+    try:
+        index = build(args.run_dir, out)
+    except (RunError, LogError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(f"report: {index} and {index.with_suffix('.html')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,42 @@
+"""Read a run folder: the results table, the manifest and step logs. No simulator here."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.mcaplog import LogError, read_log
+
+
+class RunError(RuntimeError):
+    pass
+
+
+def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict]:
+    res, man = run_dir / "results.parquet", run_dir / "manifest.json"
+    if not res.is_file():
+        raise RunError(f"{run_dir}: no results.parquet (is this a folder written by `python -m bench.run`?)")
+    manifest = json.loads(man.read_text()) if man.is_file() else {}
+    return pd.read_parquet(res), manifest
+
+
+def load_steps(path: Path) -> tuple[pd.DataFrame, str]:
+    """The /step channel of one log as a table, and a warning ('' if the log is complete)."""
+    data = read_log(path)
+    rows = [{"time": s.time, "x": s.x, "speed": s.speed, "energy_total": s.energy_total, "lane": s.lane,
+             "tls": s.signal.tls, "link": s.signal.link, "signal_distance": s.signal.distance,
+             "tls_states": list(s.tls_states)} for s in data.steps]
+    if not rows:
+        raise LogError(f"{path}: the log has no steps")
+    return pd.DataFrame(rows), data.warning
+
+
+def stop_lines(steps: pd.DataFrame) -> tuple[dict[str, float], dict[str, int]]:
+    """Stop-line x and the ego's link index per signal, recovered from the log itself."""
+    seen = steps[steps.tls != ""]
+    xs = {tls: float(np.median(g.x + g.signal_distance)) for tls, g in seen.groupby("tls")}
+    links = {tls: int(g.link.mode().iloc[0]) for tls, g in seen.groupby("tls")}
+    order = sorted(xs, key=xs.get)
+    return {t: xs[t] for t in order}, links

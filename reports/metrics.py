@@ -1,0 +1,117 @@
+"""Pure functions on arrays and tables: the numbers of the report (nothing here plots).
+
+Lower is better for both energy and travel time. Confidence intervals come from
+``scipy.stats.bootstrap`` (BCa, seeded); the IQM is the 25%-trimmed mean (as in rliable).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+PAPER_TABLE4 = {  # (method, signals) -> (energy [Wh], travel time [s]); Table 4 and section 5.3 text
+    ("baseline", "coordinated"): (231.13, 189.08),
+    ("baseline", "uncoordinated"): (253.79, 260.21),
+    ("prl", "coordinated"): (221.75, 204.79),
+    ("prl", "uncoordinated"): (184.93, 289.82),
+}
+METRICS = ("energy", "travel_time")
+BOOTSTRAP_RESAMPLES = 2000
+CI_LEVEL = 0.95
+
+
+def iqm(x: np.ndarray) -> float:
+    """Interquartile mean: mean of the middle 50%."""
+    return float(stats.trim_mean(np.asarray(x, dtype=float), 0.25))
+
+
+def bootstrap_ci(x: np.ndarray, statistic=np.mean, seed: int = 0) -> tuple[float, float]:
+    x = np.asarray(x, dtype=float)
+    if len(x) < 2 or np.all(x == x[0]):
+        return float(x[0]), float(x[0])
+    res = stats.bootstrap((x,), statistic, n_resamples=BOOTSTRAP_RESAMPLES, confidence_level=CI_LEVEL,
+                          method="BCa", rng=np.random.default_rng(seed))
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
+    """P(X < Y) + 0.5 P(X = Y) over all pairs: the chance a run of X beats a run of Y."""
+    x, y = np.asarray(x, dtype=float)[:, None], np.asarray(y, dtype=float)[None, :]
+    return float(np.mean((x < y) + 0.5 * (x == y)))
+
+
+def improvement(value: float, baseline: float) -> float:
+    """Table 4's 'Imp.': (baseline - value) / baseline, positive when lower than the baseline."""
+    return (baseline - value) / baseline
+
+
+def table4(results: pd.DataFrame) -> pd.DataFrame:
+    """Mean energy and travel time per (method, signals), improvement over the baseline, and the
+    published values with our difference from them where the paper has them."""
+    rows = []
+    means = results.groupby(["method", "signals"])[list(METRICS)].mean()
+    for (method, signals), r in means.iterrows():
+        row = {"method": method, "signals": signals, "energy": r.energy, "travel_time": r.travel_time}
+        if ("baseline", signals) in means.index:
+            base = means.loc[("baseline", signals)]
+            row["energy_imp"] = improvement(r.energy, base.energy)
+            row["time_imp"] = improvement(r.travel_time, base.travel_time)
+        paper = PAPER_TABLE4.get((method, signals))
+        if paper:
+            row["paper_energy"], row["paper_time"] = paper
+            row["energy_vs_paper"] = r.energy / paper[0] - 1
+            row["time_vs_paper"] = r.travel_time / paper[1] - 1
+            base_paper = PAPER_TABLE4[("baseline", signals)]
+            row["paper_energy_imp"] = improvement(paper[0], base_paper[0])
+            row["paper_time_imp"] = improvement(paper[1], base_paper[1])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def statistics(results: pd.DataFrame) -> pd.DataFrame:
+    """Per (method, signals, metric): mean with bootstrap CI, IQM with bootstrap CI, and the
+    probability of improvement over the baseline."""
+    rows = []
+    for (method, signals), g in results.groupby(["method", "signals"]):
+        base = results[(results.method == "baseline") & (results.signals == signals)]
+        for m in METRICS:
+            x = g[m].to_numpy()
+            lo, hi = bootstrap_ci(x)
+            ilo, ihi = bootstrap_ci(x, statistic=lambda a, axis=-1: stats.trim_mean(a, 0.25, axis=axis))
+            rows.append({"method": method, "signals": signals, "metric": m, "n": len(x), "mean": x.mean(),
+                         "ci_low": lo, "ci_high": hi, "iqm": iqm(x), "iqm_ci_low": ilo, "iqm_ci_high": ihi,
+                         "p_improve_vs_baseline": probability_of_improvement(x, base[m].to_numpy())
+                         if len(base) and method != "baseline" else np.nan})
+    return pd.DataFrame(rows)
+
+
+def group_means(results: pd.DataFrame, groups: int = 10) -> pd.DataFrame:
+    """Mean energy and travel time per seed group (case index mod ``groups``): the violin data."""
+    df = results.assign(group=results["case"] % groups)
+    return df.groupby(["method", "signals", "group"])[list(METRICS)].mean().reset_index()
+
+
+def trajectory(steps: pd.DataFrame) -> pd.DataFrame:
+    """Time since entry, distance travelled, speed and cumulative energy of one logged episode."""
+    t0, x0 = steps.time.iloc[0], steps.x.iloc[0]
+    return pd.DataFrame({"t": steps.time - t0, "distance": steps.x - x0, "speed": steps.speed,
+                         "energy": steps.energy_total})
+
+
+def signal_bands(steps: pd.DataFrame, stop_lines: dict[str, float], links: dict[str, int]) -> pd.DataFrame:
+    """Red/green intervals at each stop line, from the logged signal states: rows (tls, x, t_start,
+    t_end, green). Time and x are relative to the episode's first step, as in ``trajectory``."""
+    t = (steps.time - steps.time.iloc[0]).to_numpy()
+    x0 = steps.x.iloc[0]
+    rows = []
+    for i, (tls, x) in enumerate(stop_lines.items()):
+        link = links.get(tls)
+        if link is None:
+            continue
+        green = np.array([s[i][link] in "gG" for s in steps.tls_states])
+        edges = np.flatnonzero(np.diff(green.astype(int))) + 1
+        starts = np.r_[0, edges]
+        ends = np.r_[edges, len(t) - 1]
+        for a, b in zip(starts, ends):
+            rows.append({"tls": tls, "x": x - x0, "t_start": t[a], "t_end": t[b], "green": bool(green[a])})
+    return pd.DataFrame(rows)

@@ -1,0 +1,49 @@
+"""Markdown and LaTeX renderings of the computed tables."""
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+
+def _f(v, fmt: str = "{:.2f}") -> str:
+    return "" if v is None or (isinstance(v, float) and math.isnan(v)) else fmt.format(v)
+
+
+def _pct(v) -> str:
+    return _f(None if v is None or (isinstance(v, float) and math.isnan(v)) else 100 * v, "{:+.2f}%")
+
+
+def table4_markdown(t4: pd.DataFrame) -> str:
+    cols = ["method", "signals", "energy (Wh)", "imp.", "paper", "paper imp.", "vs paper",
+            "time (s)", "imp.", "paper", "paper imp.", "vs paper"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in t4.iterrows():
+        g = r.get
+        lines.append("| " + " | ".join([
+            r.method, r.signals, _f(r.energy), _pct(g("energy_imp")), _f(g("paper_energy")),
+            _pct(g("paper_energy_imp")), _pct(g("energy_vs_paper")), _f(r.travel_time), _pct(g("time_imp")),
+            _f(g("paper_time")), _pct(g("paper_time_imp")), _pct(g("time_vs_paper"))]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def table4_latex(t4: pd.DataFrame) -> str:
+    lines = [r"\begin{tabular}{llrrrrrr}", r"\hline",
+             r"Method & Signals & Energy (Wh) & Imp. & Paper & Time (s) & Imp. & Paper \\", r"\hline"]
+    for _, r in t4.iterrows():
+        g = r.get
+        lines.append(" & ".join([r.method, r.signals, _f(r.energy), _pct(g("energy_imp")).replace("%", r"\%"),
+                                 _f(g("paper_energy")), _f(r.travel_time), _pct(g("time_imp")).replace("%", r"\%"),
+                                 _f(g("paper_time"))]) + r" \\")
+    lines += [r"\hline", r"\end{tabular}"]
+    return "\n".join(lines) + "\n"
+
+
+def stats_markdown(st: pd.DataFrame) -> str:
+    cols = ["method", "signals", "metric", "n", "mean", "95% CI", "IQM", "IQM 95% CI", "P(improve vs baseline)"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in st.iterrows():
+        lines.append("| " + " | ".join([
+            r.method, r.signals, r.metric, str(r.n), _f(r["mean"]), f"[{_f(r.ci_low)}, {_f(r.ci_high)}]",
+            _f(r.iqm), f"[{_f(r.iqm_ci_low)}, {_f(r.iqm_ci_high)}]", _f(r.p_improve_vs_baseline, "{:.3f}")]) + " |")
+    return "\n".join(lines) + "\n"

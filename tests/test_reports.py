@@ -1,0 +1,53 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.run import parse, run
+from reports import metrics
+from reports.build import build
+
+
+def test_metric_functions():
+    assert metrics.iqm(np.array([0, 1, 2, 3, 4, 5, 6, 100.0])) == pytest.approx(3.5)
+    assert metrics.probability_of_improvement(np.array([1.0, 2.0]), np.array([3.0, 4.0])) == 1.0
+    assert metrics.probability_of_improvement(np.array([1.0]), np.array([1.0])) == 0.5
+    x = np.random.default_rng(0).normal(10, 1, 200)
+    lo, hi = metrics.bootstrap_ci(x)
+    assert lo < x.mean() < hi and hi - lo < 0.6
+    assert metrics.improvement(184.93, 253.79) == pytest.approx(0.2713, abs=1e-4)  # Table 4's 27.13%
+
+
+def test_table4_against_the_paper():
+    res = pd.DataFrame({"method": ["baseline"] * 2 + ["prl"] * 2, "signals": ["uncoordinated"] * 4,
+                        "energy": [250.0, 260.0, 180.0, 190.0], "travel_time": [250.0, 270.0, 280.0, 300.0]})
+    t4 = metrics.table4(res).set_index("method")
+    assert t4.loc["prl", "energy_imp"] == pytest.approx((255 - 185) / 255)
+    assert t4.loc["prl", "paper_energy_imp"] == pytest.approx(0.2713, abs=1e-4)
+    assert t4.loc["baseline", "energy_vs_paper"] == pytest.approx(255 / 253.79 - 1)
+
+
+def test_signal_bands():
+    states = [["G", "r"]] * 3 + [["r", "r"]] * 2 + [["G", "G"]] * 2
+    steps = pd.DataFrame({"time": np.arange(7.0) + 100, "x": np.arange(7.0) * 10 + 5, "tls_states": states})
+    bands = metrics.signal_bands(steps, {"J1": 105.0, "J2": 205.0}, {"J1": 0, "J2": 0})
+    j1 = bands[bands.tls == "J1"]
+    assert j1.green.tolist() == [True, False, True] and j1.t_start.tolist() == [0.0, 3.0, 5.0]
+    assert (bands.x.unique() == [100.0, 200.0]).all()
+
+
+def test_report_from_a_run(tmp_path):
+    run(parse(["--profile", "smoke", "--logs", str(tmp_path / "logs"), "--methods", "baseline", "glosa"]),
+        progress=False)
+    index = build(tmp_path / "logs" / "smoke", tmp_path / "report")
+    text = index.read_text()
+    assert "## Table 4" in text and "231.13" in text and "253.79" in text  # published values beside ours
+    for name in ("table4.md", "table4.tex", "statistics.md", "index.html"):
+        assert (tmp_path / "report" / name).is_file()
+    figs = sorted(p.name for p in (tmp_path / "report" / "figures").iterdir())
+    assert "violin-coordinated.png" in figs and "violin-uncoordinated.pdf" in figs
+    assert sum(n.startswith("compare-") and n.endswith(".png") for n in figs) == 6  # 3 cases x 2 settings
+    assert "<img src='figures/violin-coordinated.png'" in (tmp_path / "report" / "index.html").read_text()
