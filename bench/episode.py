@@ -9,6 +9,7 @@ import numpy as np
 
 from agents.base import Agent
 from envs.env import EcoDriveEnv
+from envs.scenario import LANE_WIDTH
 from envs.sumo import sumo_version
 
 from .cases import Case
@@ -50,6 +51,9 @@ def run_episode(
             "case_index": case.index, "sumo_seed": case.sumo_seed, "insert_time": case.insert_time,
             "sumo_version": sumo_version(), "git_sha": git_sha(), "packages_json": meta_json(package_versions()),
             "agent_sha256": agent_sha256,
+            "geometry_json": meta_json({"lane_y": env.files.lane_y, "stop_lines": env.files.stop_lines,
+                                        "junction_x": env.files.junction_x, "tls": env.files.tls_ids,
+                                        "lane_width": LANE_WIDTH, "v2i_range": env.cfg.v2i_range}),
         }
         log = EpisodeLog(log_path, meta)
         env.recorder = log.record

@@ -54,7 +54,7 @@ MESSAGES: dict[str, list[tuple[str, str, bool]]] = {
         ("config_json", "string", False), ("method", "string", False), ("signals", "string", False),
         ("case_index", "int32", False), ("sumo_seed", "int64", False), ("insert_time", "double", False),
         ("sumo_version", "string", False), ("git_sha", "string", False), ("packages_json", "string", False),
-        ("agent_sha256", "string", False),
+        ("agent_sha256", "string", False), ("geometry_json", "string", False),
     ],
 }
 
