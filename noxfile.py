@@ -5,7 +5,7 @@ from __future__ import annotations
 import nox
 
 nox.options.default_venv_backend = "none"
-nox.options.sessions = ["tests"]
+nox.options.sessions = ["tests", "regression"]
 
 
 @nox.session
@@ -23,6 +23,12 @@ def benchmark(session: nox.Session) -> None:
     session.run("python", "-m", "bench.run", *session.posargs)
     opts = parse(list(session.posargs))
     session.run("python", "-m", "reports.build", str(opts["logs"] / opts["run_id"]))
+
+
+@nox.session
+def regression(session: nox.Session) -> None:
+    """The paper's claims, Table 4's baseline row and the own reference, on the CI cases."""
+    session.run("python", "-m", "bench.regression", *session.posargs)
 
 
 @nox.session
