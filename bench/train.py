@@ -2,7 +2,8 @@
 
     python -m bench.train --method prl --signals uncoordinated --episodes 1000 --seed 0
 
-Every ``--checkpoint-every`` episodes the run folder (``runs/train/<method>-<signals>-s<seed>``)
+Every ``--checkpoint-every`` episodes the run folder (``$ECODRIVE_RUNS`` or
+``~/.cache/ecodrive-bench/runs/train``, then ``<method>-<signals>-s<seed>``)
 gets a checkpoint: networks, optimizers, epsilon, OU state, episode counter, every RNG state and
 the replay buffer, so a killed run that is started again with the same command continues
 exactly as if it had never stopped. Per-episode metrics go to ``metrics.parquet`` and a
@@ -33,7 +34,8 @@ from .episode import make_env
 from .mcaplog import write_train_log
 from .provenance import git_sha, package_versions
 
-RUNS = Path("runs/train")
+# outside the work tree, so a session that gets a fresh checkout on the same machine can resume
+RUNS = Path(os.environ.get("ECODRIVE_RUNS", Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train"))
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
 
 
@@ -138,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=1000, help="training episodes (1-100000)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the agent and of the episode draws (>= 0)")
     ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
-    ap.add_argument("--out", type=Path, default=None, help="run folder (default runs/train/<method>-<signals>-s<seed>)")
+    ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
     ap.add_argument("--no-export", action="store_true", help="do not write models/<method>-<signals>/ at the end")
     args = ap.parse_args(argv)
     if args.method not in LEARNING:
