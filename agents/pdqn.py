@@ -125,6 +125,18 @@ class PDQNAgent:
         self._last = (k, xn)
         return k, self._to_accel(xn)
 
+    def act_batch(self, grids: np.ndarray, logics: np.ndarray, masks: np.ndarray) -> list:
+        """Greedy actions for many vehicles in one forward pass (mixed traffic)."""
+        with torch.no_grad():
+            g = torch.as_tensor(grids, dtype=torch.float32)
+            l = torch.as_tensor(logics * self.scaler.scale)
+            fq, fp = features(g, l, [self.q, self.param])
+            x = self._params(self.param, fp)
+            q = self.q_values(self.q, fq, x).numpy()
+        k = np.argmax(np.where(np.asarray(masks, dtype=bool), q, -np.inf), axis=1)
+        accel = self._to_accel(x.numpy())
+        return [(int(ki), a) for ki, a in zip(k, accel)]
+
     # ------------------------------------------------------------------ learning
     def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
         k, xn = self._last

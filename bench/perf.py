@@ -27,6 +27,9 @@ def ratios(path: Path) -> dict[str, float]:
         out["env_step_over_sim_in_run"] = extra["test_env_step"]["step_over_sim"]
     if "log_overhead" in extra.get("test_episode_logged", {}):
         out["log_overhead_in_run"] = 1.0 + extra["test_episode_logged"]["log_overhead"]
+    if "control_over_sim" in extra.get("test_fleet_step_200_cvs", {}):
+        out["fleet_control_over_sim"] = extra["test_fleet_step_200_cvs"]["control_over_sim"]
+        out["fleet_cvs"] = extra["test_fleet_step_200_cvs"]["cvs_mean"]
     if "test_env_reset" in med:
         out["reset_ms"] = med["test_env_reset"] * 1e3
     if "test_learner_update[prl]" in med and "test_training_env_step" in med:
@@ -58,6 +61,11 @@ def main(argv: list[str] | None = None) -> int:
         good = r["reset_ms"] <= 50
         ok &= good
         print(f"{'env.reset':40s} {r['reset_ms']:6.1f} ms (target <= 50 ms) {'ok' if good else 'MISSED'}")
+    if "fleet_control_over_sim" in r:
+        good = r["fleet_control_over_sim"] <= 3.0
+        ok &= good
+        print(f"{'mixed traffic: control / sim step':40s} {r['fleet_control_over_sim']:6.2f}x "
+              f"({r['fleet_cvs']:.0f} CVs; target <= 3x) {'ok' if good else 'MISSED'}")
     if "prl_1000_episodes_min" in r:
         good = r["prl_1000_episodes_min"] <= 30
         ok &= good

@@ -74,6 +74,7 @@ class ScenarioConfig:
     main_green: float = field(default=42.0, metadata=_rng(5.0, 200.0))  # [s] arterial green
     yellow: float = field(default=3.0, metadata=_rng(0.0, 10.0))  # [s]
     arterial_flow: float = field(default=1000.0, metadata=_rng(0.0, 5000.0))  # [veh/h] W->E Poisson
+    mpr: float = field(default=0.0, metadata=_rng(0.0, 1.0))  # share of the W->E flow that are CVs (mixed traffic)
     opposing_flow: float = field(default=0.0, metadata=_rng(0.0, 5000.0))  # [veh/h] E->W Poisson
     side_flow: float = field(default=60.0, metadata=_rng(0.0, 1000.0))  # [veh/h] per side approach
     step_length: float = field(default=1.0, metadata=_rng(0.05, 2.0, lo_open=True))  # [s]

@@ -21,6 +21,7 @@ EGO_TYPE = "ev"  # vType of the controlled / measured vehicle
 GLOSA_TYPE = "ev_glosa"  # the same EV with SUMO's GLOSA device (range = V2I range)
 HDV_TYPE = "hdv"  # vType of human-driven background vehicles (Krauss + LC2013, SUMO defaults)
 EGO_ROUTE = "arterial"  # route id W -> E along the whole arterial
+CV_FLOW = "cv"  # id prefix of the CV flow in mixed traffic (vehicles "cv.N")
 LANE_WIDTH = 3.2  # [m] SUMO default lane width
 BUILD_VERSION = 5  # bump when the generated files change meaning
 
@@ -214,16 +215,18 @@ def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
                 ET.SubElement(vt, "param", key=key, value=val)
     ET.SubElement(root, "route", id=EGO_ROUTE, edges=" ".join(f"A{k}" for k in range(n + 1)))
     flows = []
-    if cfg.arterial_flow > 0:
-        flows.append(("art", "A0", f"A{n}", cfg.arterial_flow, str(cfg.lanes)))
+    if cfg.arterial_flow * (1 - cfg.mpr) > 0:
+        flows.append(("art", "A0", f"A{n}", cfg.arterial_flow * (1 - cfg.mpr), HDV_TYPE))
+    if cfg.arterial_flow * cfg.mpr > 0:  # Poisson splitting: CVs are an independent Poisson flow
+        flows.append((CV_FLOW, "A0", f"A{n}", cfg.arterial_flow * cfg.mpr, EGO_TYPE))
     if cfg.opposing_flow > 0:
-        flows.append(("opp", f"B{n}", "B0", cfg.opposing_flow, str(cfg.lanes)))
+        flows.append(("opp", f"B{n}", "B0", cfg.opposing_flow, HDV_TYPE))
     if cfg.side_flow > 0:
         for k in range(1, n + 1):
-            flows.append((f"n{k}", f"N{k}in", f"S{k}out", cfg.side_flow, "1"))
-            flows.append((f"s{k}", f"S{k}in", f"N{k}out", cfg.side_flow, "1"))
-    for fid, src, dst, vph, _ in flows:
-        ET.SubElement(root, "flow", id=fid, type=HDV_TYPE, begin="0", end="86400",
+            flows.append((f"n{k}", f"N{k}in", f"S{k}out", cfg.side_flow, HDV_TYPE))
+            flows.append((f"s{k}", f"S{k}in", f"N{k}out", cfg.side_flow, HDV_TYPE))
+    for fid, src, dst, vph, vtype in flows:
+        ET.SubElement(root, "flow", id=fid, type=vtype, begin="0", end="86400",
                       period=f"exp({vph / 3600.0:.6f})", departLane="random", departSpeed="max",
                       attrib={"from": src, "to": dst})
     _write_xml(root, path)

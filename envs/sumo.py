@@ -116,12 +116,14 @@ class SumoSession:
         """Insert a vehicle of the EV type at the arterial's start, now."""
         vtype = GLOSA_TYPE if glosa else EGO_TYPE
         ls.vehicle.add(vid, EGO_ROUTE, typeID=vtype, depart="now", departLane="best", departSpeed="max")
-        ls.vehicle.subscribeContext(
-            vid, tc.CMD_GET_VEHICLE_VARIABLE, self._context_range,
-            [VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED],
-        )
+        self.subscribe(vid)
         if controlled:
             self.take_control(vid)
+
+    def subscribe(self, vid: str) -> None:
+        """Context subscription of the vehicles around ``vid`` (read by ``neighbours``)."""
+        ls.vehicle.subscribeContext(vid, tc.CMD_GET_VEHICLE_VARIABLE, self._context_range,
+                                    [VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED])
 
     @staticmethod
     def add_scripted(vid: str, lane: int, pos: float, speed: float) -> None:
