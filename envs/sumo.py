@@ -136,6 +136,12 @@ class SumoSession:
         ls.vehicle.setSpeed(vid, speed)
 
     @staticmethod
+    def release_speed(vid: str) -> None:
+        """Hand a scripted vehicle back to Krauss (safety checks on, no commanded speed)."""
+        ls.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
+        ls.vehicle.setSpeed(vid, -1)
+
+    @staticmethod
     def take_control(vid: str) -> None:
         ls.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
         ls.vehicle.setLaneChangeMode(vid, LC_MODE_EXTERNAL)
