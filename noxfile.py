@@ -41,6 +41,12 @@ def perf(session: nox.Session) -> None:
 
 
 @nox.session
+def train(session: nox.Session) -> None:
+    """Train all learning methods for both settings (hours; resumable: rerun to continue)."""
+    session.run("python", "-m", "bench.train_all", *session.posargs)
+
+
+@nox.session
 def calibrate(session: nox.Session) -> None:
     """SUMO's default driving over the fixed cases against Table 4's baseline row."""
     session.run("python", "-m", "bench.calibrate", *session.posargs)

@@ -1,0 +1,64 @@
+"""Train every learning method on both signal settings, two at a time, resumably.
+
+    python -m bench.train_all [--episodes 1000] [--seed 0] [--parallel 2] [--methods prl mpdqn dqn ddpg]
+
+Each run is ``python -m bench.train`` with its own log next to its run folder; finished runs
+(a policy already in models/ from the same seed and episode count) are skipped, unfinished ones
+resume from their last checkpoint.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+
+from agents.registry import LEARNING
+from envs.config import SIGNALS
+
+from .checkpoint import MODELS, policy_dir
+from .train import RUNS
+
+
+def _finished(method: str, signals: str, seed: int, episodes: int) -> bool:
+    man = policy_dir(method, signals, MODELS) / "manifest.json"
+    if not man.is_file():
+        return False
+    m = json.loads(man.read_text())
+    return m.get("seed") == seed and m.get("episodes") == episodes
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--episodes", type=int, default=1000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--parallel", type=int, default=2, help="concurrent trainings (one core each)")
+    ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING))
+    args = ap.parse_args(argv)
+    todo = [(m, s) for m in args.methods for s in SIGNALS if not _finished(m, s, args.seed, args.episodes)]
+    running: list[tuple[subprocess.Popen, str]] = []
+    RUNS.mkdir(parents=True, exist_ok=True)
+    failed = []
+    while todo or running:
+        while todo and len(running) < args.parallel:
+            m, s = todo.pop(0)
+            log = open(RUNS / f"{m}-{s}-s{args.seed}.log", "a")
+            cmd = [sys.executable, "-m", "bench.train", "--method", m, "--signals", s, "--episodes",
+                   str(args.episodes), "--seed", str(args.seed)]
+            running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}"))
+            print(f"started {m}/{s}", flush=True)
+        for p, name in list(running):
+            if p.poll() is not None:
+                running.remove((p, name))
+                print(f"finished {name} (exit {p.returncode})", flush=True)
+                if p.returncode:
+                    failed.append(name)
+        time.sleep(5)
+    if failed:
+        print(f"failed: {', '.join(failed)}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
