@@ -10,7 +10,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from .cases import Case
 
@@ -57,10 +57,10 @@ def run_task(task: Task) -> dict[str, Any]:
     return row
 
 
-def run_local(tasks: Iterable[Task], workers: int) -> Iterator[dict[str, Any]]:
+def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = run_task) -> Iterator[dict[str, Any]]:
     ctx = mp.get_context("spawn")  # a fresh interpreter per worker: no libsumo state is inherited
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(run_task, t) for t in tasks]
+        futures = [pool.submit(fn, t) for t in tasks]
         try:
             for f in as_completed(futures):
                 yield f.result()
@@ -70,7 +70,8 @@ def run_local(tasks: Iterable[Task], workers: int) -> Iterator[dict[str, Any]]:
             raise
 
 
-def run_ray(tasks: Iterable[Task], address: str | None, workers: int) -> Iterator[dict[str, Any]]:
+def run_ray(tasks: Iterable[Any], address: str | None, workers: int,
+            fn: Callable[[Any], dict] = run_task) -> Iterator[dict[str, Any]]:
     try:
         import ray
     except ImportError:
@@ -83,7 +84,7 @@ def run_ray(tasks: Iterable[Task], address: str | None, workers: int) -> Iterato
             ray.init(address=address, **kwargs)
         else:
             ray.init(num_cpus=workers, **kwargs)
-    remote = ray.remote(num_cpus=1)(run_task)
+    remote = ray.remote(num_cpus=1)(fn)
     pending = [remote.remote(t) for t in tasks]
     while pending:
         done, pending = ray.wait(pending, num_returns=1)

@@ -27,7 +27,7 @@ from . import schema
 
 CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
 TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode,
-          "/train": schema.TrainEpisode}
+          "/train": schema.TrainEpisode, "/fleet/vehicle": schema.FleetVehicle, "/fleet/cell": schema.FleetCell}
 PART = ".part"
 # serialized FileDescriptorSets, built once per process (they are the same for every file)
 _SCHEMAS = {topic: (cls.DESCRIPTOR.full_name, build_file_descriptor_set(cls).SerializeToString())
@@ -128,6 +128,8 @@ class LogData:
     steps: list[Any] = field(default_factory=list)
     episode: Any = None  # the /episode message, None if the run did not finish
     train: list[Any] = field(default_factory=list)  # /train messages (training logs)
+    fleet_vehicles: list[Any] = field(default_factory=list)  # /fleet/vehicle (mixed traffic)
+    fleet_cell: Any = None  # /fleet/cell summary (mixed traffic)
     complete: bool = False  # footer read and episode summary present
     warning: str = ""
 
@@ -166,6 +168,10 @@ def read_log(path: str | Path) -> LogData:
                         data.episode = msg
                     elif topic == "/train":
                         data.train.append(msg)
+                    elif topic == "/fleet/vehicle":
+                        data.fleet_vehicles.append(msg)
+                    elif topic == "/fleet/cell":
+                        data.fleet_cell = msg
                     else:
                         data.metadata = msg
     except (McapError, struct.error, ValueError, EOFError, OSError) as e:  # truncated or corrupt tail
@@ -182,23 +188,32 @@ def read_log(path: str | Path) -> LogData:
     return data
 
 
-def write_train_log(path: Path, rows: list[dict[str, Any]], meta: dict[str, Any]) -> None:
-    """All training episodes so far as a ``/train`` channel (rewritten whole, atomically)."""
+def write_records(path: Path, messages: list[tuple[str, Any, int]], meta: dict[str, Any]) -> None:
+    """A whole small log at once (training metrics, mixed-traffic cells): (topic, message, log
+    time ns) records, written as ``.part`` and renamed."""
     tmp = path.with_name(path.name + PART)
+    path.parent.mkdir(parents=True, exist_ok=True)
     with open(tmp, "wb") as f:
         w = McapWriter(f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
         w.start(profile="", library="ecodrive-bench")
-        name, data = _SCHEMAS["/train"]
-        ch = w.register_channel(topic="/train", message_encoding=MessageEncoding.Protobuf,
-                                schema_id=w.register_schema(name=name, encoding="protobuf", data=data))
+        channels: dict[str, int] = {}
         w.add_metadata("ecodrive", {k: str(v) for k, v in meta.items()})
-        fields = schema.TrainEpisode.DESCRIPTOR.fields_by_name
-        for row in rows:
-            msg = schema.TrainEpisode(**{k: v for k, v in row.items() if k in fields})
-            w.add_message(channel_id=ch, log_time=int(row["episode"]), data=msg.SerializeToString(),
-                          publish_time=int(row["episode"]))
+        for topic, msg, t in messages:
+            if topic not in channels:
+                name, data = _SCHEMAS[topic]
+                channels[topic] = w.register_channel(
+                    topic=topic, message_encoding=MessageEncoding.Protobuf,
+                    schema_id=w.register_schema(name=name, encoding="protobuf", data=data))
+            w.add_message(channel_id=channels[topic], log_time=t, data=msg.SerializeToString(), publish_time=t)
         w.finish()
     os.replace(tmp, path)
+
+
+def write_train_log(path: Path, rows: list[dict[str, Any]], meta: dict[str, Any]) -> None:
+    """All training episodes so far as a ``/train`` channel (rewritten whole, atomically)."""
+    fields = schema.TrainEpisode.DESCRIPTOR.fields_by_name
+    write_records(path, [("/train", schema.TrainEpisode(**{k: v for k, v in r.items() if k in fields}),
+                          int(r["episode"])) for r in rows], meta)
 
 
 def is_complete(path: str | Path) -> bool:

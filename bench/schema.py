@@ -50,6 +50,16 @@ MESSAGES: dict[str, list[tuple[str, str, bool]]] = {
         ("loss_param", "double", False), ("lane_changes", "uint32", False), ("collisions", "uint32", False),
         ("steps", "uint32", False), ("updates", "uint32", False), ("truncated", "bool", False),
     ],
+    "FleetVehicle": [
+        ("vid", "string", False), ("kind", "string", False), ("depart", "double", False),
+        ("arrive", "double", False), ("finished", "bool", False), ("energy", "double", False),
+    ],
+    "FleetCell": [
+        ("signals", "string", False), ("mpr", "double", False), ("demand", "double", False),
+        ("rep", "uint32", False), ("seed", "int64", False), ("duration", "double", False),
+        ("summary_json", "string", False), ("collisions", "uint32", False), ("teleports", "uint32", False),
+        ("control_over_sim", "double", False),
+    ],
     "Metadata": [
         ("config_json", "string", False), ("method", "string", False), ("signals", "string", False),
         ("case_index", "int32", False), ("sumo_seed", "int64", False), ("insert_time", "double", False),
@@ -76,7 +86,7 @@ def _file_proto() -> descriptor_pb2.FileDescriptorProto:
 
 _POOL = descriptor_pool.DescriptorPool()
 _POOL.Add(_file_proto())
-RewardComponents, Signal, Step, Episode, TrainEpisode, Metadata = (
+RewardComponents, Signal, Step, Episode, TrainEpisode, FleetVehicle, FleetCell, Metadata = (
     message_factory.GetMessageClass(_POOL.FindMessageTypeByName(f"{PACKAGE}.{n}"))
-    for n in ("RewardComponents", "Signal", "Step", "Episode", "TrainEpisode", "Metadata")
+    for n in ("RewardComponents", "Signal", "Step", "Episode", "TrainEpisode", "FleetVehicle", "FleetCell", "Metadata")
 )
