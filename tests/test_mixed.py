@@ -8,7 +8,7 @@ from bench.train import train
 def test_mixed_cell_with_a_policy_and_resume(tmp_path):
     train("prl", "uncoordinated", 1, seed=0, out=tmp_path / "run", models=tmp_path / "models",
           agent_config={"learning_starts": 64, "batch_size": 16}, progress=False)
-    cell = Cell("uncoordinated", 0.5, 300, 0, 200.0, str(tmp_path / "cell.mcap"),
+    cell = Cell("uncoordinated", 0.5, 300, 0, 400.0, str(tmp_path / "cell.mcap"),
                 str(tmp_path / "models" / "prl-uncoordinated"))
     assert _done(cell) is None
     row = run_cell(cell)
