@@ -78,6 +78,7 @@ class EcoDriveEnv(gym.Env):
         self.observation_space = self.obs_type.space
         self.action_space = self.action_type.space
         self.ego: ControlledVehicle | None = None
+        self._last_obs: dict[str, np.ndarray] = {}
         self.recorder: Callable[[dict[str, Any]], None] | None = None
         self.case: dict[str, float] = {}
         self.t_depart = 0.0
@@ -115,6 +116,7 @@ class EcoDriveEnv(gym.Env):
         self.collisions = self.teleports = self.collisions_all = self.teleports_all = 0
         self.ego = ControlledVehicle(EGO_ID, s, self.obs_type, cfg)
         obs = self.ego.observe()
+        self._last_obs = obs
         info = self._info(None, {}, 0.0)
         if self.recorder is not None:
             self.recorder(self._record(obs, None, None, 0.0, {}, info))
@@ -193,5 +195,3 @@ class EcoDriveEnv(gym.Env):
             "info": info, "signal": sig, "others": ego.others,
             "tls_states": self.session.signal_states(self.files.tls_ids),
         }
-
-    _last_obs: dict[str, np.ndarray] = {}
