@@ -35,6 +35,7 @@ from .mcaplog import write_train_log
 from .provenance import git_sha, package_versions
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
+VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/cases.json's test cases)
 RUNS = Path(os.environ.get("ECODRIVE_RUNS", Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train"))
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
 
@@ -42,9 +43,13 @@ FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
 def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
-          stop_after: int | None = None, progress: bool = True) -> pd.DataFrame:
+          stop_after: int | None = None, progress: bool = True, validation_cases: int = 10) -> pd.DataFrame:
     """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
-    after that many episodes of this call (used to test resumption)."""
+    after that many episodes of this call (used to test resumption).
+
+    At every checkpoint the greedy policy is scored on ``validation_cases`` cases drawn from
+    ``VALIDATION_SEED`` (never the test cases); the exported policy is the best-scoring one
+    (mean greedy return), and its episode and validation metrics go in the manifest."""
     torch.set_num_threads(1)
     env = make_env(method, signals, scenario)
     agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **(agent_config or {}))
@@ -55,6 +60,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     rng = np.random.default_rng([seed, 7919])  # episode seeds; separate stream from the agent's
     rows: list[dict[str, Any]] = []
     start, wall = 0, 0.0
+    best: dict[str, Any] = {}
     if ckpt.exists():
         state = torch.load(ckpt, map_location="cpu", weights_only=False)
         if state["identity"] != identity:
@@ -65,6 +71,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         agent.replay.load(out / state["replay"])
         rng.bit_generator.state = state["rng"]
         rows, start, wall = state["rows"], state["episode"], state["wall_time"]
+        best = state.get("best", {})
     bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
     done_here = 0
     t_call = time.perf_counter()
@@ -93,8 +100,13 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         done_here += 1
         last = ep + 1 == episodes
         if (ep + 1) % checkpoint_every == 0 or last or (stop_after is not None and done_here >= stop_after):
+            if validation_cases:
+                score = validate(env, agent, validation_cases)
+                rows[-1].update({f"val_{k}": v for k, v in score.items()})
+                if not best or score["return"] > best["score"]["return"]:
+                    best = {"episode": ep + 1, "score": score, "agent": agent.state_dict(with_training=False)}
             wall_now = wall + time.perf_counter() - t_call
-            _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity)
+            _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity, best)
         if stop_after is not None and done_here >= stop_after and not last:
             bar.close()
             env.close()
@@ -112,15 +124,35 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
             "scenario": identity["scenario"],
             "final_metrics": {f"mean_last_{FINAL_WINDOW}_{k}": round(float(tail[k].mean()), 3)
                               for k in ("energy", "travel_time", "return_", "collisions", "lane_changes")},
+            "selected_episode": best.get("episode", episodes),
+            "validation": {"cases": validation_cases, "master_seed": VALIDATION_SEED, **best.get("score", {})},
         }
-        save_policy(policy_dir(method, signals, models), agent.state_dict(with_training=False), manifest)
+        policy = best["agent"] if best else agent.state_dict(with_training=False)
+        save_policy(policy_dir(method, signals, models), policy, manifest)
     return df
 
 
-def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict) -> None:
+def validate(env, agent, n: int) -> dict[str, float]:
+    """Mean greedy energy, travel time and return on ``n`` validation cases."""
+    vr = np.random.default_rng(VALIDATION_SEED)
+    seeds, times = vr.integers(0, 2**31 - 1, size=n), vr.uniform(env.cfg.insert_min, env.cfg.insert_max, size=n)
+    out = {"energy": 0.0, "travel_time": 0.0, "return": 0.0}
+    for seed, t_ins in zip(seeds, times):
+        obs, info = env.reset(options={"sumo_seed": int(seed), "insert_time": round(float(t_ins), 1)})
+        while True:
+            obs, r, terminated, truncated, info = env.step(agent.act(obs, info, explore=False))
+            out["return"] += r / n
+            if terminated or truncated:
+                break
+        out["energy"] += info["energy"] / n
+        out["travel_time"] += info["travel_time"] / n
+    return {k: round(v, 4) for k, v in out.items()}
+
+
+def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict, best: dict) -> None:
     replay_name = f"replay-{episode:05d}.npz"
     agent.replay.save(out / replay_name)
-    state = {"identity": identity, "agent": agent.state_dict(), "replay": replay_name,
+    state = {"identity": identity, "agent": agent.state_dict(), "replay": replay_name, "best": best,
              "rng": rng.bit_generator.state, "rows": rows, "episode": episode, "wall_time": wall}
     atomic_torch_save(state, out / "checkpoint.pt")  # the commit point: it names the replay file
     for old in out.glob("replay-*.npz"):

@@ -96,6 +96,7 @@ def test_training_smoke_and_checkpoint_round_trip(method, tmp_path):
     folder = policy_dir(method, "uncoordinated", tmp_path / "models")
     manifest = json.loads((folder / "manifest.json").read_text())
     assert manifest["seed"] == 0 and len(manifest["sha256"]) == 64 and manifest["training_wall_time_s"] > 0
+    assert manifest["selected_episode"] in (1, 2) and "energy" in manifest["validation"]  # best on validation
     state, _ = load_policy(folder, method)
     env = gym.make("EcoDrive-v0", action=_interface(method), config=FAST_SCENARIO).unwrapped
     a1 = make_agent(method, env.observation_space, env.action_space, seed=5, **FAST_AGENT)
