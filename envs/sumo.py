@@ -188,10 +188,6 @@ class SumoSession:
         return ls.vehicle.couldChangeLane(vid, direction)
 
     @staticmethod
-    def lane_change_state(vid: str, direction: int) -> tuple[int, int]:
-        return ls.vehicle.getLaneChangeState(vid, direction)
-
-    @staticmethod
     def leader(vid: str, dist: float) -> tuple[str, float] | None:
         res = ls.vehicle.getLeader(vid, dist)
         return None if res is None or res[0] == "" else (res[0], res[1])
@@ -200,10 +196,6 @@ class SumoSession:
     def follow_speed(vid: str, speed: float, gap: float, leader_speed: float, leader_decel: float) -> float:
         """Krauss safe following speed [m/s] of ``vid`` for the given situation."""
         return ls.vehicle.getFollowSpeed(vid, speed, gap, leader_speed, leader_decel)
-
-    @staticmethod
-    def remove(vid: str) -> None:
-        ls.vehicle.remove(vid)
 
     # ------------------------------------------------------------------ signals
     def next_signal(self, vid: str) -> tuple[str, int, float, str] | None:
