@@ -49,12 +49,14 @@ class Fleet:
         self.obs_type = GridLogicObservation(cfg, self.files)
         self.action_type = make_action(action, cfg)
         self.cvs: dict[str, ControlledVehicle] = {}
+        self.active: dict[str, VehicleRecord] = {}  # arterial vehicles still in the network
         self.stats = FleetStats()
         self._arterial_prefixes = (f"{CV_FLOW}.", "art.")
 
     def start(self, seed: int) -> None:
         self.session.start(seed)
         self.cvs.clear()
+        self.active.clear()
         self.stats = FleetStats()
 
     def step(self, policy: Policy | None) -> int:
@@ -74,27 +76,24 @@ class Fleet:
         s.step()
         t2 = time.perf_counter()
         now = s.time()
-        for c in s.collisions():
-            st.collisions += 1
+        st.collisions += len(s.collisions())
         st.teleports += len(s.teleports())
-        arrived = set(s.arrived())
-        for vid in arrived:
-            rec = st.records.get(vid)
+        for vid in s.arrived():
+            rec = self.active.pop(vid, None)
             if rec is not None:
                 rec.arrive = now
             self.cvs.pop(vid, None)
         for vid in s.departed():
             if vid.startswith(self._arterial_prefixes):
                 cv = vid.startswith(f"{CV_FLOW}.")
-                st.records[vid] = VehicleRecord("cv" if cv else "hdv", now - self.cfg.step_length)
+                st.records[vid] = self.active[vid] = VehicleRecord("cv" if cv else "hdv", now - self.cfg.step_length)
                 if cv and policy is not None:
                     s.subscribe(vid)
                     s.take_control(vid)
                     self.cvs[vid] = ControlledVehicle(vid, s, self.obs_type, self.cfg)
         dt = self.cfg.step_length
-        for vid, rec in st.records.items():
-            if rec.arrive is None:
-                rec.energy += s.energy_rate(vid) * dt
+        for vid, rec in self.active.items():  # only vehicles still driving: the records grow all run
+            rec.energy += s.energy_rate(vid) * dt
         for vid, cv in self.cvs.items():
             if cv._pending:
                 cv.measure()

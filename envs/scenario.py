@@ -89,7 +89,7 @@ def build(cfg: ScenarioConfig) -> ScenarioFiles:
 
 def _files(cfg: ScenarioConfig, folder: Path) -> ScenarioFiles:
     n = cfg.n_intersections
-    arterial = tuple(_art_edge(k) for k in range(n + 1))
+    arterial = tuple(f"A{k}" for k in range(n + 1))
     meta = json.loads((folder / "geometry.json").read_text())
     return ScenarioFiles(
         folder=folder,
@@ -107,11 +107,6 @@ def _files(cfg: ScenarioConfig, folder: Path) -> ScenarioFiles:
 
 def _node(k: int, n: int) -> str:
     return "W" if k == 0 else ("E" if k == n + 1 else f"J{k}")
-
-
-def _art_edge(k: int, n: int | None = None) -> str:
-    """W->E edge from node k to node k+1 (k = 0 is the insertion edge)."""
-    return f"A{k}"
 
 
 def _write_all(cfg: ScenarioConfig, out: Path) -> None:
