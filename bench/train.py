@@ -43,7 +43,7 @@ FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
 def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
-          stop_after: int | None = None, progress: bool = True, validation_cases: int = 10) -> pd.DataFrame:
+          stop_after: int | None = None, progress: bool = True, validation_cases: int = 20) -> pd.DataFrame:
     """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
     after that many episodes of this call (used to test resumption).
 
@@ -173,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="seed of the agent and of the episode draws (>= 0)")
     ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
+    ap.add_argument("--validation-cases", type=int, default=20, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
     ap.add_argument("--no-export", action="store_true", help="do not write models/<method>-<signals>/ at the end")
     args = ap.parse_args(argv)
     if args.method not in LEARNING:
@@ -183,9 +184,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--episodes {args.episodes} is out of range; accepted: 1..100000")
     if args.seed < 0 or args.checkpoint_every < 1:
         ap.error(f"--seed {args.seed} must be >= 0 and --checkpoint-every {args.checkpoint_every} >= 1")
+    if not 0 <= args.validation_cases <= 100:
+        ap.error(f"--validation-cases {args.validation_cases} is out of range; accepted: 0..100")
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}"
     df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
-               models=None if args.no_export else MODELS, command=["python", "-m", "bench.train", *sys.argv[1:]])
+               models=None if args.no_export else MODELS, command=["python", "-m", "bench.train", *sys.argv[1:]],
+               validation_cases=args.validation_cases)
     tail = df.tail(FINAL_WINDOW)
     print(json.dumps({"episodes": len(df), "energy": round(float(tail.energy.mean()), 2),
                       "travel_time": round(float(tail.travel_time.mean()), 2)}))

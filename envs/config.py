@@ -14,6 +14,7 @@ from typing import Any, Mapping
 
 SIGNALS = ("coordinated", "uncoordinated")
 REWARDS = ("r1", "r2", "r")
+COST_TIMINGS = ("step", "end")
 
 
 class ConfigError(ValueError):
@@ -55,6 +56,9 @@ class RewardConfig:
     lane_change_penalty: float = field(default=50.0, metadata=_rng(0.0, 1000.0))  # |r_p^c| per change
     speed_threshold: float = field(default=1.5, metadata=_rng(0.0, 20.0))  # v_zeta [m/s]
     jerk_threshold: float = field(default=4.0, metadata=_rng(0.0, 100.0))  # j_zeta [m/s^3]
+    # when form r pays -(E_f + phi T_f): "end" = once at t_f (the paper's eq. 11); "step" = as
+    # -(e_t + phi dt) every step, the same undiscounted sum (deviation, see docs/training.md)
+    cost_timing: str = field(default="step", metadata={"choices": COST_TIMINGS})
 
     def __post_init__(self) -> None:
         _validate(self)

@@ -38,7 +38,9 @@ class EcoDriveEnv(gym.Env):
 
     ## Reward
     ``reward="r"`` (composite, eq. 11), ``"r2"`` (distance - phi energy) or ``"r1"`` (terminal
-    only); the parts come back in ``info["reward_components"]``.
+    only); the parts come back in ``info["reward_components"]``. Form r pays -(E_f + phi T_f)
+    per step as -(e_t + phi dt) by default (``reward.cost_timing="step"``; ``"end"`` is the
+    paper's terminal payment): same undiscounted return, far less delayed credit.
 
     ## Starting state
     SUMO starts with a seed; background traffic runs until the ego's insertion time, drawn from
@@ -113,6 +115,7 @@ class EcoDriveEnv(gym.Env):
         else:
             raise RuntimeError(f"ego could not be inserted within 3600 s (case {self.case})")
         self.t_depart = s.time()
+        self._travel_time = 0.0
         self.collisions = self.teleports = self.collisions_all = self.teleports_all = 0
         self.ego = ControlledVehicle(EGO_ID, s, self.obs_type, cfg)
         obs = self.ego.observe()
@@ -147,7 +150,9 @@ class EcoDriveEnv(gym.Env):
         r, comps = rewards.reward(
             self.cfg.reward, speed=m.speed, jerk=m.jerk, lane_changed=m.lane_changed, distance=m.distance,
             energy=m.energy, terminated=terminated, total_energy=ego.energy, travel_time=travel_time,
+            step_time=travel_time - self._travel_time,
         )
+        self._travel_time = travel_time
         obs = self._last_obs if gone else ego.observe()
         self._last_obs = obs
         info = self._info(m, comps, travel_time)

@@ -165,3 +165,16 @@ def test_dqn_action_table_is_the_papers():
     accels = sorted({a for a, _ in table})
     assert len(table) == 27 and accels == [-4.0, -3.0, -2.0, -1.0, 0.0, 0.75, 1.5, 2.25, 3.0]
     assert {k for _, k in table} == {-1, 0, 1}
+
+
+def test_per_step_costs_keep_the_episode_return(cases):
+    """cost_timing only moves -(E_f + phi T_f) in time: the undiscounted return is the same."""
+    rows = {}
+    for timing in ("end", "step"):
+        agent = BaselineAgent()
+        env = make_env(agent, "uncoordinated", {"reward": {"cost_timing": timing}})
+        rows[timing] = run_episode(env, agent, cases[3], "baseline")
+        env.close()
+    assert rows["end"]["energy"] == rows["step"]["energy"]
+    assert rows["end"]["return_"] == pytest.approx(rows["step"]["return_"], abs=1e-6 * abs(rows["end"]["return_"]))
+    assert rows["end"]["return_"] < -(rows["end"]["energy"] + rows["end"]["travel_time"]) + 1e-6

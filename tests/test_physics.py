@@ -62,7 +62,7 @@ def test_lane_mask_and_apply():
 
 
 def test_composite_reward_components():
-    rc = RewardConfig()
+    rc = RewardConfig(cost_timing="end")  # the paper's eq. 11: E_f + phi T_f paid at t_f
     r, c = reward(rc, speed=1.0, jerk=5.0, lane_changed=True, distance=1.0, energy=0.5,
                   terminated=False, total_energy=10.0, travel_time=10.0)
     assert c["speed"] == -40 and c["jerk"] == -30 and c["lane_change"] == -50 and c["terminal"] == 0
@@ -70,6 +70,16 @@ def test_composite_reward_components():
     r, c = reward(rc, speed=10.0, jerk=0.0, lane_changed=False, distance=10.0, energy=0.5,
                   terminated=True, total_energy=230.0, travel_time=190.0)
     assert r == c["terminal"] == -(230.0 + 1.0 * 190.0)
+
+
+def test_composite_reward_per_step_costs():
+    rc = RewardConfig(phi=2.0)  # default cost_timing="step"
+    r, c = reward(rc, speed=10.0, jerk=0.0, lane_changed=False, distance=10.0, energy=0.75,
+                  terminated=False, total_energy=10.0, travel_time=10.0, step_time=1.0)
+    assert c["energy"] == -0.75 and c["time"] == -2.0 and c["terminal"] == 0 and r == -2.75
+    r, c = reward(rc, speed=10.0, jerk=0.0, lane_changed=False, distance=10.0, energy=-0.25,
+                  terminated=True, total_energy=230.0, travel_time=190.0, step_time=1.0)
+    assert c["terminal"] == 0 and r == pytest.approx(0.25 - 2.0)  # nothing lumped at the end
 
 
 def test_r1_and_r2():
