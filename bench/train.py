@@ -14,6 +14,7 @@ final metrics).
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import os
 import sys
@@ -72,6 +73,9 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         rng.bit_generator.state = state["rng"]
         rows, start, wall = state["rows"], state["episode"], state["wall_time"]
         best = state.get("best", {})
+        if best and not best.get("copied"):  # written before snapshot(): its weights were not the selected ones
+            print(f"{ckpt}: dropping the stored best policy (saved by reference, not a copy)", file=sys.stderr)
+            best = {}
     bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
     done_here = 0
     t_call = time.perf_counter()
@@ -104,7 +108,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
                 score = validate(env, agent, validation_cases)
                 rows[-1].update({f"val_{k}": v for k, v in score.items()})
                 if not best or score["return"] > best["score"]["return"]:
-                    best = {"episode": ep + 1, "score": score, "agent": agent.state_dict(with_training=False)}
+                    best = {"episode": ep + 1, "score": score, "agent": snapshot(agent), "copied": True}
             wall_now = wall + time.perf_counter() - t_call
             _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity, best)
         if stop_after is not None and done_here >= stop_after and not last:
@@ -130,6 +134,11 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         policy = best["agent"] if best else agent.state_dict(with_training=False)
         save_policy(policy_dir(method, signals, models), policy, manifest)
     return df
+
+
+def snapshot(agent) -> dict[str, Any]:
+    """A deep copy of the greedy policy: ``state_dict`` returns live tensors that training changes."""
+    return copy.deepcopy(agent.state_dict(with_training=False))
 
 
 def validate(env, agent, n: int) -> dict[str, float]:

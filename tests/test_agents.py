@@ -13,7 +13,8 @@ from agents.nets import linear_epsilon
 from agents.registry import LEARNING, make_agent
 from bench.checkpoint import CheckpointError, load_policy, policy_dir
 from bench.mcaplog import read_log
-from bench.train import train
+from bench.episode import make_env
+from bench.train import snapshot, train, validate
 
 FAST_AGENT = {"learning_starts": 64, "batch_size": 16}
 FAST_SCENARIO = {"max_episode_time": 60.0}
@@ -88,7 +89,7 @@ def test_greedy_act_respects_the_mask():
 def test_training_smoke_and_checkpoint_round_trip(method, tmp_path):
     """Two short episodes with updates, a shipped policy, and identical greedy actions after loading."""
     df = train(method, "uncoordinated", 2, seed=0, out=tmp_path / "run", checkpoint_every=1, models=tmp_path / "models",
-               agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
+               agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False, validation_cases=3)
     assert len(df) == 2 and df.updates.iloc[-1] > 0 and np.isfinite(df.loss_q.iloc[-1])
     assert len(pd.read_parquet(tmp_path / "run" / "metrics.parquet")) == 2
     train_log = read_log(tmp_path / "run" / "train.mcap")  # a /train-only file: no episode summary
@@ -103,6 +104,9 @@ def test_training_smoke_and_checkpoint_round_trip(method, tmp_path):
     a2 = make_agent(method, env.observation_space, env.action_space, seed=6, **FAST_AGENT)
     a1.load_state_dict(state)
     a2.load_state_dict(state)
+    val_env = make_env(method, "uncoordinated", FAST_SCENARIO)  # the exported policy is the one scored
+    assert validate(val_env, a1, 3) == {k: manifest["validation"][k] for k in ("energy", "travel_time", "return")}
+    val_env.close()
     obs, info = env.reset(seed=11)
     for _ in range(20):
         x, y = a1.act(obs, info), a2.act(obs, info)
@@ -159,3 +163,14 @@ def test_resume_refuses_another_run(tmp_path):
     train("prl", "uncoordinated", 1, seed=2, out=tmp_path / "r", **kw)
     with pytest.raises(SystemExit, match="differs in seed"):
         train("prl", "uncoordinated", 2, seed=3, out=tmp_path / "r", **kw)
+
+
+def test_policy_snapshot_is_a_copy():
+    """The best policy kept during training must not follow later updates."""
+    agent, _, _ = _filled_agent("prl", "parameterized", n=100)
+    snap = snapshot(agent)
+    before = {k: v.clone() for k, v in snap["q"].items()}
+    for _ in range(3):
+        agent.update()
+    assert all(torch.equal(before[k], snap["q"][k]) for k in before)
+    assert not all(torch.equal(before[k], v) for k, v in agent.q.state_dict().items())
