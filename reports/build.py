@@ -1,4 +1,5 @@
-"""Build the report of a run folder: Table 4, statistics, violin and trajectory figures.
+"""Build the report of a run folder: Table 4, statistics, violin and trajectory figures, and the
+sections of the further experiments found in it (reward study, heatmap, mixed traffic).
 
     python -m reports.build logs/<run-id> [--out reports/<run-id>]
 
@@ -16,7 +17,7 @@ import pandas as pd
 
 from bench.mcaplog import LogError
 
-from . import figures, metrics, tables
+from . import experiments, figures, metrics, tables
 from .load import RunError, load_run, load_steps, stop_lines
 
 METHOD_ORDER = ("baseline", "glosa", "prl", "mpdqn", "ddpg", "dqn")
@@ -24,8 +25,28 @@ TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 
 
 def build(run_dir: Path, out: Path) -> Path:
-    results, manifest = load_run(run_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if (run_dir / "results.parquet").is_file() or not experiments.present(run_dir):
+        md, images, warnings, html_tables = _single_vehicle(run_dir, out)
+    else:
+        md, images, warnings, html_tables = [f"# Report: {run_dir.name}", ""], [], [], []
+    emd, eimages, ewarnings = experiments.sections(run_dir, out)
+    md, images, warnings = md + emd, images + eimages, warnings + ewarnings
+    if warnings:
+        md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
+    (out / "index.md").write_text("\n".join(md))
+    body = "".join(f"<h3>{html.escape(t)}</h3><img src='figures/{p.name}' style='max-width:100%'>" for t, p in images)
+    tables_html = "".join(f"<h2>{h}</h2>{df.to_html(index=False, float_format=lambda v: f'{v:.3f}')}"
+                          for h, df in html_tables)
+    (out / "index.html").write_text(f"<html><head><meta charset='utf-8'><title>{html.escape(run_dir.name)}</title>"
+                                    f"</head><body><h1>Report: {html.escape(run_dir.name)}</h1>{tables_html}{body}"
+                                    "</body></html>")
+    return out / "index.md"
+
+
+def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str], list]:
+    """Table 4, statistics, violins and trajectories of a ``bench.run`` folder."""
+    results, manifest = load_run(run_dir)
     methods = [m for m in METHOD_ORDER if m in set(results.method)]
     t4 = metrics.table4(results)
     t4 = t4.set_index("method").loc[[m for m in methods if m in set(t4.method)]].reset_index()
@@ -78,16 +99,7 @@ def build(run_dir: Path, out: Path) -> Path:
                     p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
                     images.append((f"{signals} case {case}", p[0]))
                     md += [f"![{name}](figures/{p[0].name})", ""]
-    if warnings:
-        md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
-    (out / "index.md").write_text("\n".join(md))
-    body = "".join(f"<h3>{html.escape(t)}</h3><img src='figures/{p.name}' style='max-width:100%'>" for t, p in images)
-    tables_html = "".join(f"<h2>{h}</h2>{df.to_html(index=False, float_format=lambda v: f'{v:.3f}')}"
-                          for h, df in (("Table 4", t4), ("Statistics", st)))
-    (out / "index.html").write_text(f"<html><head><meta charset='utf-8'><title>{html.escape(run_dir.name)}</title>"
-                                    f"</head><body><h1>Report: {html.escape(run_dir.name)}</h1>{tables_html}{body}"
-                                    "</body></html>")
-    return out / "index.md"
+    return md, images, warnings, [("Table 4", t4), ("Statistics", st)]
 
 
 def main(argv: list[str] | None = None) -> int:

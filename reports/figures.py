@@ -7,6 +7,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
@@ -52,3 +53,51 @@ def trajectories(trajs: dict[str, pd.DataFrame], bands: pd.DataFrame, title: str
         ax.legend()
     fig.suptitle(title)
     return save(fig, out, name)
+
+
+def reward_study(curves: pd.DataFrame, out: Path) -> list[Path]:
+    """fig:rwd_compare: smoothed energy and travel time per training episode, band = seed range."""
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    for ax, metric in zip(axes, ("energy", "travel_time")):
+        for config, g in curves.groupby("config"):
+            ax.plot(g.episode, g[metric], label=config)
+            ax.fill_between(g.episode, g[f"{metric}_lo"], g[f"{metric}_hi"], alpha=0.2)
+        ax.set_xlabel("training episode")
+        ax.set_ylabel(LABELS[metric])
+        ax.grid(alpha=0.3)
+    axes[1].legend(fontsize=7, ncol=2)
+    fig.suptitle("reward study (smoothed 0.98; band = min-max over seeds)")
+    return save(fig, out, "reward-study")
+
+
+def heatmaps(grids: dict[str, pd.DataFrame], out: Path) -> list[Path]:
+    """fig:heatmap: test-case means over the |r_p^s| x |r_p^j| grid."""
+    fig, axes = plt.subplots(1, len(grids), figsize=(6 * len(grids), 4.5))
+    for ax, (metric, grid) in zip(np.atleast_1d(axes), grids.items()):
+        im = ax.imshow(grid.to_numpy(), origin="lower", cmap="viridis")
+        ax.set_xticks(range(grid.shape[1]), [f"{v:g}" for v in grid.columns])
+        ax.set_yticks(range(grid.shape[0]), [f"{v:g}" for v in grid.index])
+        ax.set_xlabel("|r_p^j| [reward units]")
+        ax.set_ylabel("|r_p^s| [reward units]")
+        for (i, j), v in np.ndenumerate(grid.to_numpy()):
+            ax.text(j, i, f"{v:.1f}", ha="center", va="center", color="w", fontsize=8)
+        fig.colorbar(im, ax=ax, label=LABELS[metric])
+    return save(fig, out, "heatmap")
+
+
+def mixed_panels(cells: pd.DataFrame, out: Path) -> list[Path]:
+    """fig:dd / fig:avg: fleet energy [Wh/veh] and speed [m/s] against demand, one line per MPR."""
+    settings = sorted(set(cells.signals))
+    fig, axes = plt.subplots(2, len(settings), figsize=(6 * len(settings), 8), squeeze=False)
+    for col, signals in enumerate(settings):
+        sub = cells[cells.signals == signals]
+        for row, (metric, label) in enumerate((("all_energy", "energy [Wh/veh]"), ("all_speed", "mean speed [m/s]"))):
+            ax = axes[row][col]
+            for mpr, g in sub.groupby("mpr"):
+                ax.plot(g.demand, g[metric], marker="o", label=f"MPR {mpr:g}")
+            ax.set_xlabel("demand [veh/h/lane]")
+            ax.set_ylabel(label)
+            ax.set_title(signals)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7)
+    return save(fig, out, "mixed-traffic")

@@ -115,3 +115,53 @@ def signal_bands(steps: pd.DataFrame, stop_lines: dict[str, float], links: dict[
         for a, b in zip(starts, ends):
             rows.append({"tls": tls, "x": x - x0, "t_start": t[a], "t_end": t[b], "green": bool(green[a])})
     return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------- section 5.2 and 5.5 experiments
+def smooth(x: np.ndarray, keep: float = 0.98) -> np.ndarray:
+    """The paper's training-curve smoothing: D_k <- keep * D_{k-1} + (1 - keep) * d_k, D_0 = d_0."""
+    x = np.asarray(x, dtype=float)
+    out = np.empty_like(x)
+    acc = x[0] if len(x) else 0.0
+    for i, v in enumerate(x):
+        acc = keep * acc + (1.0 - keep) * v if i else v
+        out[i] = acc
+    return out
+
+
+def reward_curves(train: pd.DataFrame) -> pd.DataFrame:
+    """Smoothed energy and travel time per episode for each (config, seed), then the mean, min and
+    max over seeds per (config, episode). ``train`` has config, seed, episode, energy, travel_time."""
+    parts = []
+    for (config, seed), g in train.sort_values("episode").groupby(["config", "seed"]):
+        parts.append(pd.DataFrame({"config": config, "seed": seed, "episode": g.episode.to_numpy(),
+                                   "energy": smooth(g.energy.to_numpy()),
+                                   "travel_time": smooth(g.travel_time.to_numpy())}))
+    sm = pd.concat(parts, ignore_index=True)
+    out = sm.groupby(["config", "episode"]).agg(
+        energy=("energy", "mean"), energy_lo=("energy", "min"), energy_hi=("energy", "max"),
+        travel_time=("travel_time", "mean"), travel_time_lo=("travel_time", "min"),
+        travel_time_hi=("travel_time", "max"), seeds=("seed", "nunique"))
+    return out.reset_index()
+
+
+def heatmap_grid(sweep: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """Mean test-case ``metric`` per (|r_p^s| rows, |r_p^j| columns), averaged over seeds."""
+    return sweep.pivot_table(index="reward_speed_penalty", columns="reward_jerk_penalty", values=metric, aggfunc="mean")
+
+
+def mixed_cells(cells: pd.DataFrame) -> pd.DataFrame:
+    """Mean over repetitions per (signals, MPR, demand) of fleet, CV and HDV energy, time and speed."""
+    cols = [c for c in cells.columns if c.split("_", 1)[0] in ("all", "cv", "hdv")]
+    return cells.groupby(["signals", "mpr", "demand"])[cols].mean().reset_index()
+
+
+def mpr_effect(cells: pd.DataFrame) -> pd.DataFrame:
+    """Per signal setting: fleet energy and speed by MPR (mean over demands and repetitions), and
+    the change against MPR = 0."""
+    g = cells.groupby(["signals", "mpr"])[["all_energy", "all_speed", "hdv_energy", "hdv_travel_time"]].mean()
+    g = g.reset_index()
+    for col in ("all_energy", "all_speed", "hdv_energy", "hdv_travel_time"):
+        ref = g[g.mpr == 0].set_index("signals")[col]
+        g[f"{col}_change"] = g.apply(lambda r, c=col, ref=ref: r[c] / ref.get(r.signals, np.nan) - 1.0, axis=1)
+    return g

@@ -47,3 +47,13 @@ def stats_markdown(st: pd.DataFrame) -> str:
             r.method, r.signals, r.metric, str(r.n), _f(r["mean"]), f"[{_f(r.ci_low)}, {_f(r.ci_high)}]",
             _f(r.iqm), f"[{_f(r.iqm_ci_low)}, {_f(r.iqm_ci_high)}]", _f(r.p_improve_vs_baseline, "{:.3f}")]) + " |")
     return "\n".join(lines) + "\n"
+
+
+def frame_markdown(df: pd.DataFrame, digits: int = 2) -> str:
+    """Any table (index included) as a markdown table; floats with ``digits`` decimals."""
+    flat = df.reset_index() if any(n is not None for n in df.index.names) else df
+    def cell(v):
+        return _f(v, f"{{:.{digits}f}}") if isinstance(v, float) else str(v)
+    head = "| " + " | ".join(str(c) for c in flat.columns) + " |"
+    rows = ["| " + " | ".join(cell(v) for v in row) + " |" for row in flat.itertuples(index=False)]
+    return "\n".join([head, "|" + "---|" * len(flat.columns), *rows]) + "\n"

@@ -1,0 +1,85 @@
+"""Report sections of section 5.2 and 5.5: reward study, sensitivity heatmap, mixed traffic.
+
+Each reads what ``bench.sweep`` and ``bench.mixed`` left in the run folder (parquet tables and
+the copied ``/train`` logs); a missing experiment is simply not reported.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from bench.mcaplog import LogError, read_log
+
+from . import figures, metrics, tables
+
+MPR_BREAKDOWN_DEMANDS = (200.0, 700.0)  # veh/h/lane, the paper's CV vs HDV breakdown
+
+
+def present(run_dir: Path) -> bool:
+    return any((run_dir / p).is_file() for p in ("reward/sweep.parquet", "heatmap/sweep.parquet",
+                                                 "mixed/mixed.parquet"))
+
+
+def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]], list[str]]:
+    """Markdown lines, (title, PNG) images and warnings for every experiment found."""
+    md: list[str] = []
+    images: list[tuple[str, Path]] = []
+    warnings: list[str] = []
+    figs = out / "figures"
+    reward = run_dir / "reward" / "sweep.parquet"
+    if reward.is_file():
+        sweep = pd.read_parquet(reward)
+        train = _train_logs(sweep, warnings)
+        md += ["## Reward study (fig:rwd_compare)", "",
+               f"{sweep.config.nunique()} configurations x {sweep.seed.nunique()} seeds, "
+               f"{int(sweep.episodes.max())} training episodes each.", ""]
+        if not train.empty:
+            p = figures.reward_study(metrics.reward_curves(train), figs)
+            images.append(("reward study", p[0]))
+            md += [f"![reward study](figures/{p[0].name})", ""]
+        md += [_table(sweep.groupby("config")[["energy", "travel_time", "lane_changes", "collisions"]].mean()), ""]
+    heat = run_dir / "heatmap" / "sweep.parquet"
+    if heat.is_file():
+        sweep = pd.read_parquet(heat)
+        grids = {m: metrics.heatmap_grid(sweep, m) for m in ("energy", "travel_time")}
+        p = figures.heatmaps(grids, figs)
+        images.append(("sensitivity heatmap", p[0]))
+        best = sweep.loc[sweep.energy.idxmin()]
+        md += ["## Sensitivity heatmap (fig:heatmap)", "",
+               f"|r_p^c| = 50; {int(sweep.episodes.max())} training episodes; {int(sweep.cases.max())} test cases per "
+               f"cell. Lowest energy at |r_p^s| = {best.reward_speed_penalty:g}, |r_p^j| = {best.reward_jerk_penalty:g} "
+               f"(the paper chose 40 and 30).", "", f"![heatmap](figures/{p[0].name})", "",
+               "Energy [Wh]:", "", _table(grids["energy"]), "", "Travel time [s]:", "", _table(grids["travel_time"]), ""]
+    mixed = run_dir / "mixed" / "mixed.parquet"
+    if mixed.is_file():
+        cells = metrics.mixed_cells(pd.read_parquet(mixed))
+        p = figures.mixed_panels(cells, figs)
+        images.append(("mixed traffic", p[0]))
+        effect = metrics.mpr_effect(cells)
+        br = cells[cells.demand.isin(MPR_BREAKDOWN_DEMANDS) & (cells.signals == "uncoordinated")]
+        cols = ["mpr", "demand"] + [f"{k}_{m}" for k in ("cv", "hdv") for m in ("energy", "travel_time", "speed")]
+        md += ["## Mixed traffic (fig:dd, fig:avg)", "", f"![mixed traffic](figures/{p[0].name})", "",
+               "Fleet energy and speed by MPR (mean over demands), change against MPR = 0:", "",
+               _table(effect.set_index(["signals", "mpr"])), "",
+               "CVs against HDVs, uncoordinated, 200 and 700 veh/h/lane:", "",
+               _table(br[cols].set_index(["mpr", "demand"])) if not br.empty else "(not in this run)", ""]
+    return md, images, warnings
+
+
+def _train_logs(sweep: pd.DataFrame, warnings: list[str]) -> pd.DataFrame:
+    rows = []
+    for r in sweep.itertuples():
+        path = Path(r.log_dir) / "train.mcap"
+        try:
+            log = read_log(path)
+        except LogError as e:
+            warnings.append(str(e))
+            continue
+        rows += [{"config": r.config, "seed": r.seed, "episode": m.episode, "energy": m.energy,
+                  "travel_time": m.travel_time} for m in log.train]
+    return pd.DataFrame(rows)
+
+
+def _table(df: pd.DataFrame) -> str:
+    return tables.frame_markdown(df)
