@@ -41,9 +41,12 @@ def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = N
 
 def run_episode(
     env: EcoDriveEnv, agent: Agent, case: Case, method: str, log_path: Path | None = None,
-    agent_sha256: str = "",
+    agent_sha256: str = "", script: Any = None,
 ) -> dict[str, Any]:
-    """Greedy episode of ``agent`` on ``case``; returns the summary row (also the /episode record)."""
+    """Greedy episode of ``agent`` on ``case``; returns the summary row (also the /episode record).
+
+    ``script`` (the lateral scenarios) has ``start(env)``, called after the reset, and
+    ``before(env, step)`` / ``after(env, step)``, called around every step."""
     log = None
     if log_path is not None:
         meta = {
@@ -64,11 +67,17 @@ def run_episode(
         time_stopped = ret = 0.0
         moving = True
         jerk_max = env.cfg.reward.jerk_threshold
+        if script is not None:
+            script.start(env)
         while True:
             action = agent.act(obs, info, explore=False)
             if log is not None:
                 log.raw_action = _flatten(action)
+            if script is not None:
+                script.before(env, steps)
             obs, r, terminated, truncated, info = env.step(action)
+            if script is not None:
+                script.after(env, steps)
             steps += 1
             ret += r
             speed = float(obs["logic"][env.cfg.lanes + 1])

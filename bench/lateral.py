@@ -11,6 +11,7 @@ scripted vehicles; the lateral behaviour is judged from them.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,8 @@ import pandas as pd
 
 from agents.base import Agent
 
-from .episode import make_env
+from .cases import Case
+from .episode import make_env, run_episode
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0, "max_episode_time": 300.0}
 HDV1_BRAKE = -2.0  # [m/s^2] (paper)
@@ -37,6 +39,7 @@ class Scripted:
     hold: bool  # True: scripted speed (no Krauss); False: Krauss after insertion
 
 
+SCENARIO_NAMES = ("A", "B")
 SCENARIOS: dict[str, list[Scripted]] = {
     "A": [Scripted("hdv1", 0, 25.0, 13.0, True), Scripted("hdv2", 1, 8.0, 13.0, True)],
     "B": [Scripted(f"platoon{i}", 0, 40.0 + 9.0 * i, 13.0, False) for i in range(5)]
@@ -44,38 +47,59 @@ SCENARIOS: dict[str, list[Scripted]] = {
 }
 
 
-def run_scenario(name: str, agent: Agent, method: str) -> pd.DataFrame:
-    """Trajectories (time, vehicle, x, lane, speed) of scenario ``name`` driven by ``agent``."""
-    env = make_env(agent if not isinstance(agent, str) else method, "uncoordinated", EMPTY)
-    obs, info = env.reset(options={"sumo_seed": 1, "insert_time": INSERT_A if name == "A" else INSERT_B})
-    s = env.session
-    x, _, _, _, _, lane, _ = env.ego.kin
-    scripted = SCENARIOS[name]
-    for v in scripted:
-        target = min(max(lane + v.lane_offset, 0), env.cfg.lanes - 1)
-        s.add_scripted(v.vid, lane=target, pos=x + v.gap, speed=v.speed)
-        if not v.hold:
-            s.release_speed(v.vid)
-    rows: list[dict[str, Any]] = []
-    step = 0
-    while True:
-        if name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in s.vehicle_ids():
+class Script:
+    """Adds the scenario's scripted vehicles after the reset, brakes HDV1 (A) and records every
+    vehicle's trajectory; used as ``run_episode(..., script=)``."""
+
+    def __init__(self, name: str) -> None:
+        self.name, self.vehicles, self.rows = name, SCENARIOS[name], []
+
+    def start(self, env) -> None:
+        s = env.session
+        x, _, _, _, _, lane, _ = env.ego.kin
+        for v in self.vehicles:
+            target = min(max(lane + v.lane_offset, 0), env.cfg.lanes - 1)
+            s.add_scripted(v.vid, lane=target, pos=x + v.gap, speed=v.speed)
+            if not v.hold:
+                s.release_speed(v.vid)
+
+    def before(self, env, step: int) -> None:
+        s = env.session
+        if self.name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in s.vehicle_ids():
             v1 = s.kinematics("hdv1")[3]
             s.set_speed("hdv1", max(0.0, v1 + HDV1_BRAKE * env.cfg.step_length))
-        obs, r, te, tr, info = env.step(agent.act(obs, info, explore=False))
-        t = s.time()
-        ego = env.ego.kin
-        rows.append({"time": t, "vehicle": "ego", "x": ego[0], "lane": ego[5], "speed": ego[3]})
+        if step == BRAKE_AT + BRAKE_STEPS:  # the event is over: the HDVs drive by Krauss (and signals) again
+            for v in self.vehicles:
+                if v.hold and v.vid in s.vehicle_ids():
+                    s.release_speed(v.vid)
+
+    def after(self, env, step: int) -> None:
+        s = env.session
+        t, ego = s.time(), env.ego.kin
+        self.rows.append({"time": t, "vehicle": "ego", "x": ego[0], "lane": ego[5], "speed": ego[3]})
         present = set(s.vehicle_ids())
-        for v in scripted:
+        for v in self.vehicles:
             if v.vid in present:
                 k = s.kinematics(v.vid)
-                rows.append({"time": t, "vehicle": v.vid, "x": k[0], "lane": k[5], "speed": k[3]})
-        step += 1
-        if te or tr:
-            break
-    env.close()
-    df = pd.DataFrame(rows)
+                self.rows.append({"time": t, "vehicle": v.vid, "x": k[0], "lane": k[5], "speed": k[3]})
+
+
+def case_of(name: str) -> Case:
+    """The fixed case of a scenario: SUMO seed 1 on the empty corridor."""
+    return Case(index=SCENARIO_NAMES.index(name), sumo_seed=1, insert_time=INSERT_A if name == "A" else INSERT_B, group=0)
+
+
+def run_scenario(name: str, agent: Agent, method: str, log_path: Path | None = None,
+                 agent_sha256: str = "") -> pd.DataFrame:
+    """Trajectories (time, vehicle, x, lane, speed) of scenario ``name`` driven by ``agent``;
+    with ``log_path`` the ego's steps (the scripted vehicles among its neighbours) go to MCAP."""
+    env = make_env(agent if not isinstance(agent, str) else method, "uncoordinated", EMPTY)
+    script = Script(name)
+    try:
+        run_episode(env, agent, case_of(name), method, log_path=log_path, agent_sha256=agent_sha256, script=script)
+    finally:
+        env.close()
+    df = pd.DataFrame(script.rows)
     df["method"] = method
     return df
 
@@ -114,3 +138,100 @@ def summary(df: pd.DataFrame, name: str, lanes: int = 5) -> dict[str, Any]:
         fewest = min(q.get(ln, 0) for ln in range(lanes))
         out["ended_in_shortest_queue_lane"] = q.get(final_lane(df), 0) == fewest if q else None
     return out
+
+
+# ---------------------------------------------------------------- command line
+LATERAL_METHODS = ("baseline", "prl", "ddpg")  # the paper's fig:scenario_compare
+
+
+@dataclass(frozen=True)
+class LateralTask:
+    scenario: str
+    method: str
+    policy_dir: str  # "" for rule-based methods
+    path: str  # MCAP of the ego's steps; the trajectories go next to it as .parquet
+
+
+def run_task(task: LateralTask) -> dict[str, Any]:
+    """One scenario for one method, in an executor worker. The policy is the shipped one for the
+    uncoordinated setting, used here on the empty scripted corridor on purpose (no scenario check)."""
+    import torch
+
+    from agents.registry import LEARNING, make_agent
+
+    from .checkpoint import load_policy
+
+    torch.set_num_threads(1)
+    env = make_env(task.method, "uncoordinated", EMPTY)
+    agent = make_agent(task.method, env.observation_space, env.action_space)
+    env.close()
+    sha = ""
+    if task.method in LEARNING:
+        state, manifest = load_policy(Path(task.policy_dir), task.method)
+        agent.load_state_dict(state)
+        sha = manifest["sha256"]
+    df = run_scenario(task.scenario, agent, task.method, log_path=Path(task.path), agent_sha256=sha)
+    df.to_parquet(Path(task.path).with_suffix(".parquet"), index=False)
+    return _flat(summary(df, task.scenario))
+
+
+def _flat(s: dict[str, Any]) -> dict[str, Any]:
+    return {k: (str(v) if isinstance(v, (dict, list)) else v) for k, v in s.items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import sys
+
+    from agents.registry import LEARNING, METHODS
+
+    from .checkpoint import MODELS, policy_dir
+    from .executors import EXECUTORS, run_local, run_ray
+    from .mcaplog import is_complete
+
+    ap = argparse.ArgumentParser(description="Run the lateral scenarios A and B (section 5.4) for each method.")
+    ap.add_argument("--methods", nargs="+", default=list(LATERAL_METHODS), help=f"among {', '.join(METHODS)}")
+    ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
+    ap.add_argument("--address", default=None)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--run-id", default="paper")
+    ap.add_argument("--logs", type=Path, default=Path("logs"))
+    ap.add_argument("--models", type=Path, default=MODELS)
+    args = ap.parse_args(argv)
+    bad = [m for m in args.methods if m not in METHODS]
+    for flag, wrong, accepted in (("--methods", ", ".join(bad), ", ".join(METHODS)),
+                                  ("--executor", args.executor if args.executor not in EXECUTORS else "",
+                                   ", ".join(EXECUTORS)),
+                                  ("--workers", str(args.workers) if args.workers < 1 else "", ">= 1")):
+        if wrong:
+            print(f"error: {flag} {wrong} is not accepted; accepted: {accepted}", file=sys.stderr)
+            return 2
+    missing = [m for m in args.methods if m in LEARNING
+               and not (policy_dir(m, "uncoordinated", args.models) / "manifest.json").is_file()]
+    if missing:
+        print(f"note: no shipped uncoordinated policy for {', '.join(missing)}; skipped", file=sys.stderr)
+    root = args.logs / args.run_id / "lateral"
+    tasks = [LateralTask(name, m, str(policy_dir(m, "uncoordinated", args.models)) if m in LEARNING else "",
+                         str(root / name / f"{m}.mcap"))
+             for name in SCENARIO_NAMES for m in args.methods if m not in missing]
+    for t in tasks:
+        Path(t.path).parent.mkdir(parents=True, exist_ok=True)
+    rows, todo = [], []
+    for t in tasks:
+        traj = Path(t.path).with_suffix(".parquet")
+        if is_complete(t.path) and traj.is_file():
+            rows.append(_flat(summary(pd.read_parquet(traj), t.scenario)))
+        else:
+            todo.append(t)
+    it = run_local(todo, args.workers, run_task) if args.executor == "local" else run_ray(todo, args.address, args.workers, run_task)
+    rows += list(it)
+    out = pd.DataFrame(rows).sort_values(["scenario", "method"], ignore_index=True)
+    out.to_parquet(root / "lateral.parquet", index=False)
+    print(out.to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

@@ -18,7 +18,7 @@ MPR_BREAKDOWN_DEMANDS = (200.0, 700.0)  # veh/h/lane, the paper's CV vs HDV brea
 
 def present(run_dir: Path) -> bool:
     return any((run_dir / p).is_file() for p in ("reward/sweep.parquet", "heatmap/sweep.parquet",
-                                                 "mixed/mixed.parquet"))
+                                                 "mixed/mixed.parquet", "lateral/lateral.parquet"))
 
 
 def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]], list[str]]:
@@ -51,6 +51,25 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
                f"cell. Lowest energy at |r_p^s| = {best.reward_speed_penalty:g}, |r_p^j| = {best.reward_jerk_penalty:g} "
                f"(the paper chose 40 and 30).", "", f"![heatmap](figures/{p[0].name})", "",
                "Energy [Wh]:", "", _table(grids["energy"]), "", "Travel time [s]:", "", _table(grids["travel_time"]), ""]
+    lateral = run_dir / "lateral" / "lateral.parquet"
+    if lateral.is_file():
+        summary = pd.read_parquet(lateral)
+        md += ["## Lateral scenarios (fig:scenario, fig:scenario_compare)", "",
+               "A: HDV1 ahead brakes at -2 m/s^2 for three steps, HDV2 in the left lane. B: a platoon of five "
+               "queues at a red light, two vehicles queue in the left lane. Policies are the shipped "
+               "uncoordinated ones.", "", _table(summary.set_index(["scenario", "method"])), ""]
+        for name, g in summary.groupby("scenario"):
+            trajs = {}
+            for m in g.method:
+                path = run_dir / "lateral" / name / f"{m}.parquet"
+                if path.is_file():
+                    trajs[m] = pd.read_parquet(path)
+                else:
+                    warnings.append(f"{path}: missing; scenario {name} drawn without {m}")
+            if trajs:
+                p = figures.lateral(trajs, name, figs)
+                images.append((f"lateral scenario {name}", p[0]))
+                md += [f"![scenario {name}](figures/{p[0].name})", ""]
     mixed = run_dir / "mixed" / "mixed.parquet"
     if mixed.is_file():
         cells = metrics.mixed_cells(pd.read_parquet(mixed))

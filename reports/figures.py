@@ -101,3 +101,27 @@ def mixed_panels(cells: pd.DataFrame, out: Path) -> list[Path]:
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)
     return save(fig, out, "mixed-traffic")
+
+
+def lateral(trajs: dict[str, pd.DataFrame], scenario: str, out: Path) -> list[Path]:
+    """fig:scenario_compare: the ego's lane against position (with the scripted vehicles' lanes in
+    grey), time-distance and time-speed, one line per method."""
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
+    first = next(iter(trajs.values()))
+    for vid, g in first[first.vehicle != "ego"].groupby("vehicle"):
+        axes[0].plot(g.x, g.lane, color="0.7", lw=6, alpha=0.5, solid_capstyle="butt")
+        axes[1].plot(g.time - first.time.min(), g.x - first.x.min(), color="0.7", lw=1)
+    for method, df in trajs.items():
+        ego = df[df.vehicle == "ego"]
+        axes[0].step(ego.x, ego.lane, where="post", label=method)
+        axes[1].plot(ego.time - first.time.min(), ego.x - first.x.min(), label=method)
+        axes[2].plot(ego.time - first.time.min(), ego.speed, label=method)
+    axes[0].yaxis.get_major_locator().set_params(integer=True)
+    for ax, (xl, yl) in zip(axes, (("position x [m]", "lane index (0 = rightmost) [-]"),
+                                   ("time [s]", "distance [m]"), ("time [s]", "speed [m/s]"))):
+        ax.set_xlabel(xl)
+        ax.set_ylabel(yl)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"scenario {scenario} (grey: scripted HDVs)")
+    return save(fig, out, f"lateral-{scenario}")

@@ -19,7 +19,9 @@ def test_scenario_a_hdv1_brakes_three_steps_beside_hdv2():
     ego_lane0 = df[df.vehicle == "ego"].lane.iloc[0]
     assert df[df.vehicle == "hdv1"].lane.iloc[0] == ego_lane0
     assert df[df.vehicle == "hdv2"].lane.iloc[0] == ego_lane0 + 1
-    assert summary(df, "A")["left_hdv1_lane"] is True  # LC2013 overtakes the braking HDV1 as well
+    # after the event HDV1 drives by Krauss again and stops at red lights like everyone
+    assert df[df.vehicle == "hdv1"].speed.min() < 0.1
+    assert summary(df, "A")["left_hdv1_lane"] is False  # SUMO's driver stays behind HDV1
 
 
 def test_scenario_b_platoon_queues_at_red():
@@ -28,3 +30,20 @@ def test_scenario_b_platoon_queues_at_red():
     lane0 = df[df.vehicle == "ego"].lane.iloc[0]
     assert s["queues_by_lane"].get(lane0, 0) == 5 and s["queues_by_lane"].get(lane0 + 1, 0) == 2
     assert s["ended_in_shortest_queue_lane"] is False  # SUMO's driver stays behind the platoon
+
+
+def test_lateral_command_logs_resumes_and_reports(tmp_path, capsys):
+    from bench.lateral import main
+    from bench.mcaplog import is_complete
+    from reports.build import build
+
+    argv = ["--methods", "baseline", "--logs", str(tmp_path), "--run-id", "t", "--workers", "1"]
+    assert main(argv) == 0
+    root = tmp_path / "t" / "lateral"
+    logs = [root / n / "baseline.mcap" for n in ("A", "B")]
+    assert all(is_complete(p) for p in logs) and (root / "lateral.parquet").is_file()
+    stamps = [p.stat().st_mtime_ns for p in logs]
+    assert main(argv) == 0 and [p.stat().st_mtime_ns for p in logs] == stamps  # finished: not rerun
+    text = build(tmp_path / "t", tmp_path / "report").read_text()
+    assert "## Lateral scenarios" in text and (tmp_path / "report" / "figures" / "lateral-B.png").is_file()
+    assert main(["--methods", "prl2"]) == 2 and "--methods prl2 is not accepted" in capsys.readouterr().err
