@@ -22,6 +22,14 @@ def benchmark(session: nox.Session) -> None:
 
     session.run("python", "-m", "bench.run", *session.posargs)
     opts = parse(list(session.posargs))
+    if opts["profile"] == "full":  # section 5's further experiments, into the same run folder
+        common = ["--executor", opts["executor"], "--workers", str(opts["workers"]),
+                  "--run-id", opts["run_id"], "--logs", str(opts["logs"])]
+        common += ["--address", opts["address"]] if opts["address"] else []
+        session.run("python", "-m", "bench.lateral", *common)
+        session.run("python", "-m", "bench.mixed", *common)
+        session.run("python", "-m", "bench.sweep", "reward", *common)  # days on 2 cores: see README
+        session.run("python", "-m", "bench.sweep", "heatmap", *common)
     session.run("python", "-m", "reports.build", str(opts["logs"] / opts["run_id"]))
 
 

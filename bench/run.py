@@ -28,7 +28,7 @@ from .executors import EXECUTORS, Task, run_local, run_ray
 from .mcaplog import episode_summary
 from .provenance import git_sha, package_versions
 
-PROFILES = {  # name: cases per setting (and, for full, the further experiments as they land)
+PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, mixed, reward and heatmap)
     "smoke": 3,
     "paper": 100,
     "full": 100,
