@@ -118,6 +118,7 @@ def reference(df: pd.DataFrame) -> list[tuple[str, str, str]]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--write-reference", action="store_true", help=f"write {REFERENCE} from this run")
+    ap.add_argument("--no-mixed", action="store_true", help="skip the mixed-traffic cells (reported NOT CHECKED)")
     ap.add_argument("--logs", default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
     args = ap.parse_args(argv)
     import bench.run as br
@@ -129,9 +130,13 @@ def main(argv: list[str] | None = None) -> int:
         REFERENCE.parent.mkdir(exist_ok=True)
         df[REF_COLUMNS].to_csv(REFERENCE, index=False, float_format="%.10g")
         print(f"wrote {REFERENCE} ({len(df)} episodes)")
+    from . import regression_mixed
+
+    mixed = regression_mixed.claims(None if args.no_mixed else regression_mixed.run_cells())
     failed = False
     for title, rows in (("1. the paper's claims", claims(df)), ("2. the published numbers", published(df)),
-                        ("3. the project's own reference", reference(df))):
+                        ("3. the project's own reference", reference(df)),
+                        ("4. mixed traffic (section 5.5)", mixed)):
         print(f"\n{title}")
         for name, status, detail in rows:
             print(f"  {status:12s} {name:50s} {detail}")
