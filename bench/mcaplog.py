@@ -90,6 +90,7 @@ class EpisodeLog:
             c = s.components
             c.speed, c.jerk, c.lane_change = comps["speed"], comps["jerk"], comps["lane_change"]
             c.distance, c.energy, c.terminal = comps["distance"], comps["energy"], comps["terminal"]
+            c.time = comps.get("time", 0.0)
         if sig is not None:
             g = s.signal
             g.tls, g.link, g.distance, g.state = sig.tls, sig.link, sig.distance, sig.state
@@ -224,14 +225,19 @@ def is_complete(path: str | Path) -> bool:
         return False
 
 
-def episode_summary(path: str | Path) -> dict[str, Any] | None:
+def episode_summary(path: str | Path, agent_sha256: str | None = None) -> dict[str, Any] | None:
     """The /episode record of a finished log through the MCAP index (fast), or None when the
-    file is missing, unfinished or damaged (the harness then reruns the case)."""
+    file is missing, unfinished or damaged, or (given ``agent_sha256``) was written by another
+    policy: the harness then reruns the case."""
     from mcap.reader import make_reader
 
     try:
         with open(path, "rb") as f:
             reader = make_reader(f, validate_crcs=True)
+            if agent_sha256 is not None:
+                meta = next((m.metadata for m in reader.iter_metadata() if m.name == "ecodrive"), {})
+                if meta.get("agent_sha256", "") != agent_sha256:
+                    return None
             for _, channel, message in reader.iter_messages(topics=["/episode"]):
                 ep = schema.Episode.FromString(message.data)
                 return {fd.name: getattr(ep, fd.name) for fd in ep.DESCRIPTOR.fields}

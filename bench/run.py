@@ -130,9 +130,10 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     for signals in opts["signals"]:
         for method in methods:
             pdir = str(policy_dir(method, signals, opts["models"])) if method in LEARNING else ""
+            sha = sha256(Path(pdir) / "policy.pt") if pdir else ""  # a log of another policy is rerun
             for case in cases:
                 path = run_dir / signals / method / f"case-{case.index:03d}.mcap"
-                done = episode_summary(path)
+                done = episode_summary(path, agent_sha256=sha)
                 if done is not None:
                     rows.append({**done, "mcap": str(path), "episode_wall_s": float("nan")})
                 else:

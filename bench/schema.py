@@ -15,7 +15,7 @@ _TYPES = {
 
 # message -> [(field, type, repeated)]; a type that is not a scalar names another message
 MESSAGES: dict[str, list[tuple[str, str, bool]]] = {
-    "RewardComponents": [(n, "double", False) for n in ("speed", "jerk", "lane_change", "distance", "energy", "terminal")],
+    "RewardComponents": [(n, "double", False) for n in ("speed", "jerk", "lane_change", "distance", "energy", "terminal", "time")],
     "Signal": [("tls", "string", False), ("link", "int32", False), ("distance", "double", False),
                ("state", "string", False), ("in_range", "bool", False), ("red", "double", False),
                ("time_to_green", "double", False)],

@@ -117,3 +117,12 @@ def test_rerun_decodes_every_channel(logged, tmp_path):
     for typed in ("ecodrive.Step:message", "ecodrive.Episode:message", "ecodrive.Metadata:message"):
         assert typed in printed
     assert "McapMessage:data" not in printed  # no channel left as raw bytes
+
+
+def test_log_of_another_policy_is_not_reused(logged):
+    from bench.mcaplog import episode_summary
+
+    path = logged[0] / "run0" / "case-000.mcap"
+    assert episode_summary(path)["energy"] > 0
+    assert episode_summary(path, agent_sha256="") is not None  # rule-based: written with no policy
+    assert episode_summary(path, agent_sha256="0" * 64) is None  # the harness reruns it
