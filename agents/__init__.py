@@ -1,10 +1,10 @@
-"""Agents: rule-based baselines and (later) the learning methods, behind one protocol."""
+"""Agents: rule-based baselines and the learning methods, behind one protocol."""
 from __future__ import annotations
 
 from .base import Agent
-from .baseline import BaselineAgent
+from .baseline import BaselineAgent, SteadyBaselineAgent
 from .glosa import GlosaAgent
 
-RULE_BASED = {"baseline": BaselineAgent, "glosa": GlosaAgent}  # name -> class, no learning
+RULE_BASED = {"baseline": BaselineAgent, "glosa": GlosaAgent, "baseline0": SteadyBaselineAgent}  # no learning
 
-__all__ = ["Agent", "BaselineAgent", "GlosaAgent", "RULE_BASED"]
+__all__ = ["Agent", "BaselineAgent", "GlosaAgent", "RULE_BASED", "SteadyBaselineAgent"]

@@ -13,3 +13,11 @@ class BaselineAgent(_NoLearning):
 
     def act(self, obs, info, explore: bool = False) -> int:
         return 0  # the single no-op action: SUMO drives
+
+
+class SteadyBaselineAgent(BaselineAgent):
+    """SUMO's default driving with the ego's driver imperfection off (Krauss sigma = 0): a
+    diagnostic beyond the paper that separates 'drives steadily' from 'anticipates signals'."""
+
+    name = "baseline0"
+    env_overrides: dict[str, Any] = {"ego_sigma": 0.0}

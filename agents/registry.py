@@ -3,18 +3,19 @@ from __future__ import annotations
 
 from typing import Any
 
-from .baseline import BaselineAgent
+from .baseline import BaselineAgent, SteadyBaselineAgent
 from .ddpg import DDPGAgent, DDPGConfig
 from .dqn import DQNAgent, DQNConfig
 from .glosa import GlosaAgent
 from .pdqn import PDQNAgent, PDQNConfig
 
 LEARNING = ("prl", "mpdqn", "dqn", "ddpg")
-RULE_BASED = ("baseline", "glosa")
+RULE_BASED = ("baseline", "glosa", "baseline0")
 METHODS = RULE_BASED + LEARNING
-ACTION_INTERFACE = {"baseline": "sumo", "glosa": "sumo", "prl": "parameterized", "mpdqn": "parameterized",
+ACTION_INTERFACE = {"baseline": "sumo", "glosa": "sumo", "baseline0": "sumo", "prl": "parameterized", "mpdqn": "parameterized",
                     "dqn": "discrete27", "ddpg": "longitudinal"}
-ENV_OVERRIDES: dict[str, dict[str, Any]] = {"glosa": GlosaAgent.env_overrides, "ddpg": DDPGAgent.env_overrides}
+ENV_OVERRIDES: dict[str, dict[str, Any]] = {"glosa": GlosaAgent.env_overrides, "ddpg": DDPGAgent.env_overrides,
+                                             "baseline0": SteadyBaselineAgent.env_overrides}
 
 
 def make_agent(method: str, observation_space, action_space, seed: int = 0, **config: Any):
@@ -23,6 +24,8 @@ def make_agent(method: str, observation_space, action_space, seed: int = 0, **co
         return BaselineAgent()
     if method == "glosa":
         return GlosaAgent()
+    if method == "baseline0":
+        return SteadyBaselineAgent()
     if method in ("prl", "mpdqn"):
         return PDQNAgent(observation_space, action_space, PDQNConfig(seed=seed, multipass=method == "mpdqn", **config))
     if method == "dqn":

@@ -94,6 +94,7 @@ class ScenarioConfig:
     a_max: float = field(default=3.0, metadata=_rng(0.1, 10.0))  # [m/s^2] max acceleration
     max_episode_time: float = field(default=900.0, metadata=_rng(10.0, 7200.0))  # [s] truncation
     glosa: bool = False  # equip the ego with SUMO's GLOSA device (range = v2i_range)
+    ego_sigma: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # Krauss driver imperfection of the ego's vType (SUMO default)
     ev: EVParams = field(default_factory=EVParams)
     reward: RewardConfig = field(default_factory=RewardConfig)
 

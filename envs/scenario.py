@@ -194,7 +194,7 @@ def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
     n = cfg.n_intersections
     root = ET.Element("routes")
     ego_attrs = {"length": f"{cfg.vehicle_length:g}", "accel": f"{cfg.a_max:g}", "decel": f"{-cfg.a_min:g}",
-                 "maxSpeed": f"{cfg.speed_limit:.4f}", "speedFactor": "1", "speedDev": "0"}
+                 "maxSpeed": f"{cfg.speed_limit:.4f}", "speedFactor": "1", "speedDev": "0", "sigma": f"{cfg.ego_sigma:g}"}
     for vid, attrs in ((HDV_TYPE, {"length": f"{cfg.vehicle_length:g}"}), (EGO_TYPE, ego_attrs),
                        (GLOSA_TYPE, ego_attrs)):
         vt = ET.SubElement(root, "vType", id=vid, emissionClass="Energy/unknown", mass=f"{cfg.ev.mass:g}", **attrs)

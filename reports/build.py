@@ -20,7 +20,7 @@ from bench.mcaplog import LogError
 from . import experiments, figures, metrics, tables
 from .load import RunError, load_run, load_steps, stop_lines
 
-METHOD_ORDER = ("baseline", "glosa", "prl", "mpdqn", "ddpg", "dqn")
+METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 
 

@@ -178,3 +178,16 @@ def test_per_step_costs_keep_the_episode_return(cases):
     assert rows["end"]["energy"] == rows["step"]["energy"]
     assert rows["end"]["return_"] == pytest.approx(rows["step"]["return_"], abs=1e-6 * abs(rows["end"]["return_"]))
     assert rows["end"]["return_"] < -(rows["end"]["energy"] + rows["end"]["travel_time"]) + 1e-6
+
+
+def test_steady_baseline_removes_the_egos_dawdling(cases):
+    """baseline0 = SUMO's driver with the ego's sigma = 0: fewer speed swings, less braking."""
+    from agents import SteadyBaselineAgent
+
+    rows = {}
+    for agent in (BaselineAgent(), SteadyBaselineAgent()):
+        env = make_env(agent, "coordinated")
+        assert env.cfg.ego_sigma == (0.0 if agent.name == "baseline0" else 0.5)
+        rows[agent.name] = run_episode(env, agent, cases[5], agent.name)
+        env.close()
+    assert rows["baseline0"]["battery_regenerated"] < 0.8 * rows["baseline"]["battery_regenerated"]
