@@ -65,7 +65,7 @@ def test_killed_run_resumes_to_the_same_results(local_results, tmp_path):
 
 
 @pytest.mark.parametrize("args, words", [
-    (["--methods", "teleporter"], ["teleporter", "baseline, glosa, prl"]),
+    (["--methods", "teleporter"], ["teleporter", "baseline, glosa, baseline0, prl"]),
     (["--profile", "huge"], ["huge", "smoke, paper, full"]),
     (["--executor", "slurm"], ["slurm", "local, ray"]),
     (["--methods", "prl"], ["no trained policy for prl"]),
