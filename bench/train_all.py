@@ -37,6 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING))
     args = ap.parse_args(argv)
     todo = [(m, s) for m in args.methods for s in SIGNALS if not _finished(m, s, args.seed, args.episodes)]
+    # runs with a checkpoint (started in an earlier session) resume before new ones start
+    todo.sort(key=lambda ms: not (RUNS / f"{ms[0]}-{ms[1]}-s{args.seed}" / "checkpoint.pt").is_file())
     running: list[tuple[subprocess.Popen, str]] = []
     RUNS.mkdir(parents=True, exist_ok=True)
     failed = []
