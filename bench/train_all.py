@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 import subprocess
 import sys
 import time
@@ -29,6 +30,14 @@ def _finished(method: str, signals: str, seed: int, episodes: int) -> bool:
     return m.get("seed") == seed and m.get("episodes") == episodes
 
 
+def plan(methods: list[str], seed: int, episodes: int, runs: Path | None = None) -> list[tuple[str, str]]:
+    """(method, signals) still to train; runs with a checkpoint (started in an earlier session)
+    come before new ones, otherwise in the given method order."""
+    runs = runs or RUNS
+    todo = [(m, s) for m in methods for s in SIGNALS if not _finished(m, s, seed, episodes)]
+    return sorted(todo, key=lambda ms: not (runs / f"{ms[0]}-{ms[1]}-s{seed}" / "checkpoint.pt").is_file())
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=1000)
@@ -36,9 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--parallel", type=int, default=2, help="concurrent trainings (one core each)")
     ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING))
     args = ap.parse_args(argv)
-    todo = [(m, s) for m in args.methods for s in SIGNALS if not _finished(m, s, args.seed, args.episodes)]
-    # runs with a checkpoint (started in an earlier session) resume before new ones start
-    todo.sort(key=lambda ms: not (RUNS / f"{ms[0]}-{ms[1]}-s{args.seed}" / "checkpoint.pt").is_file())
+    todo = plan(args.methods, args.seed, args.episodes)
     running: list[tuple[subprocess.Popen, str]] = []
     RUNS.mkdir(parents=True, exist_ok=True)
     failed = []

@@ -174,3 +174,13 @@ def test_policy_snapshot_is_a_copy():
         agent.update()
     assert all(torch.equal(before[k], snap["q"][k]) for k in before)
     assert not all(torch.equal(before[k], v) for k, v in agent.q.state_dict().items())
+
+
+def test_train_all_resumes_started_runs_first(tmp_path):
+    from bench.train_all import plan
+
+    (tmp_path / "ddpg-uncoordinated-s0").mkdir()
+    (tmp_path / "ddpg-uncoordinated-s0" / "checkpoint.pt").write_bytes(b"x")
+    todo = plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=tmp_path)
+    assert todo[0] == ("ddpg", "uncoordinated") and todo[1:] == [("mpdqn", "coordinated"), ("mpdqn", "uncoordinated"),
+                                                                   ("ddpg", "coordinated")]
