@@ -90,7 +90,7 @@ class EpisodeLog:
             c = s.components
             c.speed, c.jerk, c.lane_change = comps["speed"], comps["jerk"], comps["lane_change"]
             c.distance, c.energy, c.terminal = comps["distance"], comps["energy"], comps["terminal"]
-            c.time = comps.get("time", 0.0)
+            c.time = comps["time"]
         if sig is not None:
             g = s.signal
             g.tls, g.link, g.distance, g.state = sig.tls, sig.link, sig.distance, sig.state

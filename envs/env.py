@@ -115,7 +115,6 @@ class EcoDriveEnv(gym.Env):
         else:
             raise RuntimeError(f"ego could not be inserted within 3600 s (case {self.case})")
         self.t_depart = s.time()
-        self._travel_time = 0.0
         self.collisions = self.teleports = self.collisions_all = self.teleports_all = 0
         self.ego = ControlledVehicle(EGO_ID, s, self.obs_type, cfg)
         obs = self.ego.observe()
@@ -150,9 +149,8 @@ class EcoDriveEnv(gym.Env):
         r, comps = rewards.reward(
             self.cfg.reward, speed=m.speed, jerk=m.jerk, lane_changed=m.lane_changed, distance=m.distance,
             energy=m.energy, terminated=terminated, total_energy=ego.energy, travel_time=travel_time,
-            step_time=travel_time - self._travel_time,
+            step_time=self.cfg.step_length,  # each step advances SUMO by one step
         )
-        self._travel_time = travel_time
         obs = self._last_obs if gone else ego.observe()
         self._last_obs = obs
         info = self._info(m, comps, travel_time)
