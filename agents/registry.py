@@ -3,29 +3,24 @@ from __future__ import annotations
 
 from typing import Any
 
-from .baseline import BaselineAgent, SteadyBaselineAgent
+from . import RULE_BASED as _RULE_CLASSES
 from .ddpg import DDPGAgent, DDPGConfig
 from .dqn import DQNAgent, DQNConfig
-from .glosa import GlosaAgent
 from .pdqn import PDQNAgent, PDQNConfig
 
 LEARNING = ("prl", "mpdqn", "dqn", "ddpg")
-RULE_BASED = ("baseline", "glosa", "baseline0")
+RULE_BASED = tuple(_RULE_CLASSES)
 METHODS = RULE_BASED + LEARNING
-ACTION_INTERFACE = {"baseline": "sumo", "glosa": "sumo", "baseline0": "sumo", "prl": "parameterized", "mpdqn": "parameterized",
-                    "dqn": "discrete27", "ddpg": "longitudinal"}
-ENV_OVERRIDES: dict[str, dict[str, Any]] = {"glosa": GlosaAgent.env_overrides, "ddpg": DDPGAgent.env_overrides,
-                                             "baseline0": SteadyBaselineAgent.env_overrides}
+ACTION_INTERFACE = {**{m: c.action_interface for m, c in _RULE_CLASSES.items()},
+                    "prl": "parameterized", "mpdqn": "parameterized", "dqn": "discrete27", "ddpg": "longitudinal"}
+ENV_OVERRIDES: dict[str, dict[str, Any]] = {
+    m: c.env_overrides for m, c in {**_RULE_CLASSES, "ddpg": DDPGAgent}.items() if c.env_overrides}
 
 
 def make_agent(method: str, observation_space, action_space, seed: int = 0, **config: Any):
     """A fresh agent for ``method``; ``config`` overrides fields of its config dataclass."""
-    if method == "baseline":
-        return BaselineAgent()
-    if method == "glosa":
-        return GlosaAgent()
-    if method == "baseline0":
-        return SteadyBaselineAgent()
+    if method in _RULE_CLASSES:
+        return _RULE_CLASSES[method]()
     if method in ("prl", "mpdqn"):
         return PDQNAgent(observation_space, action_space, PDQNConfig(seed=seed, multipass=method == "mpdqn", **config))
     if method == "dqn":
