@@ -30,8 +30,9 @@ from tqdm import tqdm
 from agents.registry import LEARNING, make_agent
 from envs.config import SIGNALS
 
+from .cases import Case
 from .checkpoint import MODELS, atomic_torch_save, policy_dir, save_policy
-from .episode import make_env
+from .episode import make_env, run_episode
 from .mcaplog import write_train_log
 from .provenance import git_sha, package_versions
 
@@ -73,9 +74,6 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         rng.bit_generator.state = state["rng"]
         rows, start, wall = state["rows"], state["episode"], state["wall_time"]
         best = state.get("best", {})
-        if best and not best.get("copied"):  # written before snapshot(): its weights were not the selected ones
-            print(f"{ckpt}: dropping the stored best policy (saved by reference, not a copy)", file=sys.stderr)
-            best = {}
     bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
     done_here = 0
     t_call = time.perf_counter()
@@ -108,7 +106,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
                 score = validate(env, agent, validation_cases)
                 rows[-1].update({f"val_{k}": v for k, v in score.items()})
                 if not best or score["return"] > best["score"]["return"]:
-                    best = {"episode": ep + 1, "score": score, "agent": snapshot(agent), "copied": True}
+                    best = {"episode": ep + 1, "score": score, "agent": snapshot(agent)}
             wall_now = wall + time.perf_counter() - t_call
             _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity, best)
         if stop_after is not None and done_here >= stop_after and not last:
@@ -141,21 +139,19 @@ def snapshot(agent) -> dict[str, Any]:
     return copy.deepcopy(agent.state_dict(with_training=False))
 
 
+def validation_cases(cfg, n: int) -> list[Case]:
+    """``n`` cases drawn like the test cases but from ``VALIDATION_SEED``."""
+    vr = np.random.default_rng(VALIDATION_SEED)
+    seeds, times = vr.integers(0, 2**31 - 1, size=n), vr.uniform(cfg.insert_min, cfg.insert_max, size=n)
+    return [Case(index=i, sumo_seed=int(sd), insert_time=round(float(t), 1), group=0)
+            for i, (sd, t) in enumerate(zip(seeds, times))]
+
+
 def validate(env, agent, n: int) -> dict[str, float]:
     """Mean greedy energy, travel time and return on ``n`` validation cases."""
-    vr = np.random.default_rng(VALIDATION_SEED)
-    seeds, times = vr.integers(0, 2**31 - 1, size=n), vr.uniform(env.cfg.insert_min, env.cfg.insert_max, size=n)
-    out = {"energy": 0.0, "travel_time": 0.0, "return": 0.0}
-    for seed, t_ins in zip(seeds, times):
-        obs, info = env.reset(options={"sumo_seed": int(seed), "insert_time": round(float(t_ins), 1)})
-        while True:
-            obs, r, terminated, truncated, info = env.step(agent.act(obs, info, explore=False))
-            out["return"] += r / n
-            if terminated or truncated:
-                break
-        out["energy"] += info["energy"] / n
-        out["travel_time"] += info["travel_time"] / n
-    return {k: round(v, 4) for k, v in out.items()}
+    rows = [run_episode(env, agent, case, "validation") for case in validation_cases(env.cfg, n)]
+    return {k: round(float(np.mean([r[col] for r in rows])), 4)
+            for k, col in (("energy", "energy"), ("travel_time", "travel_time"), ("return", "return_"))}
 
 
 def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict, best: dict) -> None:

@@ -184,3 +184,13 @@ def test_train_all_resumes_started_runs_first(tmp_path):
     todo = plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=tmp_path)
     assert todo[0] == ("ddpg", "uncoordinated") and todo[1:] == [("mpdqn", "coordinated"), ("mpdqn", "uncoordinated"),
                                                                    ("ddpg", "coordinated")]
+
+
+def test_validation_cases_are_not_test_cases():
+    from bench.cases import load
+    from bench.train import validation_cases
+    from envs.config import ScenarioConfig
+
+    val = {(c.sumo_seed, c.insert_time) for c in validation_cases(ScenarioConfig(), 100)}
+    test = {(c.sumo_seed, c.insert_time) for c in load()}
+    assert len(val) == 100 and not val & test and not {s for s, _ in val} & {s for s, _ in test}
