@@ -89,11 +89,17 @@ def case_of(name: str) -> Case:
     return Case(index=SCENARIO_NAMES.index(name), sumo_seed=1, insert_time=INSERT_A if name == "A" else INSERT_B, group=0)
 
 
+def scenario_env(method: str):
+    """The env of the lateral scenarios: empty corridor, uncoordinated signals."""
+    return make_env(method, "uncoordinated", EMPTY)
+
+
 def run_scenario(name: str, agent: Agent, method: str, log_path: Path | None = None,
-                 agent_sha256: str = "") -> pd.DataFrame:
+                 agent_sha256: str = "", env=None) -> pd.DataFrame:
     """Trajectories (time, vehicle, x, lane, speed) of scenario ``name`` driven by ``agent``;
-    with ``log_path`` the ego's steps (the scripted vehicles among its neighbours) go to MCAP."""
-    env = make_env(agent if not isinstance(agent, str) else method, "uncoordinated", EMPTY)
+    with ``log_path`` the ego's steps (the scripted vehicles among its neighbours) go to MCAP.
+    ``env`` (from ``scenario_env``) is used and closed; by default one is made."""
+    env = env or scenario_env(method)
     script = Script(name)
     try:
         run_episode(env, agent, case_of(name), method, log_path=log_path, agent_sha256=agent_sha256, script=script)
@@ -162,15 +168,14 @@ def run_task(task: LateralTask) -> dict[str, Any]:
     from .checkpoint import load_policy
 
     torch.set_num_threads(1)
-    env = make_env(task.method, "uncoordinated", EMPTY)
+    env = scenario_env(task.method)
     agent = make_agent(task.method, env.observation_space, env.action_space)
-    env.close()
     sha = ""
     if task.method in LEARNING:
         state, manifest = load_policy(Path(task.policy_dir), task.method)
         agent.load_state_dict(state)
         sha = manifest["sha256"]
-    df = run_scenario(task.scenario, agent, task.method, log_path=Path(task.path), agent_sha256=sha)
+    df = run_scenario(task.scenario, agent, task.method, log_path=Path(task.path), agent_sha256=sha, env=env)
     df.to_parquet(Path(task.path).with_suffix(".parquet"), index=False)
     return _flat(summary(df, task.scenario))
 
@@ -185,9 +190,9 @@ def main(argv: list[str] | None = None) -> int:
 
     from agents.registry import LEARNING, METHODS
 
-    from .checkpoint import MODELS, policy_dir
+    from .checkpoint import MODELS, policy_dir, sha256
     from .executors import EXECUTORS, run_local, run_ray
-    from .mcaplog import is_complete
+    from .mcaplog import episode_summary
 
     ap = argparse.ArgumentParser(description="Run the lateral scenarios A and B (section 5.4) for each method.")
     ap.add_argument("--methods", nargs="+", default=list(LATERAL_METHODS), help=f"among {', '.join(METHODS)}")
@@ -198,14 +203,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--logs", type=Path, default=Path("logs"))
     ap.add_argument("--models", type=Path, default=MODELS)
     args = ap.parse_args(argv)
-    bad = [m for m in args.methods if m not in METHODS]
-    for flag, wrong, accepted in (("--methods", ", ".join(bad), ", ".join(METHODS)),
-                                  ("--executor", args.executor if args.executor not in EXECUTORS else "",
-                                   ", ".join(EXECUTORS)),
-                                  ("--workers", str(args.workers) if args.workers < 1 else "", ">= 1")):
-        if wrong:
-            print(f"error: {flag} {wrong} is not accepted; accepted: {accepted}", file=sys.stderr)
-            return 2
+    bad = ", ".join(m for m in args.methods if m not in METHODS)
+    error = (bad and f"--methods {bad} is not accepted; accepted: {', '.join(METHODS)}"
+             or args.executor not in EXECUTORS and f"--executor {args.executor} is not accepted; accepted: {', '.join(EXECUTORS)}"
+             or args.workers < 1 and f"--workers {args.workers} is not accepted; accepted: >= 1")
+    if error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     missing = [m for m in args.methods if m in LEARNING
                and not (policy_dir(m, "uncoordinated", args.models) / "manifest.json").is_file()]
     if missing:
@@ -219,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
     rows, todo = [], []
     for t in tasks:
         traj = Path(t.path).with_suffix(".parquet")
-        if is_complete(t.path) and traj.is_file():
+        sha = sha256(Path(t.policy_dir) / "policy.pt") if t.policy_dir else ""  # another policy's log is rerun
+        if episode_summary(t.path, agent_sha256=sha) is not None and traj.is_file():
             rows.append(_flat(summary(pd.read_parquet(traj), t.scenario)))
         else:
             todo.append(t)

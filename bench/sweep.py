@@ -89,13 +89,13 @@ def run_job(job: Job) -> dict[str, Any]:
     rows = []
     for case in load()[: job.cases]:
         path = log_dir / f"case-{case.index:03d}.mcap"
-        row = episode_summary(path)
+        row = episode_summary(path, agent_sha256=manifest["sha256"])  # a log of an earlier policy is rerun
         if row is None:
             row = run_episode(env, agent, case, "prl", log_path=path, agent_sha256=manifest["sha256"])
         rows.append({**row, "config": job.name, "seed": job.seed, "case": case.index, "mcap": str(path)})
     env.close()
-    pd.DataFrame(rows).to_parquet(log_dir / "episodes.parquet", index=False)
     ep = pd.DataFrame(rows)
+    ep.to_parquet(log_dir / "episodes.parquet", index=False)
     return {"study": job.study, "config": job.name, "seed": job.seed, "signals": job.signals,
             **{f"reward_{k}": v for k, v in job.reward.items()}, "episodes": job.episodes,
             "selected_episode": manifest.get("selected_episode"), "cases": len(ep),

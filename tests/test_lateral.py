@@ -52,16 +52,13 @@ def test_shipped_prl_shows_the_papers_lateral_behaviour():
     corridor (README, lateral scenarios): the behaviour is there, the harmony is not."""
     from agents.registry import make_agent
     from bench.checkpoint import load_policy, policy_dir
-    from bench.episode import make_env
-    from bench.lateral import EMPTY
+    from bench.lateral import scenario_env
 
-    folder = policy_dir("prl", "uncoordinated")
-    env = make_env("prl", "uncoordinated", EMPTY)
+    env = scenario_env("prl")
     agent = make_agent("prl", env.observation_space, env.action_space)
-    env.close()
-    state, _ = load_policy(folder, "prl")
+    state, _ = load_policy(policy_dir("prl", "uncoordinated"), "prl")
     agent.load_state_dict(state)
-    a = summary(run_scenario("A", agent, "prl"), "A")
+    a = summary(run_scenario("A", agent, "prl", env=env), "A")
     b = summary(run_scenario("B", agent, "prl"), "B")
     assert a["left_hdv1_lane"] is True
     assert b["ended_in_shortest_queue_lane"] is True
