@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import signal, stats
 
 PAPER_TABLE4 = {  # (method, signals) -> (energy [Wh], travel time [s]); Table 4 and section 5.3 text
     ("baseline", "coordinated"): (231.13, 189.08),
@@ -121,12 +121,9 @@ def signal_bands(steps: pd.DataFrame, stop_lines: dict[str, float], links: dict[
 def smooth(x: np.ndarray, keep: float = 0.98) -> np.ndarray:
     """The paper's training-curve smoothing: D_k <- keep * D_{k-1} + (1 - keep) * d_k, D_0 = d_0."""
     x = np.asarray(x, dtype=float)
-    out = np.empty_like(x)
-    acc = x[0] if len(x) else 0.0
-    for i, v in enumerate(x):
-        acc = keep * acc + (1.0 - keep) * v if i else v
-        out[i] = acc
-    return out
+    if not len(x):
+        return x
+    return signal.lfilter([1.0 - keep], [1.0, -keep], x, zi=[keep * x[0]])[0]
 
 
 def reward_curves(train: pd.DataFrame) -> pd.DataFrame:
