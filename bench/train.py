@@ -28,7 +28,7 @@ import torch
 from tqdm import tqdm
 
 from agents.registry import LEARNING, make_agent
-from envs.config import SIGNALS
+from envs.config import SIGNALS, backfill
 
 from .cases import Case
 from .checkpoint import MODELS, atomic_torch_save, policy_dir, save_policy
@@ -65,8 +65,9 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     best: dict[str, Any] = {}
     if ckpt.exists():
         state = torch.load(ckpt, map_location="cpu", weights_only=False)
-        if state["identity"] != identity:
-            diff = [k for k in identity if state["identity"].get(k) != identity[k]]
+        saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
+        if saved != identity:
+            diff = [k for k in identity if saved.get(k) != identity[k]]
             raise SystemExit(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
                              f"use another --out or remove the folder")
         agent.load_state_dict(state["agent"])

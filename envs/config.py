@@ -15,6 +15,9 @@ from typing import Any, Mapping
 SIGNALS = ("coordinated", "uncoordinated")
 REWARDS = ("r1", "r2", "r")
 COST_TIMINGS = ("step", "end")
+# Scenario fields added after saved runs existed, with the value their absence meant (each default
+# reproduces the behaviour from before the field). Only these are filled into an older saved config.
+ADDED_FIELDS: dict[str, Any] = {"ego_sigma": 0.5}
 
 
 class ConfigError(ValueError):
@@ -140,6 +143,11 @@ class ScenarioConfig:
         d = self.to_dict()
         d.update(overrides)
         return ScenarioConfig.from_dict(d)
+
+
+def backfill(scenario: Mapping[str, Any]) -> dict[str, Any]:
+    """A saved scenario dict with the fields of ``ADDED_FIELDS`` it predates filled in."""
+    return {**ADDED_FIELDS, **scenario}
 
 
 def _from_dict(cls: type, data: Mapping[str, Any], prefix: str) -> Any:

@@ -165,6 +165,25 @@ def test_resume_refuses_another_run(tmp_path):
         train("prl", "uncoordinated", 2, seed=3, out=tmp_path / "r", **kw)
 
 
+def test_resume_accepts_a_checkpoint_from_before_an_added_field(tmp_path):
+    """A run saved before ``ego_sigma`` existed resumes (its absence meant 0.5); a saved scenario
+    that differs in a real field is still refused."""
+    kw = dict(models=None, agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
+    train("prl", "uncoordinated", 1, seed=2, out=tmp_path / "r", **kw)
+    ckpt = tmp_path / "r" / "checkpoint.pt"
+    state = torch.load(ckpt, weights_only=False)
+    del state["identity"]["scenario"]["ego_sigma"]
+    torch.save(state, ckpt)
+    assert len(train("prl", "uncoordinated", 2, seed=2, out=tmp_path / "r", **kw)) == 2
+    state = torch.load(ckpt, weights_only=False)
+    assert state["identity"]["scenario"]["ego_sigma"] == 0.5  # rewritten in the current form
+    del state["identity"]["scenario"]["ego_sigma"]
+    state["identity"]["scenario"]["reward"]["cost_timing"] = "end"
+    torch.save(state, ckpt)
+    with pytest.raises(SystemExit, match="differs in scenario"):
+        train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "r", **kw)
+
+
 def test_policy_snapshot_is_a_copy():
     """The best policy kept during training must not follow later updates."""
     agent, _, _ = _filled_agent("prl", "parameterized", n=100)
