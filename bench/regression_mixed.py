@@ -2,10 +2,11 @@
 
 Cells: both signal settings x MPR {0, 0.5, 1} at one demand, one repetition, ``CI_DURATION`` s
 each, every CV driven by the shipped PRL policy of its setting. Claims (tolerances and reasons in
-``docs/tolerances.md``):
-- fleet energy [Wh/veh] is lower at MPR = 1 than at MPR = 0 (the paper: about 13.8% lower);
-- the fleet's mean speed at MPR = 1 is at most ``SPEED_LOSS_TOL`` below MPR = 0;
-- the HDVs' energy and travel time at MPR = 0.5 are at most ``HDV_TOL`` worse than at MPR = 0.
+``docs/tolerances.md``), all over every vehicle inserted, finished or not (the paper's means over
+the vehicles that finished would favour a run that congests the arterial):
+- fleet energy per km is lower at MPR = 1 than at MPR = 0 (the paper: about 13.8% lower, per vehicle);
+- the fleet's space-mean speed at MPR = 1 is at most ``SPEED_LOSS_TOL`` below MPR = 0;
+- the HDVs' energy per km and space-mean speed at MPR = 0.5 are at most ``HDV_TOL`` worse than at MPR = 0.
 """
 from __future__ import annotations
 
@@ -47,19 +48,24 @@ def claims(cells: pd.DataFrame | None) -> list[tuple[str, str, str]]:
     out = []
     for s in SIGNALS:
         c = cells[cells.signals == s].set_index("mpr")
-        e0, e1 = c.loc[0.0, "all_energy"], c.loc[1.0, "all_energy"]
+        n0, n1 = int(c.loc[0.0, "all_vehicles"]), int(c.loc[1.0, "all_vehicles"])
+        e0, e1 = c.loc[0.0, "all_energy_per_km"], c.loc[1.0, "all_energy_per_km"]
         saving = 1 - e1 / e0
-        out.append((f"fleet energy falls from MPR 0 to 1 ({s})", "PASS" if e1 < e0 else "FAIL",
-                    f"{e0:.1f} -> {e1:.1f} Wh/veh ({100 * saving:+.1f}% saving; paper {100 * PAPER_FLEET_SAVING:.1f}%)"))
-        v0, v1 = c.loc[0.0, "all_speed"], c.loc[1.0, "all_speed"]
+        out.append((f"fleet energy per km falls from MPR 0 to 1 ({s})", "PASS" if e1 < e0 else "FAIL",
+                    f"{e0:.1f} -> {e1:.1f} Wh/km ({100 * saving:+.1f}% saving; paper {100 * PAPER_FLEET_SAVING:.1f}%); "
+                    f"finishers only: {c.loc[0.0, 'all_energy']:.1f} -> {c.loc[1.0, 'all_energy']:.1f} Wh/veh; "
+                    f"finished {n0} -> {n1}"))
+        v0, v1 = c.loc[0.0, "all_space_mean_speed"], c.loc[1.0, "all_space_mean_speed"]
         loss = 1 - v1 / v0
-        out.append((f"mean speed loss at MPR 1 < {100 * SPEED_LOSS_TOL:.0f}% ({s})",
-                    "PASS" if loss < SPEED_LOSS_TOL else "FAIL", f"{v0:.2f} -> {v1:.2f} m/s ({100 * loss:+.1f}% loss)"))
-        for col, unit in (("hdv_energy", "Wh/veh"), ("hdv_travel_time", "s")):
+        out.append((f"space-mean speed loss at MPR 1 < {100 * SPEED_LOSS_TOL:.0f}% ({s})",
+                    "PASS" if loss < SPEED_LOSS_TOL else "FAIL",
+                    f"{v0:.2f} -> {v1:.2f} m/s ({100 * loss:+.1f}% loss); finishers only: "
+                    f"{c.loc[0.0, 'all_speed']:.2f} -> {c.loc[1.0, 'all_speed']:.2f} m/s"))
+        for col, unit, sign in (("hdv_energy_per_km", "Wh/km", 1), ("hdv_space_mean_speed", "m/s", -1)):
             h0, h5 = c.loc[0.0, col], c.loc[0.5, col]
-            worse = h5 / h0 - 1
+            worse = sign * (h5 / h0 - 1)
             out.append((f"HDV {col[4:]} at MPR 0.5 not worse by > {100 * HDV_TOL:.0f}% ({s})",
-                        "PASS" if worse <= HDV_TOL else "FAIL", f"{h0:.1f} -> {h5:.1f} {unit} ({100 * worse:+.1f}%)"))
+                        "PASS" if worse <= HDV_TOL else "FAIL", f"{h0:.2f} -> {h5:.2f} {unit} ({100 * worse:+.1f}% worse)"))
     collisions = int(cells.collisions.sum())
     out.append(("no collisions in mixed traffic", "PASS" if collisions == 0 else "FAIL",
                 f"{collisions} in {len(cells)} cells"))

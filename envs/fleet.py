@@ -29,6 +29,7 @@ class VehicleRecord:
     depart: float  # [s]
     energy: float = 0.0  # [Wh]
     arrive: float | None = None  # [s]
+    distance: float | None = None  # [m] driven by the end of the run, for vehicles still driving then
 
 
 @dataclass
@@ -36,6 +37,8 @@ class FleetStats:
     records: dict[str, VehicleRecord] = field(default_factory=dict)
     collisions: int = 0
     teleports: int = 0
+    end_time: float = 0.0  # [s] simulation time when the run was closed
+    pending: dict[str, int] = field(default_factory=dict)  # per kind: not yet inserted at the end
     sim_time_s: float = 0.0  # wall time inside simulationStep
     control_time_s: float = 0.0  # wall time observing, deciding and applying
     steps: int = 0
@@ -103,17 +106,39 @@ class Fleet:
         return n
 
     def summary(self, route_length: float) -> dict[str, Any]:
-        """Mean energy [Wh/veh], travel time [s] and speed [m/s] of the vehicles that finished."""
+        """Per kind (all, cv, hdv). As the paper: mean energy [Wh/veh], travel time [s] and speed
+        [m/s] of the vehicles that finished. Those means favour a congested run (its slow vehicles
+        are still inside at the end), so also, over every vehicle inserted: energy per distance
+        [Wh/km] and space-mean speed (distance / time in the network) [m/s], with the counts of
+        vehicles inserted, still driving at the end (``unfinished``) and never inserted (``pending``)."""
+        st = self.stats
         out: dict[str, Any] = {}
         for kind in ("all", "cv", "hdv"):
-            done = [r for r in self.stats.records.values() if r.arrive is not None and kind in ("all", r.kind)]
+            recs = [r for r in st.records.values() if kind in ("all", r.kind)]
+            done = [r for r in recs if r.arrive is not None]
             tt = np.array([r.arrive - r.depart for r in done])
+            dist = sum(route_length if r.arrive is not None else (r.distance or 0.0) for r in recs)
+            time_in = sum((r.arrive if r.arrive is not None else st.end_time) - r.depart for r in recs)
+            nan = float("nan")
             out[kind] = {"vehicles": len(done),
-                         "energy": float(np.mean([r.energy for r in done])) if done else float("nan"),
-                         "travel_time": float(tt.mean()) if done else float("nan"),
-                         "speed": float(np.mean(route_length / tt)) if done else float("nan")}
-        out["collisions"], out["teleports"] = self.stats.collisions, self.stats.teleports
+                         "energy": float(np.mean([r.energy for r in done])) if done else nan,
+                         "travel_time": float(tt.mean()) if done else nan,
+                         "speed": float(np.mean(route_length / tt)) if done else nan,
+                         "inserted": len(recs), "unfinished": len(recs) - len(done),
+                         "pending": sum(v for k, v in st.pending.items() if kind in ("all", k)),
+                         "energy_per_km": 1000.0 * sum(r.energy for r in recs) / dist if dist > 0 else nan,
+                         "space_mean_speed": dist / time_in if time_in > 0 else nan}
+        out["collisions"], out["teleports"] = st.collisions, st.teleports
         return out
 
     def close(self) -> None:
-        self.session.close()
+        """Record where the vehicles still driving got to and who never got in, then stop SUMO."""
+        s, st = self.session, self.stats
+        if s.running:
+            st.end_time = s.time()
+            for vid, rec in self.active.items():
+                rec.distance = s.odometer(vid)
+            pending = [v for v in s.pending() if v.startswith(self._arterial_prefixes)]
+            st.pending = {"cv": sum(v.startswith(f"{CV_FLOW}.") for v in pending)}
+            st.pending["hdv"] = len(pending) - st.pending["cv"]
+        s.close()

@@ -108,6 +108,11 @@ class SumoSession:
         return ls.simulation.getStartingTeleportIDList()
 
     @staticmethod
+    def pending() -> tuple[str, ...]:
+        """Vehicles due to depart that SUMO could not insert yet (the entry is blocked)."""
+        return ls.simulation.getPendingVehicles()
+
+    @staticmethod
     def vehicle_ids() -> tuple[str, ...]:
         return ls.vehicle.getIDList()
 
@@ -161,6 +166,11 @@ class SumoSession:
     def neighbours(vid: str) -> dict[str, dict[int, object]]:
         """Vehicles within the context range: id -> {var: value} (the vehicle itself included)."""
         return ls.vehicle.getContextSubscriptionResults(vid)
+
+    @staticmethod
+    def odometer(vid: str) -> float:
+        """Distance [m] driven since insertion."""
+        return ls.vehicle.getDistance(vid)
 
     @staticmethod
     def energy_rate(vid: str) -> float:

@@ -77,9 +77,13 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         images.append(("mixed traffic", p[0]))
         effect = metrics.mpr_effect(cells)
         br = cells[cells.demand.isin(MPR_BREAKDOWN_DEMANDS) & (cells.signals == "uncoordinated")]
-        cols = ["mpr", "demand"] + [f"{k}_{m}" for k in ("cv", "hdv") for m in ("energy", "travel_time", "speed")]
+        cols = ["mpr", "demand"] + [c for c in (f"{k}_{m}" for k in ("cv", "hdv") for m in (
+            "energy", "travel_time", "speed", "energy_per_km", "space_mean_speed", "unfinished")) if c in cells.columns]
         md += ["## Mixed traffic (fig:dd, fig:avg)", "", f"![mixed traffic](figures/{p[0].name})", "",
-               "Fleet energy and speed by MPR (mean over demands), change against MPR = 0:", "",
+               "Fleet metrics by MPR (mean over demands), change against MPR = 0. `energy` and `speed` "
+               "are the paper's means over the vehicles that finished in the run; `energy_per_km` and "
+               "`space_mean_speed` count every vehicle inserted, finished or not, so a policy that "
+               "congests the arterial cannot look better by keeping its slow vehicles inside:", "",
                _table(effect.set_index(["signals", "mpr"])), "",
                "CVs against HDVs, uncoordinated, 200 and 700 veh/h/lane:", "",
                _table(br[cols].set_index(["mpr", "demand"])) if not br.empty else "(not in this run)", ""]

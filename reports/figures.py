@@ -86,12 +86,18 @@ def heatmaps(grids: dict[str, pd.DataFrame], out: Path) -> list[Path]:
 
 
 def mixed_panels(cells: pd.DataFrame, out: Path) -> list[Path]:
-    """fig:dd / fig:avg: fleet energy [Wh/veh] and speed [m/s] against demand, one line per MPR."""
+    """fig:dd / fig:avg: fleet energy and speed against demand, one line per MPR. The paper's
+    means over the vehicles that finished, then (when the run has them) energy per km and
+    space-mean speed over every vehicle inserted."""
     settings = sorted(set(cells.signals))
-    fig, axes = plt.subplots(2, len(settings), figsize=(6 * len(settings), 8), squeeze=False)
+    panels = [("all_energy", "energy, finished [Wh/veh]"), ("all_speed", "mean speed, finished [m/s]"),
+              ("all_energy_per_km", "energy, all inserted [Wh/km]"),
+              ("all_space_mean_speed", "space-mean speed, all inserted [m/s]")]
+    panels = [p for p in panels if p[0] in cells.columns]
+    fig, axes = plt.subplots(len(panels), len(settings), figsize=(6 * len(settings), 4 * len(panels)), squeeze=False)
     for col, signals in enumerate(settings):
         sub = cells[cells.signals == signals]
-        for row, (metric, label) in enumerate((("all_energy", "energy [Wh/veh]"), ("all_speed", "mean speed [m/s]"))):
+        for row, (metric, label) in enumerate(panels):
             ax = axes[row][col]
             for mpr, g in sub.groupby("mpr"):
                 ax.plot(g.demand, g[metric], marker="o", label=f"MPR {mpr:g}")

@@ -153,12 +153,18 @@ def mixed_cells(cells: pd.DataFrame) -> pd.DataFrame:
     return cells.groupby(["signals", "mpr", "demand"])[cols].mean().reset_index()
 
 
+MPR_EFFECT_COLUMNS = ("all_energy", "all_speed", "all_energy_per_km", "all_space_mean_speed", "all_unfinished",
+                      "all_pending", "hdv_energy_per_km", "hdv_space_mean_speed")
+
+
 def mpr_effect(cells: pd.DataFrame) -> pd.DataFrame:
-    """Per signal setting: fleet energy and speed by MPR (mean over demands and repetitions), and
-    the change against MPR = 0."""
-    g = cells.groupby(["signals", "mpr"])[["all_energy", "all_speed", "hdv_energy", "hdv_travel_time"]].mean()
-    g = g.reset_index()
-    for col in ("all_energy", "all_speed", "hdv_energy", "hdv_travel_time"):
+    """Per signal setting: fleet metrics by MPR (mean over demands and repetitions), and the
+    change against MPR = 0. The finishers' means (``all_energy``, ``all_speed``) are the paper's;
+    the per-km and space-mean ones count every vehicle inserted (columns missing from older runs
+    are left out)."""
+    cols = [c for c in MPR_EFFECT_COLUMNS if c in cells.columns]
+    g = cells.groupby(["signals", "mpr"])[cols].mean().reset_index()
+    for col in cols:
         ref = g[g.mpr == 0].set_index("signals")[col]
         g[f"{col}_change"] = g.apply(lambda r, c=col, ref=ref: r[c] / ref.get(r.signals, np.nan) - 1.0, axis=1)
     return g

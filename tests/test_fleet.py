@@ -36,3 +36,27 @@ def test_no_cvs_means_plain_sumo():
     fleet.close()
     out = fleet.summary(route_length=2200.0)
     assert out["cv"]["vehicles"] == 0 and out["hdv"]["vehicles"] > 10
+
+
+def test_summary_counts_the_vehicles_still_driving():
+    """CVs that stand still never finish: the finishers' means cannot see them, the space-mean
+    speed over every inserted vehicle does."""
+    cfg = ScenarioConfig(signals="uncoordinated", arterial_flow=1500.0, mpr=0.5)
+    fleet = Fleet(cfg)
+    fleet.start(3)
+
+    def stand_still(grids, logics, masks):
+        return [(1, np.array([-4.0, -4.0, -4.0], dtype=np.float32))] * len(grids)
+
+    for _ in range(300):
+        fleet.step(stand_still)
+    fleet.close()
+    out = fleet.summary(route_length=5 * cfg.spacing)
+    for kind in ("all", "cv", "hdv"):
+        assert out[kind]["inserted"] == out[kind]["vehicles"] + out[kind]["unfinished"]
+        assert out[kind]["pending"] >= 0
+    assert out["cv"]["vehicles"] == 0 and out["cv"]["unfinished"] > 5
+    assert out["cv"]["space_mean_speed"] < 1.0
+    assert out["hdv"]["vehicles"] > 0 and out["hdv"]["speed"] > 3.0
+    assert out["all"]["space_mean_speed"] < out["all"]["speed"]
+    assert np.isfinite(out["all"]["energy_per_km"]) and out["all"]["energy_per_km"] > 0

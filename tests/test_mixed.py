@@ -37,16 +37,17 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path):
 def test_mixed_claims_pass_fail_and_not_checked():
     from bench.regression_mixed import claims
 
-    def cells(e1: float, hdv_tt: float) -> pd.DataFrame:
+    def cells(e1: float, hdv_v: float) -> pd.DataFrame:
         rows = []
         for s in ("coordinated", "uncoordinated"):
-            for mpr, e, v, he, ht in ((0.0, 300.0, 8.0, 300.0, 300.0), (0.5, 290.0, 7.9, 299.0, hdv_tt),
+            for mpr, e, v, he, hv in ((0.0, 150.0, 8.0, 150.0, 8.0), (0.5, 140.0, 7.9, 149.0, hdv_v),
                                       (1.0, e1, 7.8, float("nan"), float("nan"))):
-                rows.append({"signals": s, "mpr": mpr, "all_energy": e, "all_speed": v, "hdv_energy": he,
-                             "hdv_travel_time": ht, "collisions": 0})
+                rows.append({"signals": s, "mpr": mpr, "all_energy_per_km": e, "all_space_mean_speed": v,
+                             "hdv_energy_per_km": he, "hdv_space_mean_speed": hv, "all_energy": 2.2 * e,
+                             "all_speed": v + 1.0, "all_vehicles": 200, "collisions": 0})
         return pd.DataFrame(rows)
 
-    assert {st for _, st, _ in claims(cells(260.0, 301.0))} == {"PASS"}
-    failed = [n for n, st, _ in claims(cells(310.0, 330.0)) if st == "FAIL"]
-    assert len(failed) == 4 and all("energy falls" in n or "travel_time" in n for n in failed)
+    assert {st for _, st, _ in claims(cells(130.0, 7.9))} == {"PASS"}
+    failed = [n for n, st, _ in claims(cells(155.0, 7.0)) if st == "FAIL"]
+    assert len(failed) == 4 and all("energy per km falls" in n or "space_mean_speed" in n for n in failed)
     assert claims(None)[0][1] == "NOT CHECKED"
