@@ -2,6 +2,14 @@
 
 Same conv trunk, gamma, step sizes, batch and replay as PRL; OU exploration noise. The reward
 is the composite without the lane-change term r_p^c (``lane_change_penalty = 0``).
+
+Bounding the action (not in the paper): the actor's output is the normalised acceleration itself,
+clipped to [-1, 1] when acting, and the actor's gradient is inverted at the bounds (Hausknecht &
+Stone 2016): dQ/da is scaled by (1 - a)/2 where it pushes a up and by (a + 1)/2 where it pushes
+it down, so the output slows down as it nears a bound instead of crossing it. With a tanh output
+instead (``bound = "tanh"``) the first run saturated: by episode 25 the pre-tanh output was about
+4 on every state and by episode 1000 about 10, i.e. "always +3 m/s^2, let Krauss brake", with a
+vanishing gradient and the same greedy validation score at every checkpoint from 25 to 1000.
 """
 from __future__ import annotations
 
@@ -32,6 +40,7 @@ class DDPGConfig:
     learning_starts: int = 1000  # transitions stored before the first update (not in the paper)
     reward_scale: float = 0.01  # rewards are multiplied by this for learning
     grad_clip: float = 10.0  # max gradient norm per network (not in the paper)
+    bound: str = "invert"  # "invert": inverting gradients at [-1, 1]; "tanh": squash (saturates, see above)
     seed: int = 0  # seeds network initialisation and the agent's numpy Generator
 
 
@@ -42,6 +51,8 @@ class DDPGAgent:
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, cfg: DDPGConfig | None = None):
         self.cfg = cfg = cfg or DDPGConfig()
+        if cfg.bound not in ("invert", "tanh"):
+            raise ValueError(f"DDPGConfig.bound={cfg.bound!r}; accepted: 'invert', 'tanh'")
         grid_shape, logic = observation_space["grid"].shape, observation_space["logic"]
         self.a_low, self.a_high = float(action_space.low[0]), float(action_space.high[0])
         self.scaler = ObsScaler(logic.low, logic.high)
@@ -63,11 +74,15 @@ class DDPGAgent:
     def begin_episode(self, episode: int) -> None:
         self.noise.reset()
 
+    def _bounded(self, out: torch.Tensor) -> torch.Tensor:
+        """The normalised acceleration in [-1, 1] from the actor's raw output."""
+        return torch.tanh(out) if self.cfg.bound == "tanh" else out.clamp(-1.0, 1.0)
+
     def act(self, obs, info, explore: bool = False) -> np.ndarray:
         with torch.no_grad():
             g = torch.as_tensor(obs["grid"], dtype=torch.float32)[None]
             l = torch.as_tensor(self.scaler.logic(obs["logic"]))[None]
-            x = torch.tanh(self.actor(g, l))[0].numpy()
+            x = self._bounded(self.actor(g, l))[0].numpy()
         if explore:
             x = np.clip(x + self.noise.sample(), -1.0, 1.0)
         self._last = x.astype(np.float32)
@@ -88,14 +103,24 @@ class DDPGAgent:
         with torch.no_grad():
             fc2, fa2 = features(torch.as_tensor(b["next_grid"], dtype=torch.float32),
                                 torch.as_tensor(b["next_logic"]), [self.critic_target, self.actor_target])
-            a2 = torch.tanh(self.actor_target.from_features(fa2))
+            a2 = self._bounded(self.actor_target.from_features(fa2))
             y = torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * \
                 self.critic_target.from_features(fc2, a2).squeeze(1)
         fc, fa = features(g, l, [self.critic, self.actor])
         loss_c = 0.5 * F.mse_loss(self.critic.from_features(fc, torch.as_tensor(b["action"])).squeeze(1), y)
         frozen = {n: p.detach() for n, p in self.critic.mlp.named_parameters()}
-        a = torch.tanh(self.actor.from_features(fa))
-        loss_a = -functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), a], 1),)).mean()
+        out = self.actor.from_features(fa)
+        if c.bound == "tanh":
+            a = torch.tanh(out)
+            loss_a = -functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), a], 1),)).mean()
+        else:
+            a = out.detach().requires_grad_(True)
+            q = functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), a], 1),))
+            dq = torch.autograd.grad(q.sum(), a)[0]
+            a_now = a.detach()
+            dq = torch.where(dq > 0, dq * (1.0 - a_now) / 2.0, dq * (a_now + 1.0) / 2.0)
+            loss_a = -(out * dq).sum() / out.shape[0]  # its gradient is the inverted -dQ/da, batch mean
+        actor_q = q.detach().mean() if c.bound == "invert" else -loss_a.detach()
         self.opt_critic.zero_grad(set_to_none=True)
         self.opt_actor.zero_grad(set_to_none=True)
         (loss_c + loss_a).backward()  # each loss reaches only its own network
@@ -106,7 +131,7 @@ class DDPGAgent:
         soft_update(self.critic_target, self.critic, c.tau_critic)
         soft_update(self.actor_target, self.actor, c.tau_actor)
         self.updates += 1
-        return {"loss_q": loss_c.item(), "loss_param": loss_a.item()}
+        return {"loss_q": loss_c.item(), "loss_param": -actor_q.item()}  # -Q(s, actor(s)), as eq. 8
 
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:
         state = {"name": self.name, "config": asdict(self.cfg), "actor": self.actor.state_dict(),

@@ -75,6 +75,30 @@ def test_multipass_removes_parameter_leakage():
     assert not torch.allclose(q1[:, 0], q2[:, 0])
 
 
+@pytest.mark.parametrize("start", [3.0, -3.0])
+def test_ddpg_inverted_gradients_bring_the_actor_back_inside_the_bounds(start):
+    """Inverting gradients (the DDPG default): an actor whose output lies beyond a bound is pushed
+    back whatever the critic says, where a tanh output would sit saturated at the bound."""
+    agent, _, _ = _filled_agent("ddpg", "longitudinal", n=100)
+    agent.opt_actor = torch.optim.Adam(agent.actor.parameters(), lr=1e-3)
+    with torch.no_grad():
+        agent.actor.mlp[-1].bias.fill_(start)
+        agent.actor.mlp[-1].weight.mul_(0.01)
+    b = agent.replay.sample(np.random.default_rng(0), 64)
+    g, l = torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"])
+
+    def out() -> float:
+        with torch.no_grad():
+            return float(agent.actor(g, l).mean())
+
+    before = out()
+    for _ in range(200):
+        agent.update()
+    after = out()
+    assert abs(after) < abs(before) - 0.1, (before, after)
+    assert abs(after) < abs(start)
+
+
 def test_greedy_act_respects_the_mask():
     agent, obs, info = _filled_agent("prl", "parameterized", n=10)
     for mask in ([1, 1, 0], [0, 1, 0], [0, 1, 1]):
