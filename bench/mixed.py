@@ -95,6 +95,8 @@ def _row(cell: Cell, summary: dict, collisions: int, teleports: int, ratio: floa
     for kind in ("all", "cv", "hdv"):
         for k, v in summary[kind].items():
             row[f"{kind}_{k}"] = v
+    row["cv_stall_steps"] = summary.get("stall_steps", 0)
+    row["cv_longest_stall_s"] = summary.get("longest_stall_s", 0.0)
     return row
 
 

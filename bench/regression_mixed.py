@@ -60,7 +60,9 @@ def claims(cells: pd.DataFrame | None) -> list[tuple[str, str, str]]:
         out.append((f"space-mean speed loss at MPR 1 < {100 * SPEED_LOSS_TOL:.0f}% ({s})",
                     "PASS" if loss < SPEED_LOSS_TOL else "FAIL",
                     f"{v0:.2f} -> {v1:.2f} m/s ({100 * loss:+.1f}% loss); finishers only: "
-                    f"{c.loc[0.0, 'all_speed']:.2f} -> {c.loc[1.0, 'all_speed']:.2f} m/s"))
+                    f"{c.loc[0.0, 'all_speed']:.2f} -> {c.loc[1.0, 'all_speed']:.2f} m/s"
+                    + (f"; CV stalls at MPR 1: {int(c.loc[1.0, 'cv_stall_steps'])} CV-steps, longest "
+                       f"{c.loc[1.0, 'cv_longest_stall_s']:.0f} s" if "cv_stall_steps" in c.columns else "")))
         for col, unit, sign in (("hdv_energy_per_km", "Wh/km", 1), ("hdv_space_mean_speed", "m/s", -1)):
             h0, h5 = c.loc[0.0, col], c.loc[0.5, col]
             worse = sign * (h5 / h0 - 1)

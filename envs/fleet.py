@@ -22,6 +22,20 @@ from .vehicle import ControlledVehicle
 
 Policy = Callable[[np.ndarray, np.ndarray, np.ndarray], list]
 
+STALL_SPEED = 0.5  # [m/s] below this a CV stands
+STALL_FREE = 10.0  # [m] of free lane ahead, beyond which standing is not queueing
+
+
+def stalled(grids: np.ndarray, logics: np.ndarray, cfg: ScenarioConfig) -> np.ndarray:
+    """Per CV: standing with more than ``STALL_FREE`` m free ahead in its lane and no red light
+    (queueing and waiting at red are not stalls). From the observations alone."""
+    lanes = cfg.lanes
+    lane = logics[:, :lanes].argmax(1)
+    front = int(round(cfg.grid_behind / cfg.cell_length))
+    ahead = grids[np.arange(len(grids)), front:front + int(np.ceil(STALL_FREE / cfg.cell_length)) + 1, lane]
+    free = (ahead >= 0.5).all(1)
+    return (logics[:, lanes + 1] < STALL_SPEED) & free & (logics[:, lanes + 2] != 1.0)
+
 
 @dataclass
 class VehicleRecord:
@@ -42,6 +56,8 @@ class FleetStats:
     sim_time_s: float = 0.0  # wall time inside simulationStep
     control_time_s: float = 0.0  # wall time observing, deciding and applying
     steps: int = 0
+    stall_steps: int = 0  # CV-steps stalled (see ``stalled``)
+    longest_stall_s: float = 0.0  # [s] longest run of stalled steps of one CV
 
 
 class Fleet:
@@ -54,12 +70,14 @@ class Fleet:
         self.cvs: dict[str, ControlledVehicle] = {}
         self.active: dict[str, VehicleRecord] = {}  # arterial vehicles still in the network
         self.stats = FleetStats()
+        self._stall: dict[str, int] = {}  # CV -> current run of stalled steps
         self._arterial_prefixes = (f"{CV_FLOW}.", "art.")
 
     def start(self, seed: int) -> None:
         self.session.start(seed)
         self.cvs.clear()
         self.active.clear()
+        self._stall.clear()
         self.stats = FleetStats()
 
     def step(self, policy: Policy | None) -> int:
@@ -73,6 +91,7 @@ class Fleet:
             grids = np.stack([o["grid"] for o in obs])
             logics = np.stack([o["logic"] for o in obs])
             masks = np.stack([self.cvs[v].mask for v in ids])
+            self._count_stalls(ids, stalled(grids, logics, self.cfg))
             for vid, action in zip(ids, policy(grids, logics, masks)):
                 self.cvs[vid].apply(self.action_type.decode(action))
         t1 = time.perf_counter()
@@ -86,6 +105,7 @@ class Fleet:
             if rec is not None:
                 rec.arrive = now
             self.cvs.pop(vid, None)
+            self._stall.pop(vid, None)
         for vid in s.departed():
             if vid.startswith(self._arterial_prefixes):
                 cv = vid.startswith(f"{CV_FLOW}.")
@@ -104,6 +124,16 @@ class Fleet:
         st.control_time_s += (t1 - t0) + (time.perf_counter() - t2)
         st.steps += 1
         return n
+
+    def _count_stalls(self, ids: list[str], now_stalled: np.ndarray) -> None:
+        st, runs = self.stats, self._stall
+        for vid, stall in zip(ids, now_stalled):
+            if stall:
+                runs[vid] = runs.get(vid, 0) + 1
+                st.stall_steps += 1
+                st.longest_stall_s = max(st.longest_stall_s, runs[vid] * self.cfg.step_length)
+            else:
+                runs.pop(vid, None)
 
     def summary(self, route_length: float) -> dict[str, Any]:
         """Per kind (all, cv, hdv). As the paper: mean energy [Wh/veh], travel time [s] and speed
@@ -129,6 +159,7 @@ class Fleet:
                          "energy_per_km": 1000.0 * sum(r.energy for r in recs) / dist if dist > 0 else nan,
                          "space_mean_speed": dist / time_in if time_in > 0 else nan}
         out["collisions"], out["teleports"] = st.collisions, st.teleports
+        out["stall_steps"], out["longest_stall_s"] = st.stall_steps, st.longest_stall_s
         return out
 
     def close(self) -> None:

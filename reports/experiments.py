@@ -78,7 +78,8 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         effect = metrics.mpr_effect(cells)
         br = cells[cells.demand.isin(MPR_BREAKDOWN_DEMANDS) & (cells.signals == "uncoordinated")]
         cols = ["mpr", "demand"] + [c for c in (f"{k}_{m}" for k in ("cv", "hdv") for m in (
-            "energy", "travel_time", "speed", "energy_per_km", "space_mean_speed", "unfinished")) if c in cells.columns]
+            "energy", "travel_time", "speed", "energy_per_km", "space_mean_speed", "unfinished"))
+            if c in cells.columns] + [c for c in ("cv_stall_steps", "cv_longest_stall_s") if c in cells.columns]
         md += ["## Mixed traffic (fig:dd, fig:avg)", "", f"![mixed traffic](figures/{p[0].name})", "",
                "Fleet metrics by MPR (mean over demands), change against MPR = 0. `energy` and `speed` "
                "are the paper's means over the vehicles that finished in the run; `energy_per_km` and "

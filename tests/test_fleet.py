@@ -60,3 +60,19 @@ def test_summary_counts_the_vehicles_still_driving():
     assert out["hdv"]["vehicles"] > 0 and out["hdv"]["speed"] > 3.0
     assert out["all"]["space_mean_speed"] < out["all"]["speed"]
     assert np.isfinite(out["all"]["energy_per_km"]) and out["all"]["energy_per_km"] > 0
+    assert out["stall_steps"] > 0 and out["longest_stall_s"] > 100.0  # standing since insertion
+
+
+def test_stalls_are_standing_with_free_road_and_no_red():
+    from envs.fleet import stalled
+
+    cfg = ScenarioConfig()
+    rows, lanes = cfg.grid_shape
+    grids = np.ones((4, rows, lanes), dtype=np.float32)
+    logic = np.zeros((4, lanes + 4), dtype=np.float32)
+    logic[:, 1] = 1.0  # lane 1
+    logic[:, lanes + 1] = (0.0, 0.0, 0.0, 8.0)  # speed [m/s]
+    logic[:, lanes + 2] = (-1.0, 1.0, 0.0, 0.0)  # red flag: out of range, red, green, green
+    grids[2, 15, 1] = 0.0  # a vehicle 5 m ahead: queueing
+    grids[0, 15, 2] = 0.0  # one in the next lane does not matter
+    assert stalled(grids, logic, cfg).tolist() == [True, False, False, False]
