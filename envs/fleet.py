@@ -140,7 +140,8 @@ class Fleet:
         [m/s] of the vehicles that finished. Those means favour a congested run (its slow vehicles
         are still inside at the end), so also, over every vehicle inserted: energy per distance
         [Wh/km] and space-mean speed (distance / time in the network) [m/s], with the counts of
-        vehicles inserted, still driving at the end (``unfinished``) and never inserted (``pending``)."""
+        vehicles inserted, still driving at the end (``unfinished``) and never inserted (``pending``).
+        Call after ``close``, which records where the unfinished vehicles got to."""
         st = self.stats
         out: dict[str, Any] = {}
         for kind in ("all", "cv", "hdv"):
