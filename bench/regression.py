@@ -45,31 +45,32 @@ def claims(df: pd.DataFrame) -> list[tuple[str, str, str]]:
     """(claim, status PASS/FAIL/NOT CHECKED, detail)."""
     out = []
     m = lambda meth, s, c: _mean(df, meth, s, c)  # noqa: E731
-    def add(name: str, needs: list[str], test, detail) -> None:
-        missing = [x for x in needs if x not in set(df.method)]
+    sig = ("coordinated", "uncoordinated")
+
+    def add(name: str, needs: list[str], test, detail, settings: tuple[str, ...] = sig) -> None:
+        missing = sorted({f"{x}/{st}" for st in settings for x in needs if x not in set(df.method[df.signals == st])})
         if missing:
             out.append((name, "NOT CHECKED", f"no shipped policy: {', '.join(missing)}"))
         else:
             out.append((name, "PASS" if test() else "FAIL", detail()))
-    sig = ("coordinated", "uncoordinated")
     save = {s: (lambda s=s: improvement(m("prl", s, "energy"), m("baseline", s, "energy"))) for s in sig}
     for s in sig:
         add(f"PRL saves energy vs baseline ({s})", ["prl", "baseline"], lambda s=s: save[s]() > 0,
-            lambda s=s: f"saving {100 * save[s]():.2f}%")
+            lambda s=s: f"saving {100 * save[s]():.2f}%", (s,))
     add("saving larger uncoordinated than coordinated", ["prl", "baseline"],
         lambda: save["uncoordinated"]() > save["coordinated"](),
         lambda: f"{100 * save['uncoordinated']():.2f}% vs {100 * save['coordinated']():.2f}%")
     for s in sig:
         pen = lambda s=s: -improvement(m("prl", s, "travel_time"), m("baseline", s, "travel_time"))  # noqa: E731
         add(f"PRL travel-time penalty < 15% ({s})", ["prl", "baseline"], lambda pen=pen: pen() < 0.15,
-            lambda pen=pen: f"penalty {100 * pen():.2f}%")
+            lambda pen=pen: f"penalty {100 * pen():.2f}%", (s,))
         add(f"PRL uses less energy than DDPG+LC2013 ({s})", ["prl", "ddpg"],
             lambda s=s: m("prl", s, "energy") < m("ddpg", s, "energy"),
-            lambda s=s: f"{m('prl', s, 'energy'):.1f} vs {m('ddpg', s, 'energy'):.1f} Wh")
+            lambda s=s: f"{m('prl', s, 'energy'):.1f} vs {m('ddpg', s, 'energy'):.1f} Wh", (s,))
         others = ["baseline", "prl", "ddpg"]
         add(f"DQN has the worst travel time ({s})", ["dqn", *others],
             lambda s=s: m("dqn", s, "travel_time") > max(m(o, s, "travel_time") for o in others),
-            lambda s=s: f"dqn {m('dqn', s, 'travel_time'):.1f} s")
+            lambda s=s: f"dqn {m('dqn', s, 'travel_time'):.1f} s", (s,))
     out.append(("no collisions", "PASS" if int(df.collisions.sum()) == 0 else "FAIL",
                 f"{int(df.collisions.sum())} in {len(df)} episodes"))
     return out

@@ -94,19 +94,25 @@ def parse(argv: list[str]) -> dict[str, Any]:
     return opts
 
 
-def resolve_methods(opts: dict[str, Any]) -> tuple[list[str], list[str]]:
-    """(methods to run, learning methods skipped for want of a shipped policy)."""
-    if opts["methods"] is not None:
-        for m in opts["methods"]:
+def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str]], list[str]]:
+    """((method, signals) pairs to run, "method/signals" skipped for want of a shipped policy).
+
+    Without ``--methods``, a learning method runs in each setting it has a policy for; named in
+    ``--methods``, a missing policy is an error."""
+    explicit = opts["methods"] is not None
+    pairs, skipped = [], []
+    for m in (opts["methods"] if explicit else METHODS):
+        if explicit:
             _choice("--methods", m, METHODS)
-            for s in opts["signals"]:
-                if m in LEARNING and not (policy_dir(m, s, opts["models"]) / "manifest.json").is_file():
+        for s in opts["signals"]:
+            if m in LEARNING and not (policy_dir(m, s, opts["models"]) / "manifest.json").is_file():
+                if explicit:
                     raise UsageError(f"no trained policy for {m} / {s} (expected {policy_dir(m, s, opts['models'])}); "
                                      f"train it: python -m bench.train --method {m} --signals {s}")
-        return list(opts["methods"]), []
-    have = [m for m in METHODS if m not in LEARNING or all(
-        (policy_dir(m, s, opts["models"]) / "manifest.json").is_file() for s in opts["signals"])]
-    return have, [m for m in METHODS if m not in have]
+                skipped.append(f"{m}/{s}")
+            else:
+                pairs.append((m, s))
+    return pairs, skipped
 
 
 def check_writable(run_dir: Path) -> None:
@@ -120,15 +126,16 @@ def check_writable(run_dir: Path) -> None:
 
 
 def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
-    methods, skipped = resolve_methods(opts)
+    pairs, skipped = resolve_methods(opts)
+    methods = list(dict.fromkeys(m for m, _ in pairs))
     if skipped:
-        print(f"note: no shipped policy for {', '.join(skipped)}; running {', '.join(methods)}", file=sys.stderr)
+        print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
     run_dir = opts["logs"] / opts["run_id"]
     check_writable(run_dir)
     cases = load()[: PROFILES[opts["profile"]]]
     rows, tasks = [], []
     for signals in opts["signals"]:
-        for method in methods:
+        for method in [m for m, s in pairs if s == signals]:
             pdir = str(policy_dir(method, signals, opts["models"])) if method in LEARNING else ""
             sha = sha256(Path(pdir) / "policy.pt") if pdir else ""  # a log of another policy is rerun
             for case in cases:
@@ -153,7 +160,7 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     df[list(KEEP)].to_parquet(tmp, index=False)
     os.replace(tmp, run_dir / "results.parquet")
     shas = {f"{m}-{s}": sha256(policy_dir(m, s, opts["models"]) / "policy.pt")
-            for m in methods if m in LEARNING for s in opts["signals"]}
+            for m, s in pairs if m in LEARNING}
     manifest = {
         "command": " ".join(["python", "-m", "bench.run", *opts.get("argv", [])]), "profile": opts["profile"],
         "executor": opts["executor"], "workers": opts["workers"], "methods": methods, "skipped_methods": skipped,

@@ -9,3 +9,29 @@ def test_recorded_failures_are_known_and_strict():
     out = {name: status for name, status, _ in against_record(rows, record)}
     assert out == {"a": "KNOWN FAIL", "b": "FAIL", "c": "FAIL", "d": "NOT CHECKED"}
     assert [s for _, s, _ in against_record([("new", "FAIL", "")], {})] == ["FAIL"]  # unrecorded: a real failure
+
+
+def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_path):
+    import pandas as pd
+
+    from bench.regression import claims
+    from bench.run import parse, resolve_methods
+
+    models = tmp_path / "models"
+    for m, s in (("prl", "coordinated"), ("prl", "uncoordinated"), ("ddpg", "coordinated")):
+        (models / f"{m}-{s}").mkdir(parents=True)
+        (models / f"{m}-{s}" / "manifest.json").write_text("{}")
+    opts = parse(["--logs", str(tmp_path / "logs")])
+    opts["models"] = models
+    pairs, skipped = resolve_methods(opts)
+    assert ("ddpg", "coordinated") in pairs and ("ddpg", "uncoordinated") not in pairs
+    assert "ddpg/uncoordinated" in skipped and "dqn/coordinated" in skipped and ("baseline", "uncoordinated") in pairs
+
+    rows = [{"method": m, "signals": s, "energy": e, "travel_time": 180.0, "collisions": 0}
+            for m, s, e in (("baseline", "coordinated", 230.0), ("baseline", "uncoordinated", 250.0),
+                            ("prl", "coordinated", 190.0), ("prl", "uncoordinated", 240.0),
+                            ("ddpg", "coordinated", 200.0))]
+    status = {name: st for name, st, _ in claims(pd.DataFrame(rows))}
+    assert status["PRL uses less energy than DDPG+LC2013 (coordinated)"] == "PASS"
+    assert status["PRL uses less energy than DDPG+LC2013 (uncoordinated)"] == "NOT CHECKED"
+    assert status["PRL saves energy vs baseline (uncoordinated)"] == "PASS"
