@@ -153,7 +153,9 @@ def main(argv: list[str] | None = None) -> int:
     df = pd.DataFrame(rows).sort_values(["signals", "mpr", "demand", "rep"], ignore_index=True)
     root.mkdir(parents=True, exist_ok=True)
     df.to_parquet(root / "mixed.parquet", index=False)
-    print(df.groupby(["signals", "mpr"])[["all_energy", "all_speed"]].mean().round(2).to_string())
+    cols = [c for c in ("all_energy", "all_speed", "all_energy_per_km", "all_space_mean_speed", "all_unfinished",
+                        "cv_longest_stall_s") if c in df.columns]
+    print(df.groupby(["signals", "mpr"])[cols].mean().round(2).to_string())
     print(f"{len(todo)} cells run in {time.perf_counter() - t0:.0f} s; results: {root / 'mixed.parquet'}")
     return 0
 
