@@ -111,16 +111,15 @@ class DDPGAgent:
         frozen = {n: p.detach() for n, p in self.critic.mlp.named_parameters()}
         out = self.actor.from_features(fa)
         if c.bound == "tanh":
-            a = torch.tanh(out)
-            loss_a = -functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), a], 1),)).mean()
+            q = functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), torch.tanh(out)], 1),))
+            loss_a = -q.mean()
         else:
             a = out.detach().requires_grad_(True)
             q = functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), a], 1),))
             dq = torch.autograd.grad(q.sum(), a)[0]
-            a_now = a.detach()
-            dq = torch.where(dq > 0, dq * (1.0 - a_now) / 2.0, dq * (a_now + 1.0) / 2.0)
+            x = out.detach()
+            dq = torch.where(dq > 0, dq * (1.0 - x) / 2.0, dq * (x + 1.0) / 2.0)
             loss_a = -(out * dq).sum() / out.shape[0]  # its gradient is the inverted -dQ/da, batch mean
-        actor_q = q.detach().mean() if c.bound == "invert" else -loss_a.detach()
         self.opt_critic.zero_grad(set_to_none=True)
         self.opt_actor.zero_grad(set_to_none=True)
         (loss_c + loss_a).backward()  # each loss reaches only its own network
@@ -131,7 +130,7 @@ class DDPGAgent:
         soft_update(self.critic_target, self.critic, c.tau_critic)
         soft_update(self.actor_target, self.actor, c.tau_actor)
         self.updates += 1
-        return {"loss_q": loss_c.item(), "loss_param": -actor_q.item()}  # -Q(s, actor(s)), as eq. 8
+        return {"loss_q": loss_c.item(), "loss_param": -q.detach().mean().item()}  # -Q(s, actor(s)), as eq. 8
 
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:
         state = {"name": self.name, "config": asdict(self.cfg), "actor": self.actor.state_dict(),

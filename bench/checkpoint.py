@@ -69,10 +69,11 @@ def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = Non
     except Exception as e:  # a matching sha256 but unreadable content
         raise CheckpointError(f"{path}: cannot be loaded ({type(e).__name__}: {e})") from None
     if scenario is not None:
-        from envs.config import ConfigError, ScenarioConfig
+        from envs.config import ConfigError, ScenarioConfig, backfill
 
-        try:  # fields added to the config later take their defaults
-            trained = ScenarioConfig.from_dict(manifest.get("scenario", {})).to_dict()
+        trained = backfill(manifest.get("scenario", {}))  # fields added later: the value their absence meant
+        try:
+            ScenarioConfig.from_dict(trained)
         except ConfigError as e:
             raise CheckpointError(f"{man_path}: scenario config not accepted ({e})") from None
         diff = sorted(k for k in set(trained) | set(scenario)

@@ -22,19 +22,19 @@ from .checkpoint import MODELS, policy_dir
 from .train import RUNS
 
 
-def _finished(method: str, signals: str, seed: int, episodes: int) -> bool:
-    man = policy_dir(method, signals, MODELS) / "manifest.json"
+def _finished(method: str, signals: str, seed: int, episodes: int, models: Path = MODELS) -> bool:
+    man = policy_dir(method, signals, models) / "manifest.json"
     if not man.is_file():
         return False
     m = json.loads(man.read_text())
     return m.get("seed") == seed and m.get("episodes") == episodes
 
 
-def plan(methods: list[str], seed: int, episodes: int, runs: Path | None = None) -> list[tuple[str, str]]:
-    """(method, signals) still to train; runs with a checkpoint (started in an earlier session)
-    come before new ones, otherwise in the given method order."""
-    runs = runs or RUNS
-    todo = [(m, s) for m in methods for s in SIGNALS if not _finished(m, s, seed, episodes)]
+def plan(methods: list[str], seed: int, episodes: int, runs: Path = RUNS, models: Path = MODELS) -> list[tuple[str, str]]:
+    """(method, signals) still to train (no policy from this seed and episode count in ``models``);
+    runs with a checkpoint (started in an earlier session) come before new ones, otherwise in the
+    given method order."""
+    todo = [(m, s) for m in methods for s in SIGNALS if not _finished(m, s, seed, episodes, models)]
     return sorted(todo, key=lambda ms: not (runs / f"{ms[0]}-{ms[1]}-s{seed}" / "checkpoint.pt").is_file())
 
 

@@ -222,11 +222,15 @@ def test_policy_snapshot_is_a_copy():
 def test_train_all_resumes_started_runs_first(tmp_path):
     from bench.train_all import plan
 
-    (tmp_path / "ddpg-uncoordinated-s0").mkdir()
-    (tmp_path / "ddpg-uncoordinated-s0" / "checkpoint.pt").write_bytes(b"x")
-    todo = plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=tmp_path)
+    runs, models = tmp_path / "runs", tmp_path / "models"
+    (runs / "ddpg-uncoordinated-s0").mkdir(parents=True)
+    (runs / "ddpg-uncoordinated-s0" / "checkpoint.pt").write_bytes(b"x")
+    todo = plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
     assert todo[0] == ("ddpg", "uncoordinated") and todo[1:] == [("mpdqn", "coordinated"), ("mpdqn", "uncoordinated"),
                                                                    ("ddpg", "coordinated")]
+    (models / "mpdqn-coordinated").mkdir(parents=True)  # shipped from this seed and episode count: done
+    (models / "mpdqn-coordinated" / "manifest.json").write_text('{"seed": 0, "episodes": 1000}')
+    assert ("mpdqn", "coordinated") not in plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
 
 
 def test_validation_cases_are_not_test_cases():
