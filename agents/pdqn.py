@@ -125,16 +125,20 @@ class PDQNAgent:
         self._last = (k, xn)
         return k, self._to_accel(xn)
 
-    def act_batch(self, grids: np.ndarray, logics: np.ndarray, masks: np.ndarray) -> list:
-        """Greedy actions for many vehicles in one forward pass (mixed traffic)."""
+    def heads(self, grids: np.ndarray, logics: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Q_k, acceleration x_k [m/s^2]) of every head k, each (B, 3), for raw observations."""
         with torch.no_grad():
             g = torch.as_tensor(grids, dtype=torch.float32)
             l = torch.as_tensor(logics * self.scaler.scale)
             fq, fp = features(g, l, [self.q, self.param])
             x = self._params(self.param, fp)
             q = self.q_values(self.q, fq, x).numpy()
+        return q, self._to_accel(x.numpy())
+
+    def act_batch(self, grids: np.ndarray, logics: np.ndarray, masks: np.ndarray) -> list:
+        """Greedy actions for many vehicles in one forward pass (mixed traffic)."""
+        q, accel = self.heads(grids, logics)
         k = np.argmax(np.where(np.asarray(masks, dtype=bool), q, -np.inf), axis=1)
-        accel = self._to_accel(x.numpy())
         return [(int(ki), a) for ki, a in zip(k, accel)]
 
     # ------------------------------------------------------------------ learning

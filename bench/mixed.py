@@ -51,19 +51,26 @@ class Cell:
         return MASTER_SEED + self.rep
 
 
+def cell_scenario(signals: str, mpr: float, demand: float):
+    """The scenario of a mixed-traffic cell: ``demand`` [veh/h/lane] on every arterial lane."""
+    from envs.config import ScenarioConfig
+
+    lanes = ScenarioConfig().lanes
+    return ScenarioConfig(signals=signals, arterial_flow=demand * lanes, mpr=mpr)
+
+
 def run_cell(cell: Cell) -> dict[str, Any]:
     import numpy as np
     import torch
 
     from agents.registry import make_agent
-    from envs.config import ScenarioConfig
     from envs.fleet import Fleet
 
     from . import schema
     from .checkpoint import load_policy
 
     torch.set_num_threads(1)
-    cfg = ScenarioConfig(signals=cell.signals, arterial_flow=cell.demand * 5, mpr=cell.mpr)
+    cfg = cell_scenario(cell.signals, cell.mpr, cell.demand)
     fleet = Fleet(cfg)
     policy = None
     if cell.mpr > 0:

@@ -125,6 +125,10 @@ class Fleet:
         st.steps += 1
         return n
 
+    def stall_run(self, vid: str) -> int:
+        """Steps CV ``vid`` has been stalled in a row, this step included (0 when it is not)."""
+        return self._stall.get(vid, 0)
+
     def _count_stalls(self, ids: list[str], now_stalled: np.ndarray) -> None:
         st, runs = self.stats, self._stall
         for vid, stall in zip(ids, now_stalled):

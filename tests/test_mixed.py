@@ -51,3 +51,41 @@ def test_mixed_claims_pass_fail_and_not_checked():
     failed = [n for n, st, _ in claims(cells(155.0, 7.0)) if st == "FAIL"]
     assert len(failed) == 4 and all("energy per km falls" in n or "space_mean_speed" in n for n in failed)
     assert claims(None)[0][1] == "NOT CHECKED"
+
+
+def test_lane_gaps_reads_the_grid():
+    import numpy as np
+
+    from bench.stalls import lane_gaps
+
+    grid = np.ones((60, 3), np.float32)  # 10 rows behind the front bumper, 50 ahead
+    grid[10 + 12, 0] = 0.0  # 12 m free ahead in lane 0
+    grid[10 - 3, 1] = 0.0  # something 3 m behind in lane 1
+    ahead, behind = lane_gaps(grid, front=10, cell=1.0)
+    assert ahead[0] == 12.0 and np.isnan(ahead[1]) and np.isnan(ahead[2])
+    assert behind[1] == 3.0 and np.isnan(behind[0])
+
+
+def test_stall_trace_records_what_the_policy_did(tmp_path):
+    """The shipped coordinated PRL policy in the regression's MPR-1 cell, 200 s: every record is a
+    standing CV with free road and no red, and the action applied is the greedy allowed head's."""
+    import pytest
+
+    from bench.stalls import HEADS, main, trace
+    from envs.action import LATERAL
+
+    rows, summary = trace("coordinated", 1.0, 300, 200, (1,))
+    assert rows and summary["stall_steps"] >= len(rows)
+    for r in rows:
+        assert r["speed"] < 0.5 and r["red"] != 1.0 and not r[f"ahead_{r['lane']}"] <= 10.0
+        j = LATERAL.index(r["k"])
+        assert r["mask"][j] == "1" and r["accel"] == r[f"a_{HEADS[j]}"]
+        allowed = [i for i in range(3) if r["mask"][i] == "1"]
+        assert max(allowed, key=lambda i: r[f"q_{HEADS[i]}"]) == j
+    out = tmp_path / "s.parquet"
+    out.write_bytes(b"keep")
+    with pytest.raises(SystemExit):
+        main(["--out", str(out), "--duration", "10"])
+    assert out.read_bytes() == b"keep"  # not overwritten
+    with pytest.raises(SystemExit):
+        main(["--mpr", "0"])
