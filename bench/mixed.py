@@ -2,12 +2,14 @@
 
     python -m bench.mixed [--signals ...] [--mpr 0 0.2 ...] [--demand 200 ...] [--reps 5]
                           [--duration 1800] [--executor local|ray] [--workers N] [--run-id ID]
+                          [--cv-lateral policy|stay]
 
 One 1800 s simulation per cell (signals, MPR, demand [veh/h/lane], repetition), with the shipped
 PRL policy of that signal setting acting for all CVs in one batched call per step. Each cell writes
 ``<logs>/<run-id>/mixed/<signals>/mpr<M>-d<D>-r<R>.mcap`` (``/fleet/vehicle`` records and a
 ``/fleet/cell`` summary) and is skipped when that file is complete; ``mixed.parquet`` collects
-the cells.
+the cells. ``--cv-lateral stay`` (an ablation) masks every CV's lane changes, so PRL's 'stay' head
+drives; its cells and table get a ``-stay`` suffix.
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
@@ -33,6 +36,7 @@ MPRS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)  # section 5.5
 DEMANDS = (200, 300, 400, 500, 600, 700)  # [veh/h/lane], section 5.5
 REPS = 5
 DURATION = 1800.0  # [s]
+CV_LATERAL = ("policy", "stay")
 MASTER_SEED = 5150  # cell seeds: MASTER_SEED + rep (the same traffic draw across MPR and demand levels)
 
 
@@ -45,6 +49,7 @@ class Cell:
     duration: float
     path: str
     policy_dir: str
+    cv_lateral: str = "policy"  # "policy": PRL's lane decision; "stay": lane changes masked (ablation)
 
     @property
     def seed(self) -> int:
@@ -60,7 +65,6 @@ def cell_scenario(signals: str, mpr: float, demand: float):
 
 
 def run_cell(cell: Cell) -> dict[str, Any]:
-    import numpy as np
     import torch
 
     from agents.registry import make_agent
@@ -77,7 +81,7 @@ def run_cell(cell: Cell) -> dict[str, Any]:
         agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space)
         state, _ = load_policy(Path(cell.policy_dir), "prl")
         agent.load_state_dict(state)
-        policy = agent.act_batch
+        policy = agent.act_batch if cell.cv_lateral == "policy" else _stay(agent.act_batch)
     fleet.start(cell.seed)
     for _ in range(int(cell.duration / cfg.step_length)):
         fleet.step(policy)
@@ -94,6 +98,15 @@ def run_cell(cell: Cell) -> dict[str, Any]:
         teleports=st.teleports, control_over_sim=ratio), len(msgs)))
     write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell"})
     return _row(cell, summary, st.collisions, st.teleports, ratio)
+
+
+def _stay(act_batch):
+    """The policy with both lane changes masked for every CV: its 'stay' head drives."""
+    def policy(grids, logics, masks):
+        masks = np.array(masks, dtype=bool)
+        masks[:, 0] = masks[:, 2] = False
+        return act_batch(grids, logics, masks)
+    return policy
 
 
 def _row(cell: Cell, summary: dict, collisions: int, teleports: int, ratio: float) -> dict[str, Any]:
@@ -128,6 +141,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--executor", default="local", choices=list(EXECUTORS))
     ap.add_argument("--address", default=None)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--cv-lateral", default="policy", choices=CV_LATERAL,
+                    help="policy: PRL decides lane changes (the paper); stay: lane changes masked for every CV "
+                         "(ablation, beyond the paper; cells get a '-stay' suffix)")
     ap.add_argument("--run-id", default="paper", help="run folder under --logs (cells go to <run-id>/mixed/)")
     ap.add_argument("--logs", type=Path, default=Path("logs"))
     args = ap.parse_args(argv)
@@ -141,8 +157,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"train it: python -m bench.train --method prl --signals {s}", file=sys.stderr)
             return 2
     root = args.logs / args.run_id / "mixed"
-    cells = [Cell(s, m, d, r, args.duration, str(root / s / f"mpr{m:.1f}-d{d:g}-r{r}.mcap"),
-                  str(policy_dir("prl", s, MODELS)))
+    suffix = "" if args.cv_lateral == "policy" else f"-{args.cv_lateral}"
+    cells = [Cell(s, m, d, r, args.duration, str(root / s / f"mpr{m:.1f}-d{d:g}-r{r}{suffix}.mcap"),
+                  str(policy_dir("prl", s, MODELS)), args.cv_lateral)
              for s in args.signals for m in args.mpr for d in args.demand for r in range(args.reps)]
     rows, todo = [], []
     for c in cells:
@@ -159,11 +176,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     df = pd.DataFrame(rows).sort_values(["signals", "mpr", "demand", "rep"], ignore_index=True)
     root.mkdir(parents=True, exist_ok=True)
-    df.to_parquet(root / "mixed.parquet", index=False)
+    table = root / f"mixed{suffix}.parquet"  # the report reads mixed.parquet: an ablation never lands there
+    df.to_parquet(table, index=False)
     cols = [c for c in ("all_energy", "all_speed", "all_energy_per_km", "all_space_mean_speed", "all_unfinished",
                         "cv_longest_stall_s") if c in df.columns]
     print(df.groupby(["signals", "mpr"])[cols].mean().round(2).to_string())
-    print(f"{len(todo)} cells run in {time.perf_counter() - t0:.0f} s; results: {root / 'mixed.parquet'}")
+    print(f"{len(todo)} cells run in {time.perf_counter() - t0:.0f} s; results: {table}")
     return 0
 
 

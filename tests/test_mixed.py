@@ -89,3 +89,15 @@ def test_stall_trace_records_what_the_policy_did(tmp_path):
     assert out.read_bytes() == b"keep"  # not overwritten
     with pytest.raises(SystemExit):
         main(["--mpr", "0"])
+
+
+def test_stay_ablation_masks_both_lane_changes():
+    import numpy as np
+
+    from bench.mixed import _stay
+
+    seen = []
+    policy = _stay(lambda g, l, m: seen.append(m) or [(1, np.zeros(3))] * len(m))
+    masks = np.ones((4, 3), np.int8)
+    policy(None, None, masks)
+    assert seen[0].tolist() == [[False, True, False]] * 4 and masks.all()  # the caller's masks untouched
