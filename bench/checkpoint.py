@@ -76,8 +76,9 @@ def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = Non
             ScenarioConfig.from_dict(trained)
         except ConfigError as e:
             raise CheckpointError(f"{man_path}: scenario config not accepted ({e})") from None
+        # the reward is what the policy was trained for, not what it sees or drives in: not compared
         diff = sorted(k for k in set(trained) | set(scenario)
-                      if k not in ("signals", "glosa") and trained.get(k) != scenario.get(k))
+                      if k not in ("signals", "glosa", "reward") and trained.get(k) != scenario.get(k))
         if diff:
             raise CheckpointError(f"{path}: trained on a different scenario config (differs in: {', '.join(diff)})")
     return state, manifest

@@ -149,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {REFERENCE} ({len(df)} episodes)")
     from . import regression_mixed
 
-    mixed = regression_mixed.claims(None if args.no_mixed else regression_mixed.run_cells())
+    mixed = (regression_mixed.claims(None, "--no-mixed given") if args.no_mixed
+             else regression_mixed.claims(regression_mixed.run_cells()))
     paper = claims(df)
     if args.write_reference:
         pd.DataFrame(paper + mixed, columns=["claim", "status", "detail"]).to_csv(CLAIMS_RECORD, index=False)

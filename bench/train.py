@@ -28,11 +28,11 @@ import torch
 from tqdm import tqdm
 
 from agents.registry import LEARNING, make_agent
-from envs.config import SIGNALS, backfill
+from envs.config import SIGNALS, backfill, predates
 
 from .cases import Case
 from .checkpoint import MODELS, atomic_torch_save, policy_dir, save_policy
-from .episode import make_env, run_episode
+from .episode import deep_merge, make_env, run_episode
 from .mcaplog import write_train_log
 from .provenance import git_sha, package_versions
 
@@ -65,6 +65,14 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     best: dict[str, Any] = {}
     if ckpt.exists():
         state = torch.load(ckpt, map_location="cpu", weights_only=False)
+        kept = predates(state["identity"].get("scenario", {}))
+        if deep_merge(env.cfg.to_dict(), kept) != env.cfg.to_dict():  # the run keeps what it started with
+            env.close()
+            env = make_env(method, signals, deep_merge(kept, scenario or {}))  # explicit settings still win
+            identity["scenario"] = env.cfg.to_dict()
+            if progress:
+                print(f"note: this run predates {', '.join(_dotted(kept))}; it keeps the behaviour it started with",
+                      file=sys.stderr)
         saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
         if saved != identity:
             diff = [k for k in identity if saved.get(k) != identity[k]]
@@ -138,6 +146,11 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
 def snapshot(agent) -> dict[str, Any]:
     """A deep copy of the greedy policy: ``state_dict`` returns live tensors that training changes."""
     return copy.deepcopy(agent.state_dict(with_training=False))
+
+
+def _dotted(nested: dict[str, Any], prefix: str = "") -> list[str]:
+    return [k for key, v in nested.items()
+            for k in (_dotted(v, f"{prefix}{key}.") if isinstance(v, dict) else [f"{prefix}{key}={v}"])]
 
 
 def validation_cases(cfg, n: int) -> list[Case]:

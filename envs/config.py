@@ -15,9 +15,11 @@ from typing import Any, Mapping
 SIGNALS = ("coordinated", "uncoordinated")
 REWARDS = ("r1", "r2", "r")
 COST_TIMINGS = ("step", "end")
-# Scenario fields added after saved runs existed, with the value their absence meant (each default
-# reproduces the behaviour from before the field). Only these are filled into an older saved config.
-ADDED_FIELDS: dict[str, Any] = {"ego_sigma": 0.5}
+LANE_CHANGE_CHARGES = ("request", "lane")
+# Scenario fields added after saved runs existed ("a.b" = field b of sub-config a), with the value
+# their absence meant: the behaviour from before the field. Only these are filled into an older
+# saved config; a run resumed from such a config keeps that value (bench.train).
+ADDED_FIELDS: dict[str, Any] = {"ego_sigma": 0.5, "reward.lane_change_charge": "lane"}
 
 
 class ConfigError(ValueError):
@@ -62,6 +64,10 @@ class RewardConfig:
     # when form r pays -(E_f + phi T_f): "end" = once at t_f (the paper's eq. 11); "step" = as
     # -(e_t + phi dt) every step, the same undiscounted sum (deviation, see docs/training.md)
     cost_timing: str = field(default="step", metadata={"choices": COST_TIMINGS})
+    # when r_p^c is charged: "request" = in the step whose accepted request starts the change (the
+    # agent's own decision; a change SUMO makes on its own is charged when the lane index changes);
+    # "lane" = when the lane index changes, mid-manoeuvre, one step after the request (before session 4)
+    lane_change_charge: str = field(default="request", metadata={"choices": LANE_CHANGE_CHARGES})
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -145,9 +151,26 @@ class ScenarioConfig:
         return ScenarioConfig.from_dict(d)
 
 
+def predates(scenario: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``ADDED_FIELDS`` a saved scenario dict lacks, as a nested override dict."""
+    out: dict[str, Any] = {}
+    for key, value in ADDED_FIELDS.items():
+        *subs, name = key.split(".")
+        have, into = scenario, out
+        for s in subs:
+            have = have.get(s, {}) if isinstance(have, Mapping) else {}
+            into = into.setdefault(s, {})
+        if not (isinstance(have, Mapping) and name in have):
+            into[name] = value
+    return out
+
+
 def backfill(scenario: Mapping[str, Any]) -> dict[str, Any]:
     """A saved scenario dict with the fields of ``ADDED_FIELDS`` it predates filled in."""
-    return {**ADDED_FIELDS, **scenario}
+    out = dict(scenario)
+    for key, value in predates(scenario).items():
+        out[key] = {**out.get(key, {}), **value} if isinstance(value, dict) else value
+    return out
 
 
 def _from_dict(cls: type, data: Mapping[str, Any], prefix: str) -> Any:

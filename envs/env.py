@@ -147,7 +147,7 @@ class EcoDriveEnv(gym.Env):
         travel_time = s.time() - self.t_depart
         truncated = not terminated and travel_time >= self.cfg.max_episode_time
         r, comps = rewards.reward(
-            self.cfg.reward, speed=m.speed, jerk=m.jerk, lane_changed=m.lane_changed, distance=m.distance,
+            self.cfg.reward, speed=m.speed, jerk=m.jerk, lane_changed=m.lane_change_charged, distance=m.distance,
             energy=m.energy, terminated=terminated, total_energy=ego.energy, travel_time=travel_time,
             step_time=self.cfg.step_length,  # each step advances SUMO by one step
         )

@@ -30,6 +30,10 @@ class StepMeasure:
     energy: float  # [Wh]
     jerk: float  # [m/s^3]
     speed: float  # [m/s] after the step
+    lane_change_charged: bool = False  # r_p^c falls on this step (RewardConfig.lane_change_charge)
+
+
+LATERAL_START = 0.1  # [m] sideways move in the requested direction that shows a change has started
 
 
 @dataclass
@@ -47,6 +51,7 @@ class ControlledVehicle:
     clips: int = 0
     _prev_accel: float = 0.0
     _pending: tuple = ()
+    _manoeuvre: int = 0  # SUMO direction of a change charged at its start whose lane index has not flipped yet
 
     def observe(self) -> dict[str, np.ndarray]:
         s = self.session
@@ -67,12 +72,12 @@ class ControlledVehicle:
                 s.change_lane(self.vid, safety.paper_to_sumo(lateral))
         if cmd.accel is not None:
             s.set_speed(self.vid, safety.target_speed(speed, cmd.accel, cfg.step_length, cfg.speed_limit))
-        self._pending = (cmd, lateral, speed, self.kin[5], self.kin[0])
+        self._pending = (cmd, lateral, speed, self.kin[5], self.kin[0], self.kin[1])
 
     def measure(self) -> StepMeasure:
         """Read back the step just simulated (call after ``session.step``)."""
         s, cfg = self.session, self.cfg
-        cmd, lateral, v0, lane0, x0 = self._pending
+        cmd, sent, v0, lane0, x0, y0 = self._pending
         kin = s.kinematics(self.vid)
         dt = cfg.step_length
         applied = safety.applied_acceleration(v0, kin[3], dt)
@@ -80,6 +85,10 @@ class ControlledVehicle:
         lane_changed = kin[5] != lane0 and kin[6][:1] != ":" and kin[6] != ""
         # what happened, not what was asked: SUMO re-checks safety when it executes a change
         lateral = -int(np.sign(kin[5] - lane0)) if lane_changed else 0  # SUMO index grows to the left
+        if cfg.reward.lane_change_charge == "request":
+            charged = self._charge(safety.paper_to_sumo(sent) if sent else 0, -lateral, kin[1] - y0)
+        else:
+            charged = lane_changed
         energy = s.energy_rate(self.vid) * dt
         self.energy += energy
         self.lane_changes += lane_changed
@@ -92,5 +101,17 @@ class ControlledVehicle:
             requested_lateral=0 if cmd.lateral is None else cmd.lateral,
             applied_accel=applied, applied_lateral=lateral, clipped=bool(clipped),
             lane_changed=lane_changed, distance=max(0.0, kin[0] - x0),
-            energy=energy, jerk=jerk, speed=kin[3],
+            energy=energy, jerk=jerk, speed=kin[3], lane_change_charged=charged,
         )
+
+    def _charge(self, sent: int, direction: int, dy: float) -> bool:
+        """Whether r_p^c falls on this step under "request" charging. ``sent``: SUMO direction of the
+        change requested (0 none); ``direction``: of the lane index change this step (0 none);
+        ``dy``: sideways move [m] (SUMO y grows to the left, as the direction)."""
+        started = sent != 0 and (direction == sent or dy * sent > LATERAL_START)
+        finishing = direction != 0 and direction == self._manoeuvre
+        if started and direction != sent:
+            self._manoeuvre = sent  # charged now; its lane flip comes in a later step
+        elif direction or dy * self._manoeuvre <= LATERAL_START:
+            self._manoeuvre = 0  # flipped, or no longer moving sideways (SUMO gave it up)
+        return started or (direction != 0 and not finishing)

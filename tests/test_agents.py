@@ -15,6 +15,7 @@ from bench.checkpoint import CheckpointError, load_policy, policy_dir
 from bench.mcaplog import read_log
 from bench.episode import make_env
 from bench.train import snapshot, train, validate
+from envs.config import ScenarioConfig
 
 FAST_AGENT = {"learning_starts": 64, "batch_size": 16}
 FAST_SCENARIO = {"max_episode_time": 60.0}
@@ -157,8 +158,11 @@ def test_corrupt_or_mismatched_policy_is_a_clear_error(tmp_path):
     folder = policy_dir("dqn", "coordinated", tmp_path / "models")
     with pytest.raises(CheckpointError, match="not 'prl'"):
         load_policy(folder, "prl")
+    trained = json.loads((folder / "manifest.json").read_text())["scenario"]
     with pytest.raises(CheckpointError, match="different scenario"):
-        load_policy(folder, "dqn", {**json.loads((folder / "manifest.json").read_text())["scenario"], "spacing": 500.0})
+        load_policy(folder, "dqn", {**trained, "spacing": 500.0})
+    # a policy trained for another reward still drives the same scenario
+    load_policy(folder, "dqn", {**trained, "reward": {**trained["reward"], "lane_change_penalty": 10.0}})
     data = bytearray((folder / "policy.pt").read_bytes())
     data[len(data) // 2] ^= 0xFF
     (folder / "policy.pt").write_bytes(bytes(data))
@@ -197,10 +201,14 @@ def test_resume_accepts_a_checkpoint_from_before_an_added_field(tmp_path):
     ckpt = tmp_path / "r" / "checkpoint.pt"
     state = torch.load(ckpt, weights_only=False)
     del state["identity"]["scenario"]["ego_sigma"]
+    del state["identity"]["scenario"]["reward"]["lane_change_charge"]
     torch.save(state, ckpt)
     assert len(train("prl", "uncoordinated", 2, seed=2, out=tmp_path / "r", **kw)) == 2
     state = torch.load(ckpt, weights_only=False)
     assert state["identity"]["scenario"]["ego_sigma"] == 0.5  # rewritten in the current form
+    # the run keeps the lane-change charging it started with, not today's default
+    assert state["identity"]["scenario"]["reward"]["lane_change_charge"] == "lane"
+    assert ScenarioConfig().reward.lane_change_charge == "request"
     del state["identity"]["scenario"]["ego_sigma"]
     state["identity"]["scenario"]["reward"]["cost_timing"] = "end"
     torch.save(state, ckpt)

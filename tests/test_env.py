@@ -191,3 +191,24 @@ def test_steady_baseline_removes_the_egos_dawdling(cases):
         rows[agent.name] = run_episode(env, agent, cases[5], agent.name)
         env.close()
     assert rows["baseline0"]["battery_regenerated"] < 0.8 * rows["baseline"]["battery_regenerated"]
+
+
+@pytest.mark.parametrize("charge", ["request", "lane"])
+def test_lane_change_penalty_falls_on_the_step_that_decides_it(charge):
+    """With SUMO's 3 s manoeuvre the lane index flips one step after the request. "request" charges
+    r_p^c in the request's own transition, "lane" (before session 4) in the next one, whose action
+    was 'stay'; each charges the change once."""
+    env = gym.make("EcoDrive-v0", action="parameterized",
+                   config={**EMPTY, "reward": {"lane_change_charge": charge}}).unwrapped
+    obs, info = env.reset(options={"sumo_seed": 3, "insert_time": 10})
+    keep, left = (1, np.full(3, 0.5, np.float32)), (0, np.full(3, 0.5, np.float32))
+    if env.ego.kin[5] == env.cfg.lanes - 1:
+        left = (2, np.full(3, 0.5, np.float32))  # on the leftmost lane: go right instead
+    obs, r, te, tr, info = env.step(keep)
+    penalties = []
+    for action in [left] + [keep] * 5:
+        obs, r, te, tr, info = env.step(action)
+        penalties.append(info["reward_components"]["lane_change"])
+    assert env.ego.lane_changes == 1
+    assert penalties == ([-50.0] + [0.0] * 5 if charge == "request" else [0.0, -50.0] + [0.0] * 4)
+    env.close()
