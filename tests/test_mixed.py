@@ -67,14 +67,23 @@ def test_lane_gaps_reads_the_grid():
 
 
 def test_stall_trace_records_what_the_policy_did(tmp_path):
-    """The shipped coordinated PRL policy in the regression's MPR-1 cell, 200 s: every record is a
-    standing CV with free road and no red, and the action applied is the greedy allowed head's."""
+    """A PRL network whose 'stay' head always brakes (so that CVs stall whatever the shipped policy
+    does) in the regression's MPR-1 cell, 200 s: every record is a standing CV with free road and
+    no red, and the action applied is the greedy allowed head's."""
     import pytest
 
+    from bench.checkpoint import load_policy, policy_dir, save_policy
     from bench.stalls import HEADS, main, trace
     from envs.action import LATERAL
 
-    rows, summary = trace("coordinated", 1.0, 300, 200, (1,))
+    models = tmp_path / "models"
+    train("prl", "coordinated", 1, seed=0, out=tmp_path / "run", models=models,
+          agent_config={"learning_starts": 64, "batch_size": 16}, progress=False, validation_cases=1)
+    state, manifest = load_policy(policy_dir("prl", "coordinated", models), "prl")
+    last = max(k for k in state["param"] if k.endswith(".bias"))  # the output layer: tanh(-5) -> a_min
+    state["param"][last][LATERAL.index(0)] = -5.0
+    save_policy(policy_dir("prl", "coordinated", models), state, manifest)
+    rows, summary = trace("coordinated", 1.0, 300, 200, (1,), models=models)
     assert rows and summary["stall_steps"] >= len(rows)
     for r in rows:
         assert r["speed"] < 0.5 and r["red"] != 1.0 and not r[f"ahead_{r['lane']}"] <= 10.0
