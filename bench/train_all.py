@@ -3,8 +3,8 @@
     python -m bench.train_all [--episodes 1000] [--seed 0] [--parallel 2] [--methods prl mpdqn dqn ddpg]
 
 Each run is ``python -m bench.train`` with its own log next to its run folder; finished runs
-(a policy already in models/ from the same seed and episode count) are skipped, unfinished ones
-resume from their last checkpoint.
+(a policy already in models/ from the same seed and episode count, trained under today's
+scenario: see ``stale``) are skipped, unfinished ones resume from their last checkpoint.
 """
 from __future__ import annotations
 
@@ -22,12 +22,34 @@ from .checkpoint import MODELS, policy_dir
 from .train import RUNS
 
 
+def stale(trained: dict, method: str, signals: str) -> list[str]:
+    """Scenario fields in which a policy trained under ``trained`` differs from what today's
+    ``bench.train`` would train it under (fields added since are backfilled first). The lane-change
+    charging does not count for a method whose reward has no r_p^c."""
+    from agents.registry import ENV_OVERRIDES
+    from envs.config import ScenarioConfig, backfill
+
+    from .episode import deep_merge
+
+    now = ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict()
+    then = backfill(trained)
+    diff = [k for k in sorted(set(now) | set(then)) if k != "reward" and now.get(k) != then.get(k)]
+    r_now, r_then = now["reward"], then.get("reward", {})
+    for k in sorted(set(r_now) | set(r_then)):
+        if r_now.get(k) != r_then.get(k) and not (k == "lane_change_charge" and r_now["lane_change_penalty"] == 0
+                                                   and r_then.get("lane_change_penalty") == 0):
+            diff.append(f"reward.{k}")
+    return diff
+
+
 def _finished(method: str, signals: str, seed: int, episodes: int, models: Path = MODELS) -> bool:
+    """A policy in ``models`` from this seed and episode count, trained under today's scenario."""
     man = policy_dir(method, signals, models) / "manifest.json"
     if not man.is_file():
         return False
     m = json.loads(man.read_text())
-    return m.get("seed") == seed and m.get("episodes") == episodes
+    return (m.get("seed") == seed and m.get("episodes") == episodes
+            and not stale(m.get("scenario", {}), method, signals))
 
 
 def plan(methods: list[str], seed: int, episodes: int, runs: Path = RUNS, models: Path = MODELS) -> list[tuple[str, str]]:
@@ -46,6 +68,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING))
     args = ap.parse_args(argv)
     todo = plan(args.methods, args.seed, args.episodes)
+    for m, s in todo:
+        man = policy_dir(m, s) / "manifest.json"
+        if man.is_file():
+            diff = stale(json.loads(man.read_text()).get("scenario", {}), m, s)
+            print(f"note: {man.parent} was trained under an older scenario (differs in {', '.join(diff)}); "
+                  f"retraining. If {RUNS / f'{m}-{s}-s{args.seed}'} holds that finished run, move it away "
+                  f"first, or it is exported again", flush=True)
     running: list[tuple[subprocess.Popen, str]] = []
     RUNS.mkdir(parents=True, exist_ok=True)
     failed = []

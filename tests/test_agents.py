@@ -228,7 +228,7 @@ def test_policy_snapshot_is_a_copy():
 
 
 def test_train_all_resumes_started_runs_first(tmp_path):
-    from bench.train_all import plan
+    from bench.train_all import plan, stale
 
     runs, models = tmp_path / "runs", tmp_path / "models"
     (runs / "ddpg-uncoordinated-s0").mkdir(parents=True)
@@ -236,9 +236,17 @@ def test_train_all_resumes_started_runs_first(tmp_path):
     todo = plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
     assert todo[0] == ("ddpg", "uncoordinated") and todo[1:] == [("mpdqn", "coordinated"), ("mpdqn", "uncoordinated"),
                                                                    ("ddpg", "coordinated")]
-    (models / "mpdqn-coordinated").mkdir(parents=True)  # shipped from this seed and episode count: done
-    (models / "mpdqn-coordinated" / "manifest.json").write_text('{"seed": 0, "episodes": 1000}')
+    today = ScenarioConfig(signals="coordinated").to_dict()
+    (models / "mpdqn-coordinated").mkdir(parents=True)  # shipped from this seed, episode count, scenario: done
+    (models / "mpdqn-coordinated" / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": today}))
     assert ("mpdqn", "coordinated") not in plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
+    # trained before the lane-change charging fix: stale for a method with r_p^c, not for DDPG (no r_p^c)
+    old = {**today, "reward": {k: v for k, v in today["reward"].items() if k != "lane_change_charge"}}
+    assert stale(old, "mpdqn", "coordinated") == ["reward.lane_change_charge"]
+    assert stale({**old, "reward": {**old["reward"], "lane_change_penalty": 0.0}}, "ddpg", "coordinated") == []
+    assert stale({**today, "spacing": 500.0}, "mpdqn", "coordinated") == ["spacing"]
+    (models / "mpdqn-coordinated" / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": old}))
+    assert ("mpdqn", "coordinated") in plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
 
 
 def test_validation_cases_are_not_test_cases():
