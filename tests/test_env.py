@@ -210,5 +210,6 @@ def test_lane_change_penalty_falls_on_the_step_that_decides_it(charge):
         obs, r, te, tr, info = env.step(action)
         penalties.append(info["reward_components"]["lane_change"])
     assert env.ego.lane_changes == 1
-    assert penalties == ([-50.0] + [0.0] * 5 if charge == "request" else [0.0, -50.0] + [0.0] * 4)
+    pen = -env.cfg.reward.lane_change_penalty
+    assert penalties == ([pen] + [0.0] * 5 if charge == "request" else [0.0, pen] + [0.0] * 4)
     env.close()
