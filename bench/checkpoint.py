@@ -69,16 +69,15 @@ def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = Non
     except Exception as e:  # a matching sha256 but unreadable content
         raise CheckpointError(f"{path}: cannot be loaded ({type(e).__name__}: {e})") from None
     if scenario is not None:
-        from envs.config import ConfigError, ScenarioConfig, backfill
+        from envs.config import ConfigError, ScenarioConfig, backfill, diff
 
-        trained = backfill(manifest.get("scenario", {}))  # fields added later: the value their absence meant
+        trained = manifest.get("scenario", {})
         try:
-            ScenarioConfig.from_dict(trained)
+            ScenarioConfig.from_dict(backfill(trained))  # fields added later: the value their absence meant
         except ConfigError as e:
             raise CheckpointError(f"{man_path}: scenario config not accepted ({e})") from None
         # the reward is what the policy was trained for, not what it sees or drives in: not compared
-        diff = sorted(k for k in set(trained) | set(scenario)
-                      if k not in ("signals", "glosa", "reward") and trained.get(k) != scenario.get(k))
-        if diff:
-            raise CheckpointError(f"{path}: trained on a different scenario config (differs in: {', '.join(diff)})")
+        differs = sorted({k.split(".")[0] for k in diff(trained, scenario)} - {"signals", "glosa", "reward"})
+        if differs:
+            raise CheckpointError(f"{path}: trained on a different scenario config (differs in: {', '.join(differs)})")
     return state, manifest

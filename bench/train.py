@@ -28,7 +28,7 @@ import torch
 from tqdm import tqdm
 
 from agents.registry import LEARNING, make_agent
-from envs.config import SIGNALS, backfill, predates
+from envs.config import SIGNALS, backfill, flat, predates
 
 from .cases import Case
 from .checkpoint import MODELS, atomic_torch_save, policy_dir, save_policy
@@ -71,7 +71,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
             env = make_env(method, signals, deep_merge(kept, scenario or {}))  # explicit settings still win
             identity["scenario"] = env.cfg.to_dict()
             if progress:
-                print(f"note: this run predates {', '.join(_dotted(kept))}; it keeps the behaviour it started with",
+                print(f"note: this run predates {', '.join(f'{k}={v}' for k, v in flat(kept).items())}; it keeps the behaviour it started with",
                       file=sys.stderr)
         saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
         if saved != identity:
@@ -146,11 +146,6 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
 def snapshot(agent) -> dict[str, Any]:
     """A deep copy of the greedy policy: ``state_dict`` returns live tensors that training changes."""
     return copy.deepcopy(agent.state_dict(with_training=False))
-
-
-def _dotted(nested: dict[str, Any], prefix: str = "") -> list[str]:
-    return [k for key, v in nested.items()
-            for k in (_dotted(v, f"{prefix}{key}.") if isinstance(v, dict) else [f"{prefix}{key}={v}"])]
 
 
 def validation_cases(cfg, n: int) -> list[Case]:

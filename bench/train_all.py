@@ -24,22 +24,13 @@ from .train import RUNS
 
 def stale(trained: dict, method: str, signals: str) -> list[str]:
     """Scenario fields in which a policy trained under ``trained`` differs from what today's
-    ``bench.train`` would train it under (fields added since are backfilled first). The lane-change
-    charging does not count for a method whose reward has no r_p^c."""
+    ``bench.train`` would train it under (``envs.config.diff``)."""
     from agents.registry import ENV_OVERRIDES
-    from envs.config import ScenarioConfig, backfill
+    from envs.config import ScenarioConfig, diff
 
     from .episode import deep_merge
 
-    now = ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict()
-    then = backfill(trained)
-    diff = [k for k in sorted(set(now) | set(then)) if k != "reward" and now.get(k) != then.get(k)]
-    r_now, r_then = now["reward"], then.get("reward", {})
-    for k in sorted(set(r_now) | set(r_then)):
-        if r_now.get(k) != r_then.get(k) and not (k == "lane_change_charge" and r_now["lane_change_penalty"] == 0
-                                                   and r_then.get("lane_change_penalty") == 0):
-            diff.append(f"reward.{k}")
-    return diff
+    return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict())
 
 
 def _finished(method: str, signals: str, seed: int, episodes: int, models: Path = MODELS) -> bool:

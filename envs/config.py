@@ -173,6 +173,24 @@ def backfill(scenario: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def flat(nested: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"a.b": value}`` for a nested config dict."""
+    out: dict[str, Any] = {}
+    for k, v in nested.items():
+        out.update(flat(v, f"{prefix}{k}.") if isinstance(v, Mapping) else {f"{prefix}{k}": v})
+    return out
+
+
+def diff(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
+    """Dotted fields in which two scenario dicts differ in effect (both backfilled first). The
+    lane-change charging has no effect where r_p^c is 0 in both."""
+    fa, fb = flat(backfill(a)), flat(backfill(b))
+    keys = sorted(k for k in set(fa) | set(fb) if fa.get(k) != fb.get(k))
+    if fa.get("reward.lane_change_penalty") == fb.get("reward.lane_change_penalty") == 0:
+        keys = [k for k in keys if k != "reward.lane_change_charge"]
+    return keys
+
+
 def _from_dict(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
     if not isinstance(data, Mapping):
         raise ConfigError(f"{prefix or 'config'} must be a mapping, got {type(data).__name__}")
