@@ -43,6 +43,7 @@ class PDQNConfig:
     reward_scale: float = 0.01  # rewards are multiplied by this for learning (raw rewards are ~1e2)
     grad_clip: float = 10.0  # max gradient norm per network (not in the paper)
     multipass: bool = False  # MP-DQN's multi-pass Q evaluation (beyond the paper)
+    twin_q: bool = False  # clipped double Q (TD3, Fujimoto et al. 2018): two Q networks, targets use their minimum (beyond the paper)
     seed: int = 0  # seeds network initialisation and the agent's numpy Generator
 
 
@@ -66,9 +67,15 @@ class PDQNAgent:
             self.param = Head(grid_shape, logic.shape[0], 0, (128, 64), K)
             self.q_target = Head(grid_shape, logic.shape[0], K, (256, 64), K)
             self.param_target = Head(grid_shape, logic.shape[0], 0, (128, 64), K)
+            # created last, so the other networks start as they do without it
+            self.q2 = Head(grid_shape, logic.shape[0], K, (256, 64), K) if cfg.twin_q else None
+            self.q2_target = Head(grid_shape, logic.shape[0], K, (256, 64), K) if cfg.twin_q else None
         self.q_target.load_state_dict(self.q.state_dict())
         self.param_target.load_state_dict(self.param.state_dict())
-        self.opt_q = torch.optim.Adam(self.q.parameters(), lr=cfg.lr_q)
+        critics = [self.q] + ([self.q2] if cfg.twin_q else [])
+        if cfg.twin_q:
+            self.q2_target.load_state_dict(self.q2.state_dict())
+        self.opt_q = torch.optim.Adam([p for c in critics for p in c.parameters()], lr=cfg.lr_q)
         self.opt_param = torch.optim.Adam(self.param.parameters(), lr=cfg.lr_param)
         self.rng = np.random.default_rng(cfg.seed)
         self.noise = OUNoise(K, cfg.ou_theta, cfg.ou_sigma, self.rng)
@@ -151,22 +158,35 @@ class PDQNAgent:
             return {}
         return self.update()
 
+    @torch.no_grad()
+    def target(self, b: dict[str, np.ndarray]) -> torch.Tensor:
+        """Bellman target y = r + gamma (1 - done) max_k Q'(s', k, x'(s')) over the allowed k;
+        with ``twin_q``, Q' is the smaller of the two target critics for each k."""
+        c = self.cfg
+        g2, l2 = torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"])
+        f2 = features(g2, l2, [self.q_target, self.param_target] + ([self.q2_target] if c.twin_q else []))
+        x2 = self._params(self.param_target, f2[1])
+        q2 = self.q_values(self.q_target, f2[0], x2)
+        if c.twin_q:
+            q2 = torch.minimum(q2, self.q_values(self.q2_target, f2[2], x2))
+        q2 = q2.masked_fill(~torch.as_tensor(b["next_mask"]), -torch.inf)
+        return torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
+
     def losses(self, b: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
         """(eq. 7 Q loss, eq. 8 parameter loss) on a sampled batch. The parameter loss runs Q's
         layers with detached weights, so each loss has gradients only for its own network."""
         c = self.cfg
         g, l = torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"])
-        g2, l2 = torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"])
         act = torch.as_tensor(b["action"])
         k, x_b = act[:, 0].long(), act[:, 1:]
-        with torch.no_grad():
-            f2, fp2 = features(g2, l2, [self.q_target, self.param_target])
-            x2 = self._params(self.param_target, fp2)
-            q2 = self.q_values(self.q_target, f2, x2).masked_fill(~torch.as_tensor(b["next_mask"]), -torch.inf)
-            y = torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
-        feats, fp = features(g, l, [self.q, self.param])
+        twin = c.twin_q
+        y = self.target(b)
+        f = features(g, l, [self.q, self.param] + ([self.q2] if twin else []))
+        feats, fp = f[0], f[1]
         q_sa = self.q_values(self.q, feats, x_b).gather(1, k[:, None]).squeeze(1)
         loss_q = 0.5 * F.mse_loss(q_sa, y)
+        if twin:
+            loss_q = loss_q + 0.5 * F.mse_loss(self.q_values(self.q2, f[2], x_b).gather(1, k[:, None]).squeeze(1), y)
         loss_p = -self.q_values(self.q, feats.detach(), self._params(self.param, fp), frozen=True).sum(1).mean()
         return loss_q, loss_p
 
@@ -178,10 +198,14 @@ class PDQNAgent:
         (loss_q + loss_p).backward()  # one pass through the shared grouped conv
         torch.nn.utils.clip_grad_norm_(self.q.parameters(), c.grad_clip)
         torch.nn.utils.clip_grad_norm_(self.param.parameters(), c.grad_clip)
+        if c.twin_q:
+            torch.nn.utils.clip_grad_norm_(self.q2.parameters(), c.grad_clip)
         self.opt_q.step()
         self.opt_param.step()
         soft_update(self.q_target, self.q, c.tau_q)
         soft_update(self.param_target, self.param, c.tau_param)
+        if c.twin_q:
+            soft_update(self.q2_target, self.q2, c.tau_q)
         self.updates += 1
         return {"loss_q": loss_q.item(), "loss_param": loss_p.item()}
 
@@ -196,6 +220,8 @@ class PDQNAgent:
                 "rng": self.rng.bit_generator.state, "ou": self.noise.state.copy(),
                 "epsilon": self.epsilon, "updates": self.updates,
             })
+            if self.cfg.twin_q:  # acting needs only q and param
+                state.update({"q2": self.q2.state_dict(), "q2_target": self.q2_target.state_dict()})
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -206,6 +232,12 @@ class PDQNAgent:
         if "q_target" in state:
             self.q_target.load_state_dict(state["q_target"])
             self.param_target.load_state_dict(state["param_target"])
+            if self.cfg.twin_q != ("q2" in state):
+                raise ValueError(f"checkpoint {'has' if 'q2' in state else 'lacks'} a second Q network; "
+                                 f"this agent has twin_q={self.cfg.twin_q}")
+            if self.cfg.twin_q:
+                self.q2.load_state_dict(state["q2"])
+                self.q2_target.load_state_dict(state["q2_target"])
             self.opt_q.load_state_dict(state["opt_q"])
             self.opt_param.load_state_dict(state["opt_param"])
             self.rng.bit_generator.state = state["rng"]

@@ -10,6 +10,11 @@ exactly as if it had never stopped. Per-episode metrics go to ``metrics.parquet`
 ``/train`` MCAP channel (``train.mcap``). At the end the greedy policy is exported to
 ``models/<method>-<signals>/`` with a manifest (command, seed, git SHA, sha256, wall time,
 final metrics).
+
+``--set FIELD=VALUE`` (repeatable) overrides a field of the method's agent config for an
+experiment (e.g. ``--set twin_q=true`` for PRL). Such a run gets its own folder
+(``<method>-<signals>-s<seed>+FIELD=VALUE``) and is never exported to ``models/``: the shipped
+policies are the paper's agents.
 """
 from __future__ import annotations
 
@@ -40,6 +45,35 @@ from .provenance import git_sha, package_versions
 VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/cases.json's test cases)
 RUNS = Path(os.environ.get("ECODRIVE_RUNS", Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train"))
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
+
+
+def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
+    """``FIELD=VALUE`` strings -> typed overrides of ``method``'s agent config dataclass; a
+    ValueError names the bad item and the accepted fields or values."""
+    import dataclasses
+
+    from agents.ddpg import DDPGConfig
+    from agents.dqn import DQNConfig
+    from agents.pdqn import PDQNConfig
+
+    cls = {"prl": PDQNConfig, "mpdqn": PDQNConfig, "dqn": DQNConfig, "ddpg": DDPGConfig}[method]
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in ("seed", "multipass")}
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, raw = item.partition("=")
+        if not sep or name not in fields:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(fields)}")
+        kind = type(getattr(cls(), name))
+        if kind is bool:
+            if raw.lower() not in ("true", "false"):
+                raise ValueError(f"--set {item!r}: {name} takes true or false")
+            out[name] = raw.lower() == "true"
+        else:
+            try:
+                out[name] = kind(raw)
+            except ValueError:
+                raise ValueError(f"--set {item!r}: {name} takes a {kind.__name__}") from None
+    return out
 
 
 def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
@@ -189,6 +223,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
     ap.add_argument("--validation-cases", type=int, default=20, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
     ap.add_argument("--no-export", action="store_true", help="do not write models/<method>-<signals>/ at the end")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="override an agent config field for an experiment (repeatable; such runs are not exported)")
     args = ap.parse_args(argv)
     if args.method not in LEARNING:
         ap.error(f"--method {args.method!r} is not accepted; choose one of {', '.join(LEARNING)}")
@@ -200,10 +236,18 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--seed {args.seed} must be >= 0 and --checkpoint-every {args.checkpoint_every} >= 1")
     if not 0 <= args.validation_cases <= 100:
         ap.error(f"--validation-cases {args.validation_cases} is out of range; accepted: 0..100")
-    out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}"
+    try:
+        overrides = agent_overrides(args.method, args.set)
+    except ValueError as e:
+        ap.error(str(e))
+    suffix = "".join(f"+{k}={v}" for k, v in sorted(overrides.items()))
+    out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
+    if overrides and not args.no_export:
+        print(f"note: an experiment ({suffix[1:]}); it is not exported to models/", file=sys.stderr)
     df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
-               models=None if args.no_export else MODELS, command=["python", "-m", "bench.train", *sys.argv[1:]],
-               validation_cases=args.validation_cases)
+               models=None if args.no_export or overrides else MODELS,
+               command=["python", "-m", "bench.train", *sys.argv[1:]],
+               validation_cases=args.validation_cases, agent_config=overrides or None)
     tail = df.tail(FINAL_WINDOW)
     print(json.dumps({"episodes": len(df), "energy": round(float(tail.energy.mean()), 2),
                       "travel_time": round(float(tail.travel_time.mean()), 2)}))

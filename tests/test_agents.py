@@ -25,9 +25,9 @@ def _env(action: str):
     return gym.make("EcoDrive-v0", action=action, config=FAST_SCENARIO).unwrapped
 
 
-def _filled_agent(method: str, action: str, n: int = 300):
+def _filled_agent(method: str, action: str, n: int = 300, **config):
     env = _env(action)
-    agent = make_agent(method, env.observation_space, env.action_space, seed=1, **FAST_AGENT)
+    agent = make_agent(method, env.observation_space, env.action_space, seed=1, **FAST_AGENT, **config)
     agent.begin_episode(0)
     obs, info = env.reset(seed=3)
     for _ in range(n):
@@ -61,6 +61,45 @@ def test_each_loss_reaches_only_its_network(multipass):
     assert all(g is None or g.abs().sum() == 0 for g in gq[nq:])  # ... and not the parameter net
     assert any(g is not None and g.abs().sum() > 0 for g in gp[nq:])  # parameter loss trains x(s; w) ...
     assert all(g is None or g.abs().sum() == 0 for g in gp[:nq])  # ... and not Q
+
+
+def test_twin_q_target_is_the_smaller_critic_and_both_critics_learn():
+    agent, _, _ = _filled_agent("prl", "parameterized", n=100, twin_q=True)
+    b = agent.replay.sample(np.random.default_rng(0), 16)
+    agent.cfg.twin_q = False
+    plain = agent.target(b)  # the paper's target from the first critic alone
+    agent.cfg.twin_q = True
+    agent.q2_target.load_state_dict(agent.q_target.state_dict())
+    assert torch.allclose(agent.target(b), plain)
+    last = agent.q2_target.mlp[-1].bias
+    with torch.no_grad():
+        last += 1.0  # the second critic now says every Q_k is 1 higher: the first is the minimum
+    assert torch.allclose(agent.target(b), plain)
+    with torch.no_grad():
+        last -= 2.0  # now 1 lower for every k, so every bootstrapped target falls by gamma
+    drop = agent.cfg.gamma * (1.0 - torch.as_tensor(b["done"]))
+    assert torch.allclose(agent.target(b), plain - drop, atol=1e-5)
+    loss_q, loss_p = agent.losses(b)
+    nets = [agent.q, agent.q2, agent.param]
+    params = [p for n in nets for p in n.parameters()]
+    sizes = [len(list(n.parameters())) for n in nets]
+    gq = torch.autograd.grad(loss_q, params, retain_graph=True, allow_unused=True)
+    gp = torch.autograd.grad(loss_p, params, allow_unused=True)
+    q1, q2 = slice(0, sizes[0]), slice(sizes[0], sizes[0] + sizes[1])
+    reached = lambda gs: any(g is not None and g.abs().sum() > 0 for g in gs)  # noqa: E731
+    assert reached(gq[q1]) and reached(gq[q2]) and not reached(gq[sizes[0] + sizes[1]:])
+    assert reached(gp[sizes[0] + sizes[1]:]) and not reached(gp[q1]) and not reached(gp[q2])
+
+
+def test_agent_overrides_are_typed_and_checked():
+    from bench.train import agent_overrides
+
+    assert agent_overrides("prl", ["twin_q=true", "lr_q=0.001", "batch_size=64"]) == {
+        "twin_q": True, "lr_q": 0.001, "batch_size": 64}
+    for bad, msg in (("twin=true", "one of gamma"), ("twin_q=1", "true or false"), ("lr_q=fast", "takes a float"),
+                     ("multipass=true", "one of"), ("twin_q", "FIELD=VALUE")):
+        with pytest.raises(ValueError, match=msg):
+            agent_overrides("prl", [bad])
 
 
 def test_multipass_removes_parameter_leakage():
@@ -172,8 +211,10 @@ def test_corrupt_or_mismatched_policy_is_a_clear_error(tmp_path):
         load_policy(tmp_path / "nothing", "dqn")
 
 
-def test_resumed_training_equals_uninterrupted(tmp_path):
-    kw = dict(checkpoint_every=1, models=None, agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
+@pytest.mark.parametrize("extra", [{}, {"twin_q": True}])
+def test_resumed_training_equals_uninterrupted(tmp_path, extra):
+    kw = dict(checkpoint_every=1, models=None, agent_config={**FAST_AGENT, **extra}, scenario=FAST_SCENARIO,
+              progress=False)
     full = train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "full", **kw)
     part = train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "cut", stop_after=2, **kw)
     assert len(part) == 2
@@ -181,7 +222,7 @@ def test_resumed_training_equals_uninterrupted(tmp_path):
     pd.testing.assert_frame_equal(full, resumed)
     a = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=False)["agent"]
     b = torch.load(tmp_path / "cut" / "checkpoint.pt", weights_only=False)["agent"]
-    for net in ("q", "param"):
+    for net in ("q", "param", *(("q2", "q2_target") if extra else ())):
         for k in a[net]:
             assert torch.equal(a[net][k], b[net][k])
 
