@@ -87,6 +87,7 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
     torch.set_num_threads(1)
     _, manifest = load_policy(policy_dir(method, signals, models), method)
     scenario = backfill(manifest.get("scenario", {}))
+    agent_config: dict[str, Any] = {}
     if run is not None:
         ckpt = run / "checkpoint.pt"
         if not ckpt.is_file():
@@ -97,11 +98,12 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
             raise CheckpointError(f"{ckpt}: a run of {ident.get('method')}/{ident.get('signals')}, "
                                   f"not {method}/{signals}")
         state, scenario, source = saved["agent"], backfill(ident.get("scenario", {})), f"{ckpt} (episode {saved['episode']})"
+        agent_config = ident.get("agent_config", {})  # e.g. a twin_q run's second critic
     else:
         state, _ = load_policy(policy_dir(method, signals, models), method)
         source = f"models/{method}-{signals} (episode {manifest.get('selected_episode', '?')})"
     env = make_env(method, signals, scenario)
-    agent = make_agent(method, env.observation_space, env.action_space)
+    agent = make_agent(method, env.observation_space, env.action_space, **agent_config)
     agent.load_state_dict(state)
     try:
         eps = [rollout(env, agent, case) for case in validation_cases(env.cfg, cases)]

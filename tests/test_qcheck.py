@@ -58,3 +58,13 @@ def test_bad_flags_name_the_accepted_values(argv, msg, capsys):
 def test_a_folder_without_a_checkpoint_is_a_clear_error(tmp_path, capsys):
     assert main(["--run", str(tmp_path)]) == 2
     assert "no checkpoint.pt" in capsys.readouterr().err
+
+
+def test_a_twin_q_run_folder_is_checked_with_its_own_agent_config(tmp_path):
+    from bench.qcheck import check
+    from bench.train import train
+
+    train("prl", "coordinated", 1, seed=0, out=tmp_path / "run", models=None, progress=False, validation_cases=0,
+          agent_config={"learning_starts": 64, "batch_size": 16, "twin_q": True}, scenario={"max_episode_time": 60.0})
+    res = check("prl", "coordinated", 1, run=tmp_path / "run")
+    assert "episode 1" in res["source"] and res["all"]["steps"] >= 1 and np.isfinite(res["all"]["bias"])
