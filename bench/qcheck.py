@@ -85,10 +85,8 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
     from .train import validation_cases
 
     torch.set_num_threads(1)
-    _, manifest = load_policy(policy_dir(method, signals, models), method)
-    scenario = backfill(manifest.get("scenario", {}))
     agent_config: dict[str, Any] = {}
-    if run is not None:
+    if run is not None:  # a run folder carries its own scenario and agent config
         ckpt = run / "checkpoint.pt"
         if not ckpt.is_file():
             raise CheckpointError(f"{run}: no checkpoint.pt (a training run folder has one)")
@@ -97,10 +95,12 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
         if (ident.get("method"), ident.get("signals")) != (method, signals):
             raise CheckpointError(f"{ckpt}: a run of {ident.get('method')}/{ident.get('signals')}, "
                                   f"not {method}/{signals}")
-        state, scenario, source = saved["agent"], backfill(ident.get("scenario", {})), f"{ckpt} (episode {saved['episode']})"
+        state, scenario = saved["agent"], backfill(ident.get("scenario", {}))
         agent_config = ident.get("agent_config", {})  # e.g. a twin_q run's second critic
+        source = f"{ckpt} (episode {saved['episode']})"
     else:
-        state, _ = load_policy(policy_dir(method, signals, models), method)
+        state, manifest = load_policy(policy_dir(method, signals, models), method)
+        scenario = backfill(manifest.get("scenario", {}))
         source = f"models/{method}-{signals} (episode {manifest.get('selected_episode', '?')})"
     env = make_env(method, signals, scenario)
     agent = make_agent(method, env.observation_space, env.action_space, **agent_config)

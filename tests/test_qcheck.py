@@ -68,3 +68,16 @@ def test_a_twin_q_run_folder_is_checked_with_its_own_agent_config(tmp_path):
           agent_config={"learning_starts": 64, "batch_size": 16, "twin_q": True}, scenario={"max_episode_time": 60.0})
     res = check("prl", "coordinated", 1, run=tmp_path / "run")
     assert "episode 1" in res["source"] and res["all"]["steps"] >= 1 and np.isfinite(res["all"]["bias"])
+
+
+def test_a_run_folder_needs_no_shipped_policy(tmp_path):
+    """MP-DQN has no shipped policy yet; its run folders can still be checked."""
+    from bench.qcheck import check
+    from bench.train import train
+
+    train("mpdqn", "coordinated", 1, seed=0, out=tmp_path / "run", models=None, progress=False, validation_cases=0,
+          agent_config={"learning_starts": 64, "batch_size": 16}, scenario={"max_episode_time": 30.0})
+    res = check("mpdqn", "coordinated", 1, run=tmp_path / "run", models=tmp_path / "no-models")
+    assert res["all"]["steps"] >= 1
+    with pytest.raises(Exception, match="a run of mpdqn/coordinated, not prl/coordinated"):
+        check("prl", "coordinated", 1, run=tmp_path / "run")
