@@ -57,13 +57,13 @@ def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
     from agents.pdqn import PDQNConfig
 
     cls = {"prl": PDQNConfig, "mpdqn": PDQNConfig, "dqn": DQNConfig, "ddpg": DDPGConfig}[method]
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.name not in ("seed", "multipass")}
+    defaults = {f.name: f.default for f in dataclasses.fields(cls) if f.name not in ("seed", "multipass")}
     out: dict[str, Any] = {}
     for item in items:
         name, sep, raw = item.partition("=")
-        if not sep or name not in fields:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(fields)}")
-        kind = type(getattr(cls(), name))
+        if not sep or name not in defaults:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(defaults)}")
+        kind = type(defaults[name])
         if kind is bool:
             if raw.lower() not in ("true", "false"):
                 raise ValueError(f"--set {item!r}: {name} takes true or false")

@@ -60,9 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     todo = plan(args.methods, args.seed, args.episodes)
     for m, s in todo:
-        man = policy_dir(m, s) / "manifest.json"
+        man, diff = policy_dir(m, s) / "manifest.json", []
         if man.is_file():
             diff = stale(json.loads(man.read_text()).get("scenario", {}), m, s)
+        if diff:  # a policy from another seed or episode count is not "older"
             print(f"note: {man.parent} was trained under an older scenario (differs in {', '.join(diff)}); "
                   f"retraining. If {RUNS / f'{m}-{s}-s{args.seed}'} holds that finished run, move it away "
                   f"first, or it is exported again", flush=True)
