@@ -33,7 +33,7 @@ import torch
 from tqdm import tqdm
 
 from agents.registry import LEARNING, make_agent
-from envs.config import SIGNALS, backfill, flat, predates
+from envs.config import SIGNALS, added_values, backfill, flat
 
 from .cases import Case
 from .checkpoint import MODELS, atomic_torch_save, policy_dir, save_policy
@@ -99,13 +99,13 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     best: dict[str, Any] = {}
     if ckpt.exists():
         state = torch.load(ckpt, map_location="cpu", weights_only=False)
-        kept = predates(state["identity"].get("scenario", {}))
+        kept = added_values(state["identity"].get("scenario", {}))
         if deep_merge(env.cfg.to_dict(), kept) != env.cfg.to_dict():  # the run keeps what it started with
             env.close()
             env = make_env(method, signals, deep_merge(kept, scenario or {}))  # explicit settings still win
             identity["scenario"] = env.cfg.to_dict()
             if progress:
-                print(f"note: this run predates {', '.join(f'{k}={v}' for k, v in flat(kept).items())}; it keeps the behaviour it started with",
+                print(f"note: this run keeps the behaviour it started with: {', '.join(f'{k}={v}' for k, v in flat(kept).items())}",
                       file=sys.stderr)
         saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
         if saved != identity:

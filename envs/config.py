@@ -165,6 +165,20 @@ def predates(scenario: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def added_values(scenario: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``ADDED_FIELDS`` values a saved run uses, as a nested override dict: its own where it
+    saved them, the pre-field behaviour where it predates them. A resumed run keeps these, also
+    when it was already resumed once and so saved the pre-field value explicitly."""
+    out: dict[str, Any] = {}
+    for key in ADDED_FIELDS:
+        *subs, name = key.split(".")
+        have, into = backfill(scenario), out
+        for s in subs:
+            have, into = have.get(s, {}), into.setdefault(s, {})
+        into[name] = have[name]
+    return out
+
+
 def backfill(scenario: Mapping[str, Any]) -> dict[str, Any]:
     """A saved scenario dict with the fields of ``ADDED_FIELDS`` it predates filled in."""
     out = dict(scenario)

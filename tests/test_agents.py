@@ -250,11 +250,15 @@ def test_resume_accepts_a_checkpoint_from_before_an_added_field(tmp_path):
     # the run keeps the lane-change charging it started with, not today's default
     assert state["identity"]["scenario"]["reward"]["lane_change_charge"] == "lane"
     assert ScenarioConfig().reward.lane_change_charge == "request"
+    # resumed again, from the checkpoint that now names 'lane' explicitly, it still keeps it
+    assert len(train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "r", **kw)) == 3
+    state = torch.load(ckpt, weights_only=False)
+    assert state["identity"]["scenario"]["reward"]["lane_change_charge"] == "lane"
     del state["identity"]["scenario"]["ego_sigma"]
     state["identity"]["scenario"]["reward"]["cost_timing"] = "end"
     torch.save(state, ckpt)
     with pytest.raises(SystemExit, match="differs in scenario"):
-        train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "r", **kw)
+        train("prl", "uncoordinated", 4, seed=2, out=tmp_path / "r", **kw)
 
 
 def test_policy_snapshot_is_a_copy():
