@@ -22,6 +22,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from torch.func import functional_call
 
+from .base import check_config
 from .nets import Head, ObsScaler, OUNoise, features, soft_update
 from .replay import Replay
 
@@ -43,6 +44,11 @@ class DDPGConfig:
     bound: str = "invert"  # "invert": inverting gradients at [-1, 1]; "tanh": squash (saturates, see above)
     seed: int = 0  # seeds network initialisation and the agent's numpy Generator
 
+    def __post_init__(self) -> None:
+        check_config(self)
+        if self.bound not in ("invert", "tanh"):
+            raise ValueError(f"DDPGConfig.bound={self.bound!r}; accepted: 'invert', 'tanh'")
+
 
 class DDPGAgent:
     name = "ddpg"
@@ -51,8 +57,6 @@ class DDPGAgent:
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, cfg: DDPGConfig | None = None):
         self.cfg = cfg = cfg or DDPGConfig()
-        if cfg.bound not in ("invert", "tanh"):
-            raise ValueError(f"DDPGConfig.bound={cfg.bound!r}; accepted: 'invert', 'tanh'")
         grid_shape, logic = observation_space["grid"].shape, observation_space["logic"]
         self.a_low, self.a_high = float(action_space.low[0]), float(action_space.high[0])
         self.scaler = ObsScaler(logic.low, logic.high)

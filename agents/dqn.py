@@ -13,6 +13,7 @@ import torch
 import torch.nn.functional as F
 from gymnasium import spaces
 
+from .base import check_config
 from .nets import Head, ObsScaler, features, linear_epsilon, soft_update
 from .replay import Replay
 
@@ -33,6 +34,9 @@ class DQNConfig:
     reward_scale: float = 0.01  # rewards are multiplied by this for learning
     grad_clip: float = 10.0  # max gradient norm (not in the paper)
     seed: int = 0  # seeds network initialisation and the agent's numpy Generator
+
+    def __post_init__(self) -> None:
+        check_config(self)
 
 
 class DQNAgent:

@@ -19,6 +19,7 @@ import torch.nn.functional as F
 from torch.func import functional_call
 from gymnasium import spaces
 
+from .base import check_config
 from .nets import Head, ObsScaler, OUNoise, features, linear_epsilon, soft_update
 from .replay import Replay
 
@@ -45,6 +46,9 @@ class PDQNConfig:
     multipass: bool = False  # MP-DQN's multi-pass Q evaluation (beyond the paper)
     twin_q: bool = False  # clipped double Q (TD3, Fujimoto et al. 2018): two Q networks, targets use their minimum (beyond the paper)
     seed: int = 0  # seeds network initialisation and the agent's numpy Generator
+
+    def __post_init__(self) -> None:
+        check_config(self)
 
 
 class PDQNAgent:

@@ -73,6 +73,10 @@ def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
                 out[name] = kind(raw)
             except ValueError:
                 raise ValueError(f"--set {item!r}: {name} takes a {kind.__name__}") from None
+    try:
+        cls(**out)  # range checks (agents.base.check_config)
+    except ValueError as e:
+        raise ValueError(f"--set {' '.join(items)}: {e}") from None
     return out
 
 

@@ -97,9 +97,17 @@ def test_agent_overrides_are_typed_and_checked():
     assert agent_overrides("prl", ["twin_q=true", "lr_q=0.001", "batch_size=64"]) == {
         "twin_q": True, "lr_q": 0.001, "batch_size": 64}
     for bad, msg in (("twin=true", "one of gamma"), ("twin_q=1", "true or false"), ("lr_q=fast", "takes a float"),
-                     ("multipass=true", "one of"), ("twin_q", "FIELD=VALUE")):
+                     ("multipass=true", "one of"), ("twin_q", "FIELD=VALUE"),
+                     ("gamma=5", r"gamma = 5.0 is out of range; accepted: 0.0 <= gamma <= 1.0"),
+                     ("lr_q=0", r"0.0 < lr_q <= 1.0"), ("batch_size=0", "1 <= batch_size"),
+                     ("eps_init=0.001", "exceeds eps_init"), ("replay_size=100", "smaller than batch_size"),
+                     ("grad_clip=nan", "grad_clip = nan")):
         with pytest.raises(ValueError, match=msg):
             agent_overrides("prl", [bad])
+    with pytest.raises(ValueError, match="DDPGConfig.tau_actor = 2.0"):
+        agent_overrides("ddpg", ["tau_actor=2"])
+    with pytest.raises(ValueError, match="DQNConfig.eps_decay_episodes = 0"):
+        agent_overrides("dqn", ["eps_decay_episodes=0"])
 
 
 def test_multipass_removes_parameter_leakage():
