@@ -54,7 +54,7 @@ FIELD_RANGES: dict[str, tuple[float | None, float | None, bool]] = {
     "batch_size": (1, None, False), "replay_size": (1, None, False),
     "eps_init": (0.0, 1.0, False), "eps_end": (0.0, 1.0, False), "eps_decay_episodes": (1, None, False),
     "ou_theta": (0.0, 1.0, False), "ou_sigma": (0.0, None, False), "learning_starts": (0, None, False),
-    "reward_scale": (0.0, None, True), "grad_clip": (0.0, None, True), "seed": (0, None, False),
+    "reward_scale": (0.0, None, True), "n_step": (1, 100, False), "grad_clip": (0.0, None, True), "seed": (0, None, False),
 }
 
 

@@ -21,7 +21,7 @@ from gymnasium import spaces
 
 from .base import check_config
 from .nets import Head, ObsScaler, OUNoise, features, linear_epsilon, soft_update
-from .replay import Replay
+from .replay import NStepWindow, Replay
 
 K = 3  # lateral choices: k = -1, 0, +1
 
@@ -44,6 +44,7 @@ class PDQNConfig:
     reward_scale: float = 0.01  # rewards are multiplied by this for learning (raw rewards are ~1e2)
     grad_clip: float = 10.0  # max gradient norm per network (not in the paper)
     multipass: bool = False  # MP-DQN's multi-pass Q evaluation (beyond the paper)
+    n_step: int = 1  # n-step Bellman targets, gamma^m max_k Q'(s_{t+m}) after m <= n rewards (1 = the paper; beyond the paper)
     twin_q: bool = False  # clipped double Q (TD3, Fujimoto et al. 2018): two Q networks, targets use their minimum (beyond the paper)
     seed: int = 0  # seeds network initialisation and the agent's numpy Generator
 
@@ -84,6 +85,7 @@ class PDQNAgent:
         self.rng = np.random.default_rng(cfg.seed)
         self.noise = OUNoise(K, cfg.ou_theta, cfg.ou_sigma, self.rng)
         self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1 + K)
+        self.window = NStepWindow(cfg.n_step, cfg.gamma)
         self.epsilon = cfg.eps_init
         self.updates = 0
 
@@ -118,6 +120,7 @@ class PDQNAgent:
         c = self.cfg
         self.epsilon = linear_epsilon(episode, c.eps_init, c.eps_end, c.eps_decay_episodes)
         self.noise.reset()
+        self.window.window = []  # an n-step transition never spans two episodes
 
     def act(self, obs, info, explore: bool = False):
         mask = np.asarray(info["action_mask"], dtype=bool)
@@ -155,16 +158,19 @@ class PDQNAgent:
     # ------------------------------------------------------------------ learning
     def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
         k, xn = self._last
-        self.replay.add(obs["grid"], self.scaler.logic(obs["logic"]), np.concatenate([[k], xn]),
-                        reward * self.cfg.reward_scale, next_obs["grid"], self.scaler.logic(next_obs["logic"]),
-                        float(terminated), np.asarray(info["action_mask"], dtype=bool))
+        step = (np.array(obs["grid"]), self.scaler.logic(obs["logic"]), np.concatenate([[k], xn]),
+                reward * self.cfg.reward_scale, np.array(next_obs["grid"]), self.scaler.logic(next_obs["logic"]),
+                float(terminated), np.asarray(info["action_mask"], dtype=bool))
+        for t in self.window.push(step, terminated or truncated):
+            self.replay.add(*t)
         if self.replay.size < max(self.cfg.learning_starts, self.cfg.batch_size):
             return {}
         return self.update()
 
     @torch.no_grad()
     def target(self, b: dict[str, np.ndarray]) -> torch.Tensor:
-        """Bellman target y = r + gamma (1 - done) max_k Q'(s', k, x'(s')) over the allowed k;
+        """Bellman target y = r + gamma^m (1 - done) max_k Q'(s', k, x'(s')) over the allowed k
+        (m = 1 unless ``n_step``, where r sums m discounted rewards and s' is m steps on);
         with ``twin_q``, Q' is the smaller of the two target critics for each k."""
         c = self.cfg
         g2, l2 = torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"])
@@ -174,7 +180,8 @@ class PDQNAgent:
         if c.twin_q:
             q2 = torch.minimum(q2, self.q_values(self.q2_target, f2[2], x2))
         q2 = q2.masked_fill(~torch.as_tensor(b["next_mask"]), -torch.inf)
-        return torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
+        discount = c.gamma if c.n_step == 1 else c.gamma ** torch.as_tensor(b["steps"])
+        return torch.as_tensor(b["reward"]) + discount * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
 
     def losses(self, b: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
         """(eq. 7 Q loss, eq. 8 parameter loss) on a sampled batch. The parameter loss runs Q's

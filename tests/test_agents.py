@@ -219,7 +219,7 @@ def test_corrupt_or_mismatched_policy_is_a_clear_error(tmp_path):
         load_policy(tmp_path / "nothing", "dqn")
 
 
-@pytest.mark.parametrize("extra", [{}, {"twin_q": True}])
+@pytest.mark.parametrize("extra", [{}, {"twin_q": True}, {"n_step": 4}])
 def test_resumed_training_equals_uninterrupted(tmp_path, extra):
     kw = dict(checkpoint_every=1, models=None, agent_config={**FAST_AGENT, **extra}, scenario=FAST_SCENARIO,
               progress=False)
@@ -230,7 +230,7 @@ def test_resumed_training_equals_uninterrupted(tmp_path, extra):
     pd.testing.assert_frame_equal(full, resumed)
     a = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=False)["agent"]
     b = torch.load(tmp_path / "cut" / "checkpoint.pt", weights_only=False)["agent"]
-    for net in ("q", "param", *(("q2", "q2_target") if extra else ())):
+    for net in ("q", "param", *(("q2", "q2_target") if "twin_q" in extra else ())):
         for k in a[net]:
             assert torch.equal(a[net][k], b[net][k])
 
@@ -310,3 +310,79 @@ def test_validation_cases_are_not_test_cases():
     val = {(c.sumo_seed, c.insert_time) for c in validation_cases(ScenarioConfig(), 100)}
     test = {(c.sumo_seed, c.insert_time) for c in load()}
     assert len(val) == 100 and not val & test and not {s for s, _ in val} & {s for s, _ in test}
+
+
+def test_n_step_window_sums_discounted_rewards_and_flushes_at_the_end():
+    from agents.replay import NStepWindow
+
+    w = NStepWindow(3, 0.5)
+    # (grid, logic, action, reward, next_grid, next_logic, done, next_mask)
+    steps = [(f"s{t}", t, f"a{t}", float(2 ** t), f"s{t + 1}", t + 1, float(t == 4), f"m{t + 1}") for t in range(5)]
+    out = [w.push(s, episode_end=s[6] == 1.0) for s in steps]
+    assert [len(o) for o in out] == [0, 0, 1, 1, 3]
+    flat = [t for o in out for t in o]
+    assert [t[0] for t in flat] == ["s0", "s1", "s2", "s3", "s4"]
+    # r_t = 2^t, gamma = 0.5: every full window sums to 3 * 2^t; the flushed tail is shorter
+    assert [t[3] for t in flat] == [3.0, 6.0, 12.0, 16.0, 16.0]
+    assert [t[8] for t in flat] == [3, 3, 3, 2, 1]
+    assert [t[4] for t in flat] == ["s3", "s4", "s5", "s5", "s5"]
+    assert [t[6] for t in flat] == [0.0, 0.0, 1.0, 1.0, 1.0] and flat[0][7] == "m3"
+    assert w.window == []
+    one = NStepWindow(1, 0.99)
+    assert one.push(steps[0], episode_end=False) == [(*steps[0], 1)]
+
+
+def test_prl_n_step_replay_and_target_on_a_real_episode():
+    """With ``n_step = 3`` the stored rewards are the discounted 3-sums of the env's rewards, the
+    next states are three steps on (fewer at the end), and the target discounts by gamma^m."""
+    env = _env("parameterized")
+    agent = make_agent("prl", env.observation_space, env.action_space, seed=1, n_step=3,
+                       learning_starts=10_000, batch_size=16)
+    gamma, scale = agent.cfg.gamma, agent.cfg.reward_scale
+    agent.begin_episode(0)
+    obs, info = env.reset(seed=3)
+    rewards, logics = [], [agent.scaler.logic(obs["logic"])]
+    while True:
+        a = agent.act(obs, info, explore=True)
+        nobs, r, te, tr, info = env.step(a)
+        agent.observe(obs, a, r, nobs, te, tr, info)
+        rewards.append(r * scale)
+        logics.append(agent.scaler.logic(nobs["logic"]))
+        obs = nobs
+        if te or tr:
+            break
+    env.close()
+    n = len(rewards)
+    assert agent.replay.size == n > 5
+    rb = agent.replay
+    for t in range(n):
+        m = min(3, n - t)
+        assert rb.steps[t] == m
+        assert rb.reward[t] == pytest.approx(sum(gamma ** j * rewards[t + j] for j in range(m)), rel=1e-5)
+        np.testing.assert_array_equal(rb.logic[t], logics[t])
+        np.testing.assert_array_equal(rb.next_logic[t], logics[t + m])
+    b = {f: getattr(rb, f)[:n] for f in rb.FIELDS}
+    y = agent.target(b)
+    agent.cfg.n_step = 1  # the 1-step formula, with gamma^m by hand
+    y1 = agent.target({**b, "reward": np.zeros(n, np.float32)})
+    expect = torch.as_tensor(b["reward"]) + torch.as_tensor(gamma ** b["steps"]) * (y1 / gamma)
+    assert torch.allclose(y, expect, atol=1e-5)
+
+
+def test_replay_round_trip_and_files_from_before_n_step(tmp_path):
+    from agents.replay import Replay
+
+    rb = Replay(10, (60, 5), 9, 4)
+    for i in range(4):
+        rb.add(np.zeros((60, 5)), np.full(9, i), np.zeros(4), float(i), np.ones((60, 5)), np.zeros(9), 0.0,
+               np.ones(3, bool), steps=i + 1)
+    rb.save(tmp_path / "r.npz")
+    back = Replay(10, (60, 5), 9, 4)
+    back.load(tmp_path / "r.npz")
+    assert back.size == 4 and list(back.steps[:4]) == [1, 2, 3, 4] and list(back.reward[:4]) == [0, 1, 2, 3]
+    with np.load(tmp_path / "r.npz") as d:  # a buffer saved before the "steps" field existed
+        np.savez(tmp_path / "old.npz", **{k: d[k] for k in d.files if k != "steps"})
+    old = Replay(10, (60, 5), 9, 4)
+    old.steps[:] = 7
+    old.load(tmp_path / "old.npz")
+    assert list(old.steps[:4]) == [1, 1, 1, 1] and list(old.logic[:4, 0]) == [0, 1, 2, 3]
