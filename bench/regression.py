@@ -71,6 +71,12 @@ def claims(df: pd.DataFrame) -> list[tuple[str, str, str]]:
         add(f"DQN has the worst travel time ({s})", ["dqn", *others],
             lambda s=s: m("dqn", s, "travel_time") > max(m(o, s, "travel_time") for o in others),
             lambda s=s: f"dqn {m('dqn', s, 'travel_time'):.1f} s", (s,))
+    # section 5.3 (violin plots): "DDPG is close to the baseline, but much worse in non-coordinate
+    # signal settings due to the increased travel time"
+    ddpg_pen = {s: (lambda s=s: -improvement(m("ddpg", s, "travel_time"), m("baseline", s, "travel_time"))) for s in sig}
+    add("DDPG+LC2013 slower than baseline uncoordinated, more than coordinated", ["ddpg", "baseline"],
+        lambda: 0 < ddpg_pen["uncoordinated"]() and ddpg_pen["uncoordinated"]() > ddpg_pen["coordinated"](),
+        lambda: f"penalty {100 * ddpg_pen['uncoordinated']():.2f}% vs {100 * ddpg_pen['coordinated']():.2f}%")
     out.append(("no collisions", "PASS" if int(df.collisions.sum()) == 0 else "FAIL",
                 f"{int(df.collisions.sum())} in {len(df)} episodes"))
     return out

@@ -35,3 +35,24 @@ def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_pat
     assert status["PRL uses less energy than DDPG+LC2013 (coordinated)"] == "PASS"
     assert status["PRL uses less energy than DDPG+LC2013 (uncoordinated)"] == "NOT CHECKED"
     assert status["PRL saves energy vs baseline (uncoordinated)"] == "PASS"
+
+
+def test_ddpg_uncoordinated_travel_time_claim():
+    import pandas as pd
+
+    from bench.regression import claims
+
+    name = "DDPG+LC2013 slower than baseline uncoordinated, more than coordinated"
+
+    def status(ddpg_c: float, ddpg_u: float) -> str:
+        rows = [{"method": m, "signals": s, "energy": 200.0, "travel_time": t, "collisions": 0}
+                for m, s, t in (("baseline", "coordinated", 190.0), ("baseline", "uncoordinated", 250.0),
+                                ("ddpg", "coordinated", ddpg_c), ("ddpg", "uncoordinated", ddpg_u))]
+        return {n: st for n, st, _ in claims(pd.DataFrame(rows))}[name]
+
+    assert status(190.0, 300.0) == "PASS"  # 0% vs +20%
+    assert status(190.0, 240.0) == "FAIL"  # faster than the baseline uncoordinated
+    assert status(247.0, 300.0) == "FAIL"  # +30% coordinated, +20% uncoordinated
+    rows = [{"method": "baseline", "signals": s, "energy": 1.0, "travel_time": 1.0, "collisions": 0}
+            for s in ("coordinated", "uncoordinated")]
+    assert {n: st for n, st, _ in claims(pd.DataFrame(rows))}[name] == "NOT CHECKED"
