@@ -18,7 +18,7 @@ import pandas as pd
 from bench.mcaplog import LogError
 
 from . import experiments, figures, metrics, tables
-from .load import RunError, load_run, load_steps, stop_lines
+from .load import RunError, component_sums, load_run, load_steps, stop_lines
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
@@ -65,14 +65,26 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
     md += ["## Table 4", "", tables.table4_markdown(t4), "## Statistics", "",
            f"Bootstrap (BCa, {metrics.BOOTSTRAP_RESAMPLES} resamples) {int(metrics.CI_LEVEL * 100)}% CIs; IQM = "
            "25% trimmed mean; P(improve) = chance an episode of the method uses less than one of the baseline.",
-           "", tables.stats_markdown(st), "## Distributions over seed groups (fig:rwd_bar)", ""]
+           "", tables.stats_markdown(st)]
+    warnings = []
+    parts = _return_parts(results, warnings)
+    if parts is not None:
+        parts.to_csv(out / "return_parts.csv", index=False)
+        md += ["## Return by reward component", "",
+               "Mean per episode of each reward component's sum, read from the step logs (form r: speed "
+               "and jerk penalties, lane-change penalty, -energy [Wh] and -phi x time [s] paid per step); "
+               "terminal is eq. 11's -(E_f + phi T_f) paid once at the end, in logs written with "
+               "cost_timing = 'end' (the same sum as energy + time). "
+               "The components add up to the return. Components that are zero for every method are left out. "
+               "Each method is scored with its own reward (DDPG+LC2013's has no lane-change penalty).",
+               "", tables.frame_markdown(parts.set_index(["method", "signals"]), digits=1)]
+    md += ["## Distributions over seed groups (fig:rwd_bar)", ""]
     images = []
     for signals in sorted(set(results.signals)):
         p = figures.violins(groups, methods, signals, out / "figures")
         images.append((f"violin, {signals}", p[0]))
         md += [f"![violin {signals}](figures/{p[0].name})", ""]
     compare = next((m for m in ("prl", "mpdqn", "ddpg", "glosa") if m in methods), None)
-    warnings = []
     if compare is not None and "baseline" in methods:
         md += [f"## Trajectories: baseline against {compare} (fig:compare1/2)", ""]
         if compare != "prl":
@@ -99,7 +111,29 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
                     p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
                     images.append((f"{signals} case {case}", p[0]))
                     md += [f"![{name}](figures/{p[0].name})", ""]
-    return md, images, warnings, [("Table 4", t4), ("Statistics", st)]
+    return md, images, warnings, [("Table 4", t4), ("Statistics", st)] + ([("Return by reward component", parts)]
+                                                                          if parts is not None else [])
+
+
+def _return_parts(results: pd.DataFrame, warnings: list[str]) -> pd.DataFrame | None:
+    """Per method and setting, the mean episode sum of each reward component (from the logs)."""
+    rows = []
+    for r in results.itertuples(index=False):
+        try:
+            sums, warn = component_sums(Path(r.mcap))
+        except (LogError, OSError) as e:
+            warnings.append(str(e))
+            continue
+        if warn:
+            warnings.append(warn)
+        rows.append({"method": r.method, "signals": r.signals, "case": r.case, **sums})
+    if not rows:
+        return None
+    parts = metrics.return_parts(pd.DataFrame(rows))
+    order = {m: i for i, m in enumerate(METHOD_ORDER)}
+    parts = parts.sort_values(["signals", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
+    keep = [c for c in parts.columns if c in ("method", "signals", "episodes") or (parts[c] != 0).any()]
+    return parts[keep].reset_index(drop=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -33,6 +33,19 @@ def load_steps(path: Path) -> tuple[pd.DataFrame, str]:
     return pd.DataFrame(rows), data.warning
 
 
+def component_sums(path: Path) -> tuple[dict[str, float], str]:
+    """The episode's sum of each reward component (``envs.rewards.COMPONENTS``) and of the reward,
+    from the /step channel, and a warning ('' if the log is complete)."""
+    from envs.rewards import COMPONENTS
+
+    data = read_log(path)
+    if not data.steps:
+        raise LogError(f"{path}: the log has no steps")
+    sums = {c: float(sum(getattr(s.components, c) for s in data.steps)) for c in COMPONENTS}
+    sums["reward"] = float(sum(s.reward for s in data.steps))
+    return sums, data.warning
+
+
 def stop_lines(steps: pd.DataFrame) -> tuple[dict[str, float], dict[str, int]]:
     """Stop-line x and the ego's link index per signal, recovered from the log itself."""
     seen = steps[steps.tls != ""]

@@ -168,3 +168,12 @@ def mpr_effect(cells: pd.DataFrame) -> pd.DataFrame:
         ref = g[g.mpr == 0].set_index("signals")[col]
         g[f"{col}_change"] = g.apply(lambda r, c=col, ref=ref: r[c] / ref.get(r.signals, np.nan) - 1.0, axis=1)
     return g
+
+
+def return_parts(parts: pd.DataFrame) -> pd.DataFrame:
+    """Mean episode sum of each reward component per method and setting (one row per episode in,
+    columns method, signals, the components and reward); the components add up to the return."""
+    cols = [c for c in parts.columns if c not in ("method", "signals", "case")]
+    out = parts.groupby(["method", "signals"], sort=False)[cols].mean()
+    out.insert(0, "episodes", parts.groupby(["method", "signals"], sort=False).size())
+    return out.reset_index()

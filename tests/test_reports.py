@@ -51,3 +51,15 @@ def test_report_from_a_run(tmp_path):
     assert "violin-coordinated.png" in figs and "violin-uncoordinated.pdf" in figs
     assert sum(n.startswith("compare-") and n.endswith(".png") for n in figs) == 6  # 3 cases x 2 settings
     assert "<img src='figures/violin-coordinated.png'" in (tmp_path / "report" / "index.html").read_text()
+    # the return by reward component: read from the step logs, adding up to the harness's return
+    assert "## Return by reward component" in text
+    parts = pd.read_csv(tmp_path / "report" / "return_parts.csv")
+    results = pd.read_parquet(tmp_path / "logs" / "smoke" / "results.parquet")
+    assert len(parts) == 4 and parts.episodes.tolist() == [3, 3, 3, 3]
+    comps = [c for c in parts.columns if c not in ("method", "signals", "episodes", "reward")]
+    assert {"speed", "energy", "time"} <= set(comps) and "distance" not in comps  # all-zero columns dropped
+    np.testing.assert_allclose(parts[comps].sum(axis=1), parts.reward, rtol=1e-9)
+    expect = results.groupby(["method", "signals"])["return"].mean()
+    for r in parts.itertuples():
+        assert r.reward == pytest.approx(expect[(r.method, r.signals)], rel=1e-9)
+        assert r.time < 0 and r.energy < 0
