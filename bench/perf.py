@@ -38,6 +38,14 @@ def ratios(path: Path) -> dict[str, float]:
         out["updates_per_s"] = 1.0 / mean["test_learner_update[prl]"]
         out["env_steps_per_s"] = 1.0 / mean["test_training_env_step"]
         out["prl_1000_episodes_min"] = per_step * STEPS_PER_EPISODE * 1000 / 60
+        flops = extra.get("test_learner_update[prl]", {}).get("flops")
+        if flops and "test_matmul_rate" in med:
+            rate = extra["test_matmul_rate"]["flops"] / med["test_matmul_rate"]  # FLOP/s of one core
+            floor = flops / rate  # [s] the update at the matmul rate, no overhead
+            out["update_gflop"] = flops / 1e9
+            out["matmul_gflops"] = rate / 1e9
+            out["update_over_floor"] = med["test_learner_update[prl]"] / floor
+            out["prl_1000_episodes_floor_min"] = floor * STEPS_PER_EPISODE * 1000 / 60
     return out
 
 
@@ -73,6 +81,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{'training env steps/s (act+step+store)':40s} {r['env_steps_per_s']:6.1f}")
         print(f"{'projected 1000-episode PRL run':40s} {r['prl_1000_episodes_min']:6.1f} min "
               f"(target <= 30 min, {STEPS_PER_EPISODE} steps/episode) {'ok' if good else 'MISSED'}")
+    if "update_over_floor" in r:
+        print(f"{'PRL update: floating-point work':40s} {r['update_gflop']:6.3f} GFLOP "
+              f"(one core's matmul rate: {r['matmul_gflops']:.1f} GFLOP/s)")
+        print(f"{'PRL update / its FLOP floor':40s} {r['update_over_floor']:6.2f}x")
+        print(f"{'1000 episodes of updates at the floor':40s} {r['prl_1000_episodes_floor_min']:6.1f} min "
+              f"(no env steps; one update of batch 128 per step)")
     return 0 if ok else 1
 
 

@@ -1,7 +1,9 @@
 """pytest-benchmark: PRL learner updates and training env steps (one thread, as in training).
 
 ``nox -s perf`` reports updates/s and env steps/s; ``bench.perf`` turns them into the projected
-wall time of a 1000-episode run (target: 30 minutes on one core).
+wall time of a 1000-episode run (target: 30 minutes on one core). The update's floating-point
+operations (counted by torch's FlopCounterMode) over this core's measured matmul rate give the
+fastest any implementation of the same update could run here: the FLOP floor.
 """
 from __future__ import annotations
 
@@ -9,8 +11,11 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from torch.utils.flop_counter import FlopCounterMode
 
 from agents.registry import make_agent
+
+MATMUL = (128, 512, 256)  # (batch, in, out): about the size of the networks' first dense layers
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +41,20 @@ def test_learner_update(benchmark, filled, method):
     env, src = filled
     agent = make_agent(method, env.observation_space, env.action_space, seed=0)
     agent.replay = src.replay
+    with FlopCounterMode(display=False) as fc:
+        agent.update()
+    benchmark.extra_info["flops"] = int(fc.get_total_flops())
     benchmark.pedantic(agent.update, rounds=200, iterations=1, warmup_rounds=5)
+
+
+def test_matmul_rate(benchmark):
+    """A plain float32 matmul of the networks' size on one thread: this core's practical FLOP rate."""
+    torch.set_num_threads(1)
+    b, i, o = MATMUL
+    g = torch.Generator().manual_seed(0)
+    x, w = torch.randn(b, i, generator=g), torch.randn(i, o, generator=g)
+    benchmark.extra_info["flops"] = 2 * b * i * o
+    benchmark.pedantic(torch.mm, args=(x, w), rounds=2000, iterations=1, warmup_rounds=50)
 
 
 def test_training_env_step(benchmark, filled):
