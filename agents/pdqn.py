@@ -120,7 +120,7 @@ class PDQNAgent:
         c = self.cfg
         self.epsilon = linear_epsilon(episode, c.eps_init, c.eps_end, c.eps_decay_episodes)
         self.noise.reset()
-        self.window.window = []  # an n-step transition never spans two episodes
+        self.window.reset()  # an n-step transition never spans two episodes
 
     def act(self, obs, info, explore: bool = False):
         mask = np.asarray(info["action_mask"], dtype=bool)
@@ -158,8 +158,9 @@ class PDQNAgent:
     # ------------------------------------------------------------------ learning
     def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
         k, xn = self._last
-        step = (np.array(obs["grid"]), self.scaler.logic(obs["logic"]), np.concatenate([[k], xn]),
-                reward * self.cfg.reward_scale, np.array(next_obs["grid"]), self.scaler.logic(next_obs["logic"]),
+        # the env builds fresh arrays every step, so the window may hold them without copying
+        step = (obs["grid"], self.scaler.logic(obs["logic"]), np.concatenate([[k], xn]),
+                reward * self.cfg.reward_scale, next_obs["grid"], self.scaler.logic(next_obs["logic"]),
                 float(terminated), np.asarray(info["action_mask"], dtype=bool))
         for t in self.window.push(step, terminated or truncated):
             self.replay.add(*t)
@@ -180,6 +181,7 @@ class PDQNAgent:
         if c.twin_q:
             q2 = torch.minimum(q2, self.q_values(self.q2_target, f2[2], x2))
         q2 = q2.masked_fill(~torch.as_tensor(b["next_mask"]), -torch.inf)
+        # the paper's 1-step target keeps its scalar discount (the shipped policies' runs stay bit-identical)
         discount = c.gamma if c.n_step == 1 else c.gamma ** torch.as_tensor(b["steps"])
         return torch.as_tensor(b["reward"]) + discount * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
 

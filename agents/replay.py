@@ -58,6 +58,9 @@ class NStepWindow:
         self.n, self.gamma = n, gamma
         self.window: list[tuple] = []
 
+    def reset(self) -> None:
+        self.window = []
+
     def _emit(self, i: int) -> tuple:
         first, last = self.window[i], self.window[-1]
         ret = sum(self.gamma ** j * t[3] for j, t in enumerate(self.window[i:]))

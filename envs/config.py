@@ -170,9 +170,10 @@ def added_values(scenario: Mapping[str, Any]) -> dict[str, Any]:
     saved them, the pre-field behaviour where it predates them. A resumed run keeps these, also
     when it was already resumed once and so saved the pre-field value explicitly."""
     out: dict[str, Any] = {}
+    full = backfill(scenario)
     for key in ADDED_FIELDS:
         *subs, name = key.split(".")
-        have, into = backfill(scenario), out
+        have, into = full, out
         for s in subs:
             have, into = have.get(s, {}), into.setdefault(s, {})
         into[name] = have[name]
