@@ -74,6 +74,7 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     from .checkpoint import load_policy
 
     torch.set_num_threads(1)
+    t0 = time.perf_counter()
     cfg = cell_scenario(cell.signals, cell.mpr, cell.demand)
     fleet = Fleet(cfg)
     policy = None
@@ -89,15 +90,16 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     summary = fleet.summary(route_length=cfg.n_intersections * cfg.spacing)
     st = fleet.stats
     ratio = st.control_time_s / st.sim_time_s if st.sim_time_s else float("nan")
+    wall = time.perf_counter() - t0
     msgs = [("/fleet/vehicle", schema.FleetVehicle(vid=v, kind=r.kind, depart=r.depart, arrive=r.arrive or 0.0,
                                                      finished=r.arrive is not None, energy=r.energy), i)
             for i, (v, r) in enumerate(sorted(st.records.items()))]
     msgs.append(("/fleet/cell", schema.FleetCell(
         signals=cell.signals, mpr=cell.mpr, demand=cell.demand, rep=cell.rep, seed=cell.seed,
         duration=cell.duration, summary_json=json.dumps(summary), collisions=st.collisions,
-        teleports=st.teleports, control_over_sim=ratio), len(msgs)))
+        teleports=st.teleports, control_over_sim=ratio, wall_s=wall), len(msgs)))
     write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell"})
-    return _row(cell, summary, st.collisions, st.teleports, ratio)
+    return _row(cell, summary, st.collisions, st.teleports, ratio, wall)
 
 
 def _stay(act_batch):
@@ -109,9 +111,12 @@ def _stay(act_batch):
     return policy
 
 
-def _row(cell: Cell, summary: dict, collisions: int, teleports: int, ratio: float) -> dict[str, Any]:
+def _row(cell: Cell, summary: dict, collisions: int, teleports: int, ratio: float,
+         wall: float) -> dict[str, Any]:
+    """One table row; ``wall_s`` is the cell's wall time (0 in cells written before it was logged)."""
     row = {"signals": cell.signals, "mpr": cell.mpr, "demand": cell.demand, "rep": cell.rep, "seed": cell.seed,
-           "collisions": collisions, "teleports": teleports, "control_over_sim": ratio, "mcap": cell.path}
+           "collisions": collisions, "teleports": teleports, "control_over_sim": ratio, "wall_s": wall,
+           "mcap": cell.path}
     for kind in ("all", "cv", "hdv"):
         for k, v in summary[kind].items():
             row[f"{kind}_{k}"] = v
@@ -128,7 +133,7 @@ def _done(cell: Cell) -> dict[str, Any] | None:
     c = data.fleet_cell  # written last: present means the cell finished
     if c is None:
         return None
-    return _row(cell, json.loads(c.summary_json), c.collisions, c.teleports, c.control_over_sim)
+    return _row(cell, json.loads(c.summary_json), c.collisions, c.teleports, c.control_over_sim, c.wall_s)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -58,7 +58,7 @@ MESSAGES: dict[str, list[tuple[str, str, bool]]] = {
         ("signals", "string", False), ("mpr", "double", False), ("demand", "double", False),
         ("rep", "uint32", False), ("seed", "int64", False), ("duration", "double", False),
         ("summary_json", "string", False), ("collisions", "uint32", False), ("teleports", "uint32", False),
-        ("control_over_sim", "double", False),
+        ("control_over_sim", "double", False), ("wall_s", "double", False),
     ],
     "Metadata": [
         ("config_json", "string", False), ("method", "string", False), ("signals", "string", False),

@@ -17,6 +17,7 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path):
     assert _done(cell) is None
     row = run_cell(cell)
     assert row["hdv_vehicles"] > 0 and row["collisions"] == 0
+    assert row["wall_s"] > 0  # the cell's cost is logged, for sweep estimates
     data = read_log(cell.path)
     kinds = [v.kind for v in data.fleet_vehicles]
     assert data.fleet_cell.mpr == 0.5 and 0.3 < kinds.count("cv") / len(kinds) < 0.7  # CVs ran under PRL
