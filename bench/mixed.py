@@ -94,12 +94,13 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     msgs = [("/fleet/vehicle", schema.FleetVehicle(vid=v, kind=r.kind, depart=r.depart, arrive=r.arrive or 0.0,
                                                      finished=r.arrive is not None, energy=r.energy), i)
             for i, (v, r) in enumerate(sorted(st.records.items()))]
-    msgs.append(("/fleet/cell", schema.FleetCell(
+    done = schema.FleetCell(
         signals=cell.signals, mpr=cell.mpr, demand=cell.demand, rep=cell.rep, seed=cell.seed,
         duration=cell.duration, summary_json=json.dumps(summary), collisions=st.collisions,
-        teleports=st.teleports, control_over_sim=ratio, wall_s=wall), len(msgs)))
+        teleports=st.teleports, control_over_sim=ratio, wall_s=wall)
+    msgs.append(("/fleet/cell", done, len(msgs)))
     write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell"})
-    return _row(cell, summary, st.collisions, st.teleports, ratio, wall)
+    return _row(cell, done)
 
 
 def _stay(act_batch):
@@ -111,12 +112,13 @@ def _stay(act_batch):
     return policy
 
 
-def _row(cell: Cell, summary: dict, collisions: int, teleports: int, ratio: float,
-         wall: float) -> dict[str, Any]:
-    """One table row; ``wall_s`` is the cell's wall time (0 in cells written before it was logged)."""
+def _row(cell: Cell, c) -> dict[str, Any]:
+    """One table row from the cell's ``/fleet/cell`` message (``wall_s`` reads 0 in cells written
+    before it was logged)."""
+    summary = json.loads(c.summary_json)
     row = {"signals": cell.signals, "mpr": cell.mpr, "demand": cell.demand, "rep": cell.rep, "seed": cell.seed,
-           "collisions": collisions, "teleports": teleports, "control_over_sim": ratio, "wall_s": wall,
-           "mcap": cell.path}
+           "collisions": c.collisions, "teleports": c.teleports, "control_over_sim": c.control_over_sim,
+           "wall_s": c.wall_s, "mcap": cell.path}
     for kind in ("all", "cv", "hdv"):
         for k, v in summary[kind].items():
             row[f"{kind}_{k}"] = v
@@ -133,7 +135,7 @@ def _done(cell: Cell) -> dict[str, Any] | None:
     c = data.fleet_cell  # written last: present means the cell finished
     if c is None:
         return None
-    return _row(cell, json.loads(c.summary_json), c.collisions, c.teleports, c.control_over_sim, c.wall_s)
+    return _row(cell, c)
 
 
 def main(argv: list[str] | None = None) -> int:
