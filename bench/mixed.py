@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from dataclasses import dataclass
@@ -77,11 +78,12 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     t0 = time.perf_counter()
     cfg = cell_scenario(cell.signals, cell.mpr, cell.demand)
     fleet = Fleet(cfg)
-    policy = None
+    policy, policy_sha = None, ""
     if cell.mpr > 0:
         agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space)
-        state, _ = load_policy(Path(cell.policy_dir), "prl")
+        state, manifest = load_policy(Path(cell.policy_dir), "prl")
         agent.load_state_dict(state)
+        policy_sha = manifest["sha256"]
         policy = agent.act_batch if cell.cv_lateral == "policy" else _stay(agent.act_batch)
     fleet.start(cell.seed)
     for _ in range(int(cell.duration / cfg.step_length)):
@@ -99,8 +101,9 @@ def run_cell(cell: Cell) -> dict[str, Any]:
         duration=cell.duration, summary_json=json.dumps(summary), collisions=st.collisions,
         teleports=st.teleports, control_over_sim=ratio, wall_s=wall)
     msgs.append(("/fleet/cell", done, len(msgs)))
-    write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell"})
-    return _row(cell, done)
+    write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell",
+                                          "policy_sha256": policy_sha})
+    return _row(done, cell.path)
 
 
 def _stay(act_batch):
@@ -112,13 +115,13 @@ def _stay(act_batch):
     return policy
 
 
-def _row(cell: Cell, c) -> dict[str, Any]:
-    """One table row from the cell's ``/fleet/cell`` message (``wall_s`` reads 0 in cells written
-    before it was logged)."""
+def _row(c, path: str) -> dict[str, Any]:
+    """One table row from a finished cell's ``/fleet/cell`` message (``wall_s`` reads 0 in cells
+    written before it was logged)."""
     summary = json.loads(c.summary_json)
-    row = {"signals": cell.signals, "mpr": cell.mpr, "demand": cell.demand, "rep": cell.rep, "seed": cell.seed,
-           "collisions": c.collisions, "teleports": c.teleports, "control_over_sim": c.control_over_sim,
-           "wall_s": c.wall_s, "mcap": cell.path}
+    row = {"signals": c.signals, "mpr": c.mpr, "demand": c.demand, "rep": c.rep, "seed": c.seed,
+           "duration": c.duration, "collisions": c.collisions, "teleports": c.teleports,
+           "control_over_sim": c.control_over_sim, "wall_s": c.wall_s, "mcap": str(path)}
     for kind in ("all", "cv", "hdv"):
         for k, v in summary[kind].items():
             row[f"{kind}_{k}"] = v
@@ -127,7 +130,24 @@ def _row(cell: Cell, c) -> dict[str, Any]:
     return row
 
 
+class CellMismatch(ValueError):
+    """A finished cell file that was made with other settings than the ones asked for."""
+
+
+def _policy_sha(cell: Cell) -> str:
+    if cell.mpr == 0:
+        return ""
+    try:
+        return json.loads((Path(cell.policy_dir) / "manifest.json").read_text()).get("sha256", "")
+    except (OSError, json.JSONDecodeError):
+        return ""  # run_cell's load_policy reports it
+
+
 def _done(cell: Cell) -> dict[str, Any] | None:
+    """The row of a finished cell file; None when the file is missing or unfinished (it is then
+    rerun). A finished file made with another duration or seed, or (for cells with CVs) another
+    PRL policy than the shipped one, raises CellMismatch: it is never silently reused or
+    overwritten."""
     try:
         data = read_log(cell.path)
     except Exception:
@@ -135,7 +155,46 @@ def _done(cell: Cell) -> dict[str, Any] | None:
     c = data.fleet_cell  # written last: present means the cell finished
     if c is None:
         return None
-    return _row(cell, c)
+    stored_sha = (data.meta or {}).get("policy_sha256")  # absent in cells written before it was logged
+    bad = [f"{name} {got} (asked {want})" for name, got, want in (
+        ("duration", c.duration, cell.duration), ("seed", c.seed, cell.seed),
+        ("PRL policy sha256", (stored_sha or "")[:12], _policy_sha(cell)[:12]))
+        if got != want and not (name.startswith("PRL") and stored_sha is None)]
+    if bad:
+        raise CellMismatch(f"{cell.path}: finished with {', '.join(bad)}; use another --run-id, or move the "
+                           f"file away to rerun it")
+    return _row(c, cell.path)
+
+
+CELL_NAME = re.compile(r"^mpr(?P<mpr>\d\.\d)-d(?P<demand>[\d.]+)-r(?P<rep>\d+)(?P<suffix>-[a-z]+)?\.mcap$")
+
+
+def collect(root: Path, suffix: str) -> dict[str, dict[str, Any]]:
+    """Rows of every finished cell under ``root`` with this suffix (whatever grid made them), by path."""
+    rows = {}
+    for path in sorted(root.glob("*/mpr*.mcap")):
+        m = CELL_NAME.match(path.name)
+        if not m or (m["suffix"] or "") != suffix:
+            continue
+        try:
+            c = read_log(path).fleet_cell
+        except Exception:
+            continue
+        if c is not None:
+            rows[str(path)] = _row(c, str(path))
+    return rows
+
+
+def write_table(rows: dict[str, dict[str, Any]], table: Path) -> pd.DataFrame:
+    """The cells' table, replaced atomically (a kill never leaves half a parquet)."""
+    df = pd.DataFrame(list(rows.values()))
+    if not df.empty:
+        df = df.sort_values(["signals", "mpr", "demand", "rep"], ignore_index=True)
+    table.parent.mkdir(parents=True, exist_ok=True)
+    tmp = table.with_suffix(".parquet.tmp")
+    df.to_parquet(tmp, index=False)
+    tmp.replace(table)
+    return df
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -168,23 +227,28 @@ def main(argv: list[str] | None = None) -> int:
     cells = [Cell(s, m, d, r, args.duration, str(root / s / f"mpr{m:.1f}-d{d:g}-r{r}{suffix}.mcap"),
                   str(policy_dir("prl", s, MODELS)), args.cv_lateral)
              for s in args.signals for m in args.mpr for d in args.demand for r in range(args.reps)]
-    rows, todo = [], []
-    for c in cells:
-        done = _done(c)
-        (rows.append(done) if done else todo.append(c))
+    table = root / f"mixed{suffix}.parquet"  # the report reads mixed.parquet: an ablation never lands there
+    todo = []
+    try:
+        for c in cells:
+            if _done(c) is None:
+                todo.append(c)
+    except CellMismatch as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    rows = collect(root, suffix)  # every finished cell in the run, not only this grid's
+    write_table(rows, table)
     t0 = time.perf_counter()
     it = (run_local(todo, args.workers, run_cell) if args.executor == "local"
           else run_ray(todo, args.address, args.workers, run_cell))
     try:
         for row in tqdm(it, total=len(todo), desc="cells", unit="cell"):
-            rows.append(row)
+            rows[row["mcap"]] = row
+            write_table(rows, table)  # a killed sweep leaves the table of its finished cells
     except CheckpointError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    df = pd.DataFrame(rows).sort_values(["signals", "mpr", "demand", "rep"], ignore_index=True)
-    root.mkdir(parents=True, exist_ok=True)
-    table = root / f"mixed{suffix}.parquet"  # the report reads mixed.parquet: an ablation never lands there
-    df.to_parquet(table, index=False)
+    df = write_table(rows, table)
     cols = [c for c in ("all_energy", "all_speed", "all_energy_per_km", "all_space_mean_speed", "all_unfinished",
                         "cv_longest_stall_s") if c in df.columns]
     print(df.groupby(["signals", "mpr"])[cols].mean().round(2).to_string())

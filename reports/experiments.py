@@ -72,7 +72,15 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
                 md += [f"![scenario {name}](figures/{p[0].name})", ""]
     mixed = run_dir / "mixed" / "mixed.parquet"
     if mixed.is_file():
-        cells = metrics.mixed_cells(pd.read_parquet(mixed))
+        rows = pd.read_parquet(mixed)
+        cover = metrics.mixed_coverage(rows)
+        if cover.missing.any():
+            warnings.append(f"{mixed}: the mixed-traffic sweep is unfinished ({int(cover.cells.sum())} cells, "
+                            f"{int(cover.missing.sum())} missing from the grid they span); its figure and "
+                            f"tables show the finished cells only")
+        if "duration" in rows and rows.duration.nunique() > 1:
+            warnings.append(f"{mixed}: cells of different durations ({sorted(rows.duration.unique())} s) are mixed")
+        cells = metrics.mixed_cells(rows)
         p = figures.mixed_panels(cells, figs)
         images.append(("mixed traffic", p[0]))
         effect = metrics.mpr_effect(cells)
@@ -81,7 +89,10 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
             "energy", "travel_time", "speed", "energy_per_km", "space_mean_speed", "unfinished"))
             if c in cells.columns] + [c for c in ("cv_stall_steps", "cv_longest_stall_s") if c in cells.columns]
         md += ["## Mixed traffic (fig:dd, fig:avg)", "", f"![mixed traffic](figures/{p[0].name})", "",
-               "Fleet metrics by MPR (mean over demands), change against MPR = 0. `energy` and `speed` "
+               "Cells finished per setting and MPR (`missing`: demand x repetition pairs of the "
+               "setting's grid not run yet):", "", _table(cover.set_index(["signals", "mpr"])), "",
+               "Fleet metrics by MPR (mean over the demands that every MPR level has), change against "
+               "MPR = 0. `energy` and `speed` "
                "are the paper's means over the vehicles that finished in the run; `energy_per_km` and "
                "`space_mean_speed` count every vehicle inserted, finished or not, so a policy that "
                "congests the arterial cannot look better by keeping its slow vehicles inside:", "",

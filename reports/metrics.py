@@ -157,16 +157,41 @@ MPR_EFFECT_COLUMNS = ("all_energy", "all_speed", "all_energy_per_km", "all_space
                       "all_pending", "hdv_energy_per_km", "hdv_space_mean_speed")
 
 
+def common_demands(cells: pd.DataFrame) -> pd.DataFrame:
+    """Per signal setting, only the demands present at every MPR level of that setting."""
+    keep = []
+    for _, g in cells.groupby("signals"):
+        levels = g.groupby("demand").mpr.nunique()
+        keep.append(g[g.demand.isin(levels[levels == g.mpr.nunique()].index)])
+    return pd.concat(keep) if keep else cells
+
+
+def mixed_coverage(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per signal setting and MPR: the cells finished, the demands and repetitions they cover, and
+    the (demand, rep) pairs of that setting's grid (every demand x rep seen in it) still missing."""
+    out = []
+    for signals, g in rows.groupby("signals"):
+        grid = {(d, r) for d in g.demand.unique() for r in g.rep.unique()}
+        for mpr, h in g.groupby("mpr"):
+            have = set(zip(h.demand, h.rep))
+            out.append({"signals": signals, "mpr": mpr, "cells": len(h),
+                        "demands": " ".join(f"{d:g}" for d in sorted(h.demand.unique())),
+                        "reps": h.rep.nunique(), "missing": len(grid - have)})
+    return pd.DataFrame(out)
+
+
 def mpr_effect(cells: pd.DataFrame) -> pd.DataFrame:
     """Per signal setting: fleet metrics by MPR (mean over demands and repetitions), and the
-    change against MPR = 0. The finishers' means (``all_energy``, ``all_speed``) are the paper's;
+    change against MPR = 0, over the demands that every MPR level of the setting has (so that an
+    unfinished sweep compares like with like). The finishers' means (``all_energy``, ``all_speed``) are the paper's;
     the per-km and space-mean ones count every vehicle inserted (columns missing from older runs
     are left out)."""
     cols = [c for c in MPR_EFFECT_COLUMNS if c in cells.columns]
-    g = cells.groupby(["signals", "mpr"])[cols].mean().reset_index()
+    g = common_demands(cells).groupby(["signals", "mpr"])[cols].mean().reset_index()
     for col in cols:
         ref = g[g.mpr == 0].set_index("signals")[col]
-        g[f"{col}_change"] = g.apply(lambda r, c=col, ref=ref: r[c] / ref.get(r.signals, np.nan) - 1.0, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):  # 0/0 (e.g. nothing pending at MPR 0) is NaN
+            g[f"{col}_change"] = g.apply(lambda r, c=col, ref=ref: r[c] / ref.get(r.signals, np.nan) - 1.0, axis=1)
     return g
 
 

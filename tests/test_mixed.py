@@ -33,6 +33,17 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path):
     assert "## Mixed traffic" in text and (tmp_path / "report" / "figures" / "mixed-traffic.png").is_file()
     effect = mpr_effect(mixed_cells(pd.read_parquet(run / "mixed" / "mixed.parquet")))
     assert effect.all_energy_change.iloc[0] == 0 and effect.all_energy_change.notna().all()
+    # a finished cell of another PRL policy is not reused for the one shipped now
+    import json
+
+    import pytest
+
+    from bench.mixed import CellMismatch
+
+    man = tmp_path / "models" / "prl-uncoordinated" / "manifest.json"
+    man.write_text(json.dumps({**json.loads(man.read_text()), "sha256": "0" * 64}))
+    with pytest.raises(CellMismatch, match="PRL policy sha256"):
+        _done(cell)
 
 
 def test_mixed_claims_pass_fail_and_not_checked():
@@ -111,3 +122,34 @@ def test_stay_ablation_masks_both_lane_changes():
     masks = np.ones((4, 3), np.int8)
     policy(None, None, masks)
     assert seen[0].tolist() == [[False, True, False]] * 4 and masks.all()  # the caller's masks untouched
+
+
+def test_sweep_table_collects_every_finished_cell_and_refuses_a_mismatch(tmp_path, capsys):
+    """MPR-0 cells (SUMO alone, 20 s): a second sweep over another demand keeps the first sweep's
+    cell in the table; a rerun asking another duration for a finished cell is refused and the cell
+    file is left as it was."""
+    from bench.mixed import main
+
+    args = ["--signals", "coordinated", "--mpr", "0", "--reps", "1", "--workers", "1", "--logs", str(tmp_path),
+            "--run-id", "m"]
+    assert main(args + ["--demand", "200", "--duration", "20"]) == 0
+    assert main(args + ["--demand", "300", "--duration", "20"]) == 0
+    table = pd.read_parquet(tmp_path / "m" / "mixed" / "mixed.parquet")
+    assert sorted(table.demand) == [200.0, 300.0] and (table.duration == 20.0).all()
+    cell = tmp_path / "m" / "mixed" / "coordinated" / "mpr0.0-d200-r0.mcap"
+    before = cell.read_bytes()
+    assert main(args + ["--demand", "200", "--duration", "30"]) == 2
+    assert "duration 20.0 (asked 30.0)" in capsys.readouterr().err
+    assert cell.read_bytes() == before
+
+
+def test_mixed_coverage_and_like_for_like_effect():
+    from reports.metrics import mixed_coverage
+
+    rows = pd.DataFrame([{"signals": "coordinated", "mpr": m, "demand": d, "rep": 0, "all_energy_per_km": e}
+                         for m, d, e in ((0.0, 200, 100.0), (0.0, 700, 300.0), (1.0, 200, 90.0))])
+    cover = mixed_coverage(rows).set_index("mpr")
+    assert cover.loc[0.0, "missing"] == 0 and cover.loc[1.0, "missing"] == 1 and cover.loc[1.0, "demands"] == "200"
+    effect = mpr_effect(mixed_cells(rows)).set_index("mpr")
+    # MPR 1 has only 200 veh/h/lane: both levels are compared there (90 / 100), not against the 200-700 mean
+    assert abs(effect.loc[1.0, "all_energy_per_km_change"] - (-0.1)) < 1e-12
