@@ -8,13 +8,16 @@
 A job trains PRL with one reward configuration (``bench.train``, so it resumes from its own
 checkpoints under ``$ECODRIVE_RUNS/sweeps/<study>/``), copies its ``/train`` log into
 ``<logs>/<run-id>/<study>/<name>/train.mcap``, then runs the exported (validation-selected) policy
-greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it. A rerun skips
-what is finished. ``sweep.parquet`` (one row per job) and ``episodes.parquet`` (one row per test
-episode) collect the results; ``python -m reports.build`` draws them.
+greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it, and writes
+``job.json`` there last. A rerun skips what is finished; a finished folder made with other values
+(episodes, cases, reward, ...) is refused, never overwritten. ``sweep.parquet`` (one row per
+finished job of the study folder, whatever command ran it) and ``episodes.parquet`` (one row per
+test episode) collect the results after every job; ``python -m reports.build`` draws them.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import sys
 import time
@@ -96,12 +99,69 @@ def run_job(job: Job) -> dict[str, Any]:
     env.close()
     ep = pd.DataFrame(rows)
     ep.to_parquet(log_dir / "episodes.parquet", index=False)
-    return {"study": job.study, "config": job.name, "seed": job.seed, "signals": job.signals,
-            **{f"reward_{k}": v for k, v in job.reward.items()}, "episodes": job.episodes,
-            "selected_episode": manifest.get("selected_episode"), "cases": len(ep),
-            "energy": ep.energy.mean(), "travel_time": ep.travel_time.mean(),
-            "collisions": int(ep.collisions.sum()), "lane_changes": ep.lane_changes_applied.mean(),
-            "job_wall_s": time.perf_counter() - t0, "log_dir": str(log_dir)}
+    row = {"study": job.study, "config": job.name, "seed": job.seed, "signals": job.signals,
+           **{f"reward_{k}": v for k, v in job.reward.items()}, "episodes": job.episodes,
+           "selected_episode": manifest.get("selected_episode"), "cases": len(ep),
+           "energy": ep.energy.mean(), "travel_time": ep.travel_time.mean(),
+           "collisions": int(ep.collisions.sum()), "lane_changes": ep.lane_changes_applied.mean(),
+           "job_wall_s": time.perf_counter() - t0, "log_dir": str(log_dir)}
+    tmp = log_dir / "job.json.tmp"
+    tmp.write_text(json.dumps({"job": _identity(job), "row": row}, default=float))
+    tmp.replace(log_dir / "job.json")  # written last: present means the job finished
+    return row
+
+
+def _identity(job: Job) -> dict[str, Any]:
+    """What makes a job's results: a finished log folder made with other values is not reused."""
+    return {"signals": job.signals, "seed": job.seed, "episodes": job.episodes, "cases": job.cases,
+            "reward": job.reward, "validation_cases": job.validation_cases, "max_episode_time": job.max_episode_time}
+
+
+def finished(root: Path) -> dict[str, dict[str, Any]]:
+    """Rows of every finished job under a study folder (whatever command made them), by log folder."""
+    rows = {}
+    for path in sorted(root.glob("*/job.json")):
+        try:
+            rows[str(path.parent)] = json.loads(path.read_text())["row"]
+        except (OSError, ValueError, KeyError):
+            continue
+    return rows
+
+
+def is_finished(job: Job) -> bool:
+    """Whether the job's log folder holds this job, finished; ConfigError if it holds a finished
+    job made with other values."""
+    path = Path(job.log_dir) / "job.json"
+    if not path.is_file():
+        return False
+    try:
+        stored = json.loads(path.read_text())["job"]
+    except (OSError, ValueError, KeyError):
+        return False  # unreadable: the job reruns and rewrites it
+    want = json.loads(json.dumps(_identity(job), default=float))
+    diff = [f"{k} {stored.get(k)!r} (asked {v!r})" for k, v in want.items() if stored.get(k) != v]
+    if diff:
+        raise ConfigError(f"{job.log_dir}: finished with {', '.join(diff)}; use another --run-id, or move the "
+                          f"folder away to rerun it")
+    return True
+
+
+def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
+    """``sweep.parquet`` and ``episodes.parquet`` of the study folder, replaced atomically."""
+    df = pd.DataFrame(list(rows.values()))
+    if not df.empty:
+        df = df.sort_values(["config", "seed"], ignore_index=True)
+    _atomic_parquet(df, root / "sweep.parquet")
+    episodes = [pd.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()]
+    if episodes:
+        _atomic_parquet(pd.concat(episodes, ignore_index=True), root / "episodes.parquet")
+    return df
+
+
+def _atomic_parquet(df: pd.DataFrame, path: Path) -> None:
+    tmp = path.with_suffix(".parquet.tmp")
+    df.to_parquet(tmp, index=False)
+    tmp.replace(path)
 
 
 def jobs(study: str, args: argparse.Namespace) -> list[Job]:
@@ -169,14 +229,19 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:
         print(f"error: cannot write {root}: {e.strerror}", file=sys.stderr)
         return 2
+    try:
+        todo = [job for job in todo if not is_finished(job)]
+    except ConfigError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    rows = finished(root)  # every finished job of the study, not only this command's
+    write_tables(root, rows)
     it = (run_local(todo, args.workers, run_job) if args.executor == "local"
           else run_ray(todo, args.address, args.workers, run_job))
-    rows = [row for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job")]
-    df = pd.DataFrame(rows).sort_values(["config", "seed"], ignore_index=True)
-    df.to_parquet(root / "sweep.parquet", index=False)
-    episodes = [pd.read_parquet(Path(r) / "episodes.parquet") for r in df.log_dir if (Path(r) / "episodes.parquet").is_file()]
-    if episodes:
-        pd.concat(episodes, ignore_index=True).to_parquet(root / "episodes.parquet", index=False)
+    for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
+        rows[row["log_dir"]] = row
+        write_tables(root, rows)  # a killed sweep leaves the tables of its finished jobs
+    df = write_tables(root, rows)
     print(df[["config", "seed", "selected_episode", "energy", "travel_time", "collisions"]].round(2).to_string(index=False))
     print(f"results: {root / 'sweep.parquet'}")
     return 0

@@ -51,3 +51,21 @@ def test_bad_sweep_input_is_one_line(tmp_path, capsys):
     assert e.value.code == 2 and "choose one of reward, heatmap" in capsys.readouterr().err
     rc = sweep.main(["heatmap", "--values", "2000", "--logs", str(tmp_path)])
     assert rc == 2 and "2000" in capsys.readouterr().err
+
+
+def test_sweep_table_keeps_earlier_jobs_and_refuses_a_mismatch(tmp_path, monkeypatch, capsys):
+    """Two commands over different heatmap cells add up in one table; asking a finished cell again
+    with another episode count is refused and its folder is left as it was."""
+    monkeypatch.setattr(bench.train, "RUNS", tmp_path / "runs")
+    common = ["--episodes", "1", "--cases", "1", "--validation-cases", "1", "--max-episode-time", "30",
+              "--workers", "1", "--logs", str(tmp_path / "logs"), "--run-id", "t"]
+    assert sweep.main(["heatmap", "--values", "10"] + common) == 0
+    assert sweep.main(["heatmap", "--values", "50"] + common) == 0
+    root = tmp_path / "logs" / "t" / "heatmap"
+    assert pd.read_parquet(root / "sweep.parquet").config.tolist() == ["s10-j10", "s50-j50"]
+    assert len(pd.read_parquet(root / "episodes.parquet")) == 2
+    before = {p.name: p.read_bytes() for p in (root / "s10-j10-s0").iterdir()}
+    common[1] = "2"
+    assert sweep.main(["heatmap", "--values", "10"] + common) == 2
+    assert "episodes 1 (asked 2)" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in (root / "s10-j10-s0").iterdir()} == before
