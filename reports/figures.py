@@ -16,6 +16,8 @@ LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
 def save(fig, out: Path, name: str) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}.png", out / f"{name}.pdf"]
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()  # stacked panels: a title must not sit on the x label above it
     fig.savefig(paths[0], dpi=120, bbox_inches="tight")
     fig.savefig(paths[1], bbox_inches="tight")
     plt.close(fig)
