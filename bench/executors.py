@@ -6,6 +6,7 @@ on the executor (tests compare them).
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -57,9 +58,30 @@ def run_task(task: Task) -> dict[str, Any]:
     return row
 
 
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def _die_with_parent(parent: int) -> None:
+    """Worker initializer: on Linux, ask for SIGTERM when the process that started the pool dies
+    (a killed sweep must not leave orphans computing its cells); elsewhere nothing."""
+    import ctypes
+    import signal
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # it died before prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
 def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = run_task) -> Iterator[dict[str, Any]]:
     ctx = mp.get_context("spawn")  # a fresh interpreter per worker: no libsumo state is inherited
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_die_with_parent,
+                             initargs=(os.getpid(),)) as pool:
         futures = [pool.submit(fn, t) for t in tasks]
         try:
             for f in as_completed(futures):

@@ -64,6 +64,41 @@ def test_killed_run_resumes_to_the_same_results(local_results, tmp_path):
     pd.testing.assert_frame_equal(df_local[COMPARE], df[COMPARE])
 
 
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\nState:\tZ" not in state  # a zombie has exited
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux-only")
+def test_killing_the_parent_stops_its_workers(tmp_path):
+    """A sweep killed by its PID alone (not its process group) leaves no worker computing on."""
+    cmd = [sys.executable, "-m", "bench.run", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
+           "--workers", "1"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        workers: list[int] = []
+        deadline = time.time() + 120
+        while time.time() < deadline and not (workers and list(tmp_path.rglob("*.mcap*"))):
+            kids = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
+            workers = [int(k) for k in kids if b"spawn_main" in Path(f"/proc/{k}/cmdline").read_bytes()]
+            time.sleep(0.05)
+        assert workers, "no pool worker started"
+        proc.kill()
+        proc.wait()
+        deadline = time.time() + 20
+        while time.time() < deadline and any(_alive(w) for w in workers):
+            time.sleep(0.1)
+        assert not any(_alive(w) for w in workers)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
 @pytest.mark.parametrize("args, words", [
     (["--methods", "teleporter"], ["teleporter", "baseline, glosa, baseline0, prl"]),
     (["--profile", "huge"], ["huge", "smoke, paper, full"]),
