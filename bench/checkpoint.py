@@ -33,6 +33,13 @@ def atomic_torch_save(obj: Any, path: Path) -> None:
     os.replace(tmp, path)
 
 
+def atomic_parquet(df: Any, path: Path) -> None:
+    """A table written whole: a kill leaves the old file or the new one, never half of either."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    df.to_parquet(tmp, index=False)
+    os.replace(tmp, path)
+
+
 def policy_dir(method: str, signals: str, root: Path = MODELS) -> Path:
     return root / f"{method}-{signals}"
 

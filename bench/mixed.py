@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from envs.config import SIGNALS
 
-from .checkpoint import MODELS, CheckpointError, policy_dir
+from .checkpoint import MODELS, CheckpointError, atomic_parquet, policy_dir
 from .executors import EXECUTORS, run_local, run_ray
 from .mcaplog import read_log, write_records
 from .provenance import git_sha
@@ -191,9 +191,7 @@ def write_table(rows: dict[str, dict[str, Any]], table: Path) -> pd.DataFrame:
     if not df.empty:
         df = df.sort_values(["signals", "mpr", "demand", "rep"], ignore_index=True)
     table.parent.mkdir(parents=True, exist_ok=True)
-    tmp = table.with_suffix(".parquet.tmp")
-    df.to_parquet(tmp, index=False)
-    tmp.replace(table)
+    atomic_parquet(df, table)
     return df
 
 

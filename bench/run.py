@@ -23,7 +23,7 @@ from agents.registry import LEARNING, METHODS
 from envs.config import SIGNALS
 
 from .cases import load
-from .checkpoint import MODELS, CheckpointError, policy_dir, sha256
+from .checkpoint import MODELS, CheckpointError, atomic_parquet, policy_dir, sha256
 from .executors import EXECUTORS, Task, run_local, run_ray
 from .mcaplog import episode_summary
 from .provenance import git_sha, package_versions
@@ -156,9 +156,7 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     df = pd.DataFrame(rows).rename(columns={"return_": "return", "case_index": "case", "sumo_seed": "seed"})
     df = df.sort_values(["signals", "method", "case"], ignore_index=True)
     ran = df["episode_wall_s"].dropna()
-    tmp = run_dir / ".results.parquet.tmp"
-    df[list(KEEP)].to_parquet(tmp, index=False)
-    os.replace(tmp, run_dir / "results.parquet")
+    atomic_parquet(df[list(KEEP)], run_dir / "results.parquet")
     shas = {f"{m}-{s}": sha256(policy_dir(m, s, opts["models"]) / "policy.pt")
             for m, s in pairs if m in LEARNING}
     manifest = {

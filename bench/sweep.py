@@ -30,6 +30,7 @@ from tqdm import tqdm
 
 from envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig
 
+from .checkpoint import atomic_parquet
 from .executors import EXECUTORS, run_local, run_ray
 from .mcaplog import episode_summary
 
@@ -151,17 +152,12 @@ def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
     df = pd.DataFrame(list(rows.values()))
     if not df.empty:
         df = df.sort_values(["config", "seed"], ignore_index=True)
-    _atomic_parquet(df, root / "sweep.parquet")
+    atomic_parquet(df, root / "sweep.parquet")
     episodes = [pd.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()]
     if episodes:
-        _atomic_parquet(pd.concat(episodes, ignore_index=True), root / "episodes.parquet")
+        atomic_parquet(pd.concat(episodes, ignore_index=True), root / "episodes.parquet")
     return df
 
-
-def _atomic_parquet(df: pd.DataFrame, path: Path) -> None:
-    tmp = path.with_suffix(".parquet.tmp")
-    df.to_parquet(tmp, index=False)
-    tmp.replace(path)
 
 
 def jobs(study: str, args: argparse.Namespace) -> list[Job]:
