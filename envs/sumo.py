@@ -19,8 +19,12 @@ _ACTIVE: "SumoSession | None" = None
 VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_SPEED
 _GREEN = frozenset("gG")
 
-# speed mode 31: all checks on, so SUMO's Krauss safe speed clips any commanded speed
-SPEED_MODE_SAFE = 31
+# speed mode 27 = 31 without bit 2 ("regard maximum deceleration"): SUMO's Krauss safe speed clips
+# any commanded speed, and when it asks for more braking than the vType's decel (4 m/s^2 = -a_min)
+# the vehicle brakes harder, up to its emergencyDecel, as SUMO's own drivers do. With bit 2 on, an
+# HDV stopping at a yellow light at its decel of 4.5 m/s^2 in front of a CV (mixed traffic) ended
+# in a collision. Commanded speeds never need more than the action bound a_min.
+SPEED_MODE_SAFE = 27
 # lane-change mode 512: no autonomous changes; TraCI requests respect the others' gaps
 LC_MODE_EXTERNAL = 512
 LC_MODE_DEFAULT = 1621  # SUMO's default (LC2013 decides)

@@ -153,3 +153,16 @@ def test_mixed_coverage_and_like_for_like_effect():
     effect = mpr_effect(mixed_cells(rows)).set_index("mpr")
     # MPR 1 has only 200 veh/h/lane: both levels are compared there (90 / 100), not against the 200-700 mean
     assert abs(effect.loc[1.0, "all_energy_per_km_change"] - (-0.1)) < 1e-12
+
+
+def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
+    """Uncoordinated, MPR 0.6, 200 veh/h/lane, the shipped PRL policy: at t = 493 s an HDV stops
+    at a yellow light at its decel of 4.5 m/s^2, 13 m ahead of a CV whose decel (the action bound)
+    is 4 m/s^2. With speed mode 31 the CV could not brake harder than 4 m/s^2 and hit it; the
+    safety layer now lets SUMO brake it as hard as its safe speed asks (speed mode 27)."""
+    from bench.checkpoint import policy_dir
+
+    cell = Cell("uncoordinated", 0.6, 200, 0, 520.0, str(tmp_path / "cell.mcap"),
+                str(policy_dir("prl", "uncoordinated")))
+    row = run_cell(cell)
+    assert row["cv_vehicles"] > 0 and row["collisions"] == 0 and row["teleports"] == 0
