@@ -103,7 +103,7 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     msgs.append(("/fleet/cell", done, len(msgs)))
     write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell",
                                           "policy_sha256": policy_sha})
-    return _row(done, cell.path)
+    return _row(done, cell.path, policy_sha)
 
 
 def _stay(act_batch):
@@ -115,13 +115,15 @@ def _stay(act_batch):
     return policy
 
 
-def _row(c, path: str) -> dict[str, Any]:
-    """One table row from a finished cell's ``/fleet/cell`` message (``wall_s`` reads 0 in cells
-    written before it was logged)."""
+def _row(c, path: str, policy_sha: str | None) -> dict[str, Any]:
+    """One table row from a finished cell's ``/fleet/cell`` message and the sha256 of the PRL policy
+    that drove it (None in cells written before it was logged; ``wall_s`` reads 0 in cells written
+    before it was)."""
     summary = json.loads(c.summary_json)
     row = {"signals": c.signals, "mpr": c.mpr, "demand": c.demand, "rep": c.rep, "seed": c.seed,
            "duration": c.duration, "collisions": c.collisions, "teleports": c.teleports,
-           "control_over_sim": c.control_over_sim, "wall_s": c.wall_s, "mcap": str(path)}
+           "control_over_sim": c.control_over_sim, "wall_s": c.wall_s, "policy_sha256": policy_sha,
+           "mcap": str(path)}
     for kind in ("all", "cv", "hdv"):
         for k, v in summary[kind].items():
             row[f"{kind}_{k}"] = v
@@ -143,30 +145,38 @@ def _policy_sha(cell: Cell) -> str:
         return ""  # run_cell's load_policy reports it
 
 
-def _done(cell: Cell) -> dict[str, Any] | None:
-    """The row of a finished cell file; None when the file is missing or unfinished (it is then
-    rerun). A finished file made with another duration or seed, or (for cells with CVs) another
-    PRL policy than the shipped one, raises CellMismatch: it is never silently reused or
-    overwritten."""
+def _read(path: Path) -> dict[str, Any] | None:
+    """The row of a finished cell file; None when it is missing, unreadable or unfinished."""
     try:
-        data = read_log(cell.path)
+        data = read_log(path)
     except Exception:
         return None
     c = data.fleet_cell  # written last: present means the cell finished
-    if c is None:
-        return None
-    stored_sha = (data.meta or {}).get("policy_sha256")  # absent in cells written before it was logged
+    return None if c is None else _row(c, str(path), (data.meta or {}).get("policy_sha256"))
+
+
+def _check(cell: Cell, row: dict[str, Any]) -> None:
+    """CellMismatch when a finished cell was made with another duration or seed, or (for cells with
+    CVs, when its file says) another PRL policy than the one asked for."""
     bad = [f"{name} {got} (asked {want})" for name, got, want in (
-        ("duration", c.duration, cell.duration), ("seed", c.seed, cell.seed),
-        ("PRL policy sha256", (stored_sha or "")[:12], _policy_sha(cell)[:12]))
-        if got != want and not (name.startswith("PRL") and stored_sha is None)]
+        ("duration", row["duration"], cell.duration), ("seed", row["seed"], cell.seed)) if got != want]
+    if row["policy_sha256"] is not None and row["policy_sha256"] != _policy_sha(cell):
+        bad.append(f"PRL policy sha256 {row['policy_sha256'][:12]} (asked {_policy_sha(cell)[:12]})")
     if bad:
         raise CellMismatch(f"{cell.path}: finished with {', '.join(bad)}; use another --run-id, or move the "
                            f"file away to rerun it")
-    return _row(c, cell.path)
 
 
-CELL_NAME = re.compile(r"^mpr(?P<mpr>\d\.\d)-d(?P<demand>[\d.]+)-r(?P<rep>\d+)(?P<suffix>-[a-z]+)?\.mcap$")
+def _done(cell: Cell) -> dict[str, Any] | None:
+    """The row of the cell's finished file, or None (it is then rerun); CellMismatch if that file was
+    made with other settings: it is never silently reused or overwritten."""
+    row = _read(Path(cell.path))
+    if row is not None:
+        _check(cell, row)
+    return row
+
+
+CELL_NAME = re.compile(r"^mpr\d\.\d-d[\d.]+-r\d+(?P<suffix>-[a-z]+)?\.mcap$")
 
 
 def collect(root: Path, suffix: str) -> dict[str, dict[str, Any]]:
@@ -174,14 +184,9 @@ def collect(root: Path, suffix: str) -> dict[str, dict[str, Any]]:
     rows = {}
     for path in sorted(root.glob("*/mpr*.mcap")):
         m = CELL_NAME.match(path.name)
-        if not m or (m["suffix"] or "") != suffix:
-            continue
-        try:
-            c = read_log(path).fleet_cell
-        except Exception:
-            continue
-        if c is not None:
-            rows[str(path)] = _row(c, str(path))
+        row = _read(path) if m and (m["suffix"] or "") == suffix else None
+        if row is not None:
+            rows[str(path)] = row
     return rows
 
 
@@ -226,15 +231,15 @@ def main(argv: list[str] | None = None) -> int:
                   str(policy_dir("prl", s, MODELS)), args.cv_lateral)
              for s in args.signals for m in args.mpr for d in args.demand for r in range(args.reps)]
     table = root / f"mixed{suffix}.parquet"  # the report reads mixed.parquet: an ablation never lands there
-    todo = []
+    rows = collect(root, suffix)  # every finished cell in the run, not only this grid's (one read each)
     try:
         for c in cells:
-            if _done(c) is None:
-                todo.append(c)
+            if c.path in rows:
+                _check(c, rows[c.path])
     except CellMismatch as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    rows = collect(root, suffix)  # every finished cell in the run, not only this grid's
+    todo = [c for c in cells if c.path not in rows]
     write_table(rows, table)
     t0 = time.perf_counter()
     it = (run_local(todo, args.workers, run_cell) if args.executor == "local"
