@@ -102,8 +102,8 @@ def run_cell(cell: Cell) -> dict[str, Any]:
         teleports=st.teleports, control_over_sim=ratio, wall_s=wall)
     msgs.append(("/fleet/cell", done, len(msgs)))
     write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell",
-                                          "policy_sha256": policy_sha})
-    return _row(done, cell.path, policy_sha)
+                                          "policy_sha256": policy_sha, "speed_mode": str(_speed_mode())})
+    return _row(done, cell.path, policy_sha, _speed_mode())
 
 
 def _stay(act_batch):
@@ -115,15 +115,15 @@ def _stay(act_batch):
     return policy
 
 
-def _row(c, path: str, policy_sha: str | None) -> dict[str, Any]:
-    """One table row from a finished cell's ``/fleet/cell`` message and the sha256 of the PRL policy
-    that drove it (None in cells written before it was logged; ``wall_s`` reads 0 in cells written
-    before it was)."""
+def _row(c, path: str, policy_sha: str | None, speed_mode: int | None) -> dict[str, Any]:
+    """One table row from a finished cell's ``/fleet/cell`` message, the sha256 of the PRL policy
+    that drove it and the CVs' SUMO speed mode (each None in cells written before it was logged;
+    ``wall_s`` reads 0 in cells written before it was)."""
     summary = json.loads(c.summary_json)
     row = {"signals": c.signals, "mpr": c.mpr, "demand": c.demand, "rep": c.rep, "seed": c.seed,
            "duration": c.duration, "collisions": c.collisions, "teleports": c.teleports,
            "control_over_sim": c.control_over_sim, "wall_s": c.wall_s, "policy_sha256": policy_sha,
-           "mcap": str(path)}
+           "speed_mode": speed_mode, "mcap": str(path)}
     for kind in ("all", "cv", "hdv"):
         for k, v in summary[kind].items():
             row[f"{kind}_{k}"] = v
@@ -152,16 +152,31 @@ def _read(path: Path) -> dict[str, Any] | None:
     except Exception:
         return None
     c = data.fleet_cell  # written last: present means the cell finished
-    return None if c is None else _row(c, str(path), (data.meta or {}).get("policy_sha256"))
+    if c is None:
+        return None
+    meta = data.meta or {}
+    mode = meta.get("speed_mode")
+    return _row(c, str(path), meta.get("policy_sha256"), int(mode) if mode is not None else None)
+
+
+def _speed_mode() -> int:
+    """The SUMO speed mode the safety layer gives every CV now."""
+    from envs.sumo import SPEED_MODE_SAFE
+
+    return SPEED_MODE_SAFE
 
 
 def _check(cell: Cell, row: dict[str, Any]) -> None:
-    """CellMismatch when a finished cell was made with another duration or seed, or (for cells with
-    CVs, when its file says) another PRL policy than the one asked for."""
+    """CellMismatch when a finished cell was made with another duration or seed or, for cells with
+    CVs, another PRL policy (when its file says) or another safety layer than the current one."""
     bad = [f"{name} {got} (asked {want})" for name, got, want in (
         ("duration", row["duration"], cell.duration), ("seed", row["seed"], cell.seed)) if got != want]
     if row["policy_sha256"] is not None and row["policy_sha256"] != _policy_sha(cell):
         bad.append(f"PRL policy sha256 {row['policy_sha256'][:12]} (asked {_policy_sha(cell)[:12]})")
+    if cell.mpr > 0 and row["speed_mode"] != _speed_mode():
+        # older cells do not record it; until commit c7dab69 their CVs ran under speed mode 31
+        got = "not recorded (31 until commit c7dab69)" if row["speed_mode"] is None else row["speed_mode"]
+        bad.append(f"CV speed mode {got} (asked {_speed_mode()})")
     if bad:
         raise CellMismatch(f"{cell.path}: finished with {', '.join(bad)}; use another --run-id, or move the "
                            f"file away to rerun it")

@@ -9,7 +9,7 @@ from reports.build import build
 from reports.metrics import mixed_cells, mpr_effect
 
 
-def test_mixed_cell_with_a_policy_and_resume(tmp_path):
+def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
     train("prl", "uncoordinated", 1, seed=0, out=tmp_path / "run", models=tmp_path / "models",
           agent_config={"learning_starts": 64, "batch_size": 16}, progress=False, validation_cases=1)
     cell = Cell("uncoordinated", 0.5, 300, 0, 400.0, str(tmp_path / "cell.mcap"),
@@ -41,9 +41,19 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path):
     from bench.mixed import CellMismatch
 
     man = tmp_path / "models" / "prl-uncoordinated" / "manifest.json"
-    man.write_text(json.dumps({**json.loads(man.read_text()), "sha256": "0" * 64}))
+    shipped = man.read_text()
+    man.write_text(json.dumps({**json.loads(shipped), "sha256": "0" * 64}))
     with pytest.raises(CellMismatch, match="PRL policy sha256"):
         _done(cell)
+    man.write_text(shipped)
+    # nor is one whose CVs ran under another safety layer (SUMO speed mode); a cell without CVs is
+    import envs.sumo
+
+    assert data.meta["speed_mode"] == str(envs.sumo.SPEED_MODE_SAFE)
+    monkeypatch.setattr(envs.sumo, "SPEED_MODE_SAFE", 31)
+    with pytest.raises(CellMismatch, match=r"CV speed mode 27 \(asked 31\)"):
+        _done(cell)
+    assert _done(plain)["mpr"] == 0.0
 
 
 def test_mixed_claims_pass_fail_and_not_checked():
