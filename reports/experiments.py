@@ -84,6 +84,7 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         p = figures.mixed_panels(cells, figs)
         images.append(("mixed traffic", p[0]))
         effect = metrics.mpr_effect(cells)
+        spread = metrics.mpr_effect_spread(rows)
         br = cells[cells.demand.isin(MPR_BREAKDOWN_DEMANDS) & (cells.signals == "uncoordinated")]
         cols = ["mpr", "demand"] + [c for c in (f"{k}_{m}" for k in ("cv", "hdv") for m in (
             "energy", "travel_time", "speed", "energy_per_km", "space_mean_speed", "unfinished"))
@@ -96,8 +97,12 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
                "are the paper's means over the vehicles that finished in the run; `energy_per_km` and "
                "`space_mean_speed` count every vehicle inserted, finished or not, so a policy that "
                "congests the arterial cannot look better by keeping its slow vehicles inside:", "",
-               _table(effect.set_index(["signals", "mpr"])), "",
-               "CVs against HDVs, uncoordinated, 200 and 700 veh/h/lane:", "",
+               _table(effect.set_index(["signals", "mpr"])), ""]
+        if not spread.empty:
+            md += ["The same changes within each finished repetition (every repetition drives the same "
+                   "traffic draw at every MPR): mean, min and max over the repetitions:", "",
+                   _table(spread.set_index(["signals", "mpr"])), ""]
+        md += ["CVs against HDVs, uncoordinated, 200 and 700 veh/h/lane:", "",
                _table(br[cols].set_index(["mpr", "demand"])) if not br.empty else "(not in this run)", ""]
     return md, images, warnings
 

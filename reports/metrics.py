@@ -195,6 +195,30 @@ def mpr_effect(cells: pd.DataFrame) -> pd.DataFrame:
     return g
 
 
+def mpr_effect_spread(rows: pd.DataFrame, cols: tuple[str, ...] = ("all_energy_per_km", "all_space_mean_speed",
+                                                                   "all_energy", "all_speed")) -> pd.DataFrame:
+    """Per signal setting and MPR: the change against MPR = 0 computed within each repetition (the
+    same traffic draw at every MPR), then its mean, min and max over the repetitions that have the
+    setting's whole MPR x demand grid. Empty when no repetition is complete."""
+    cols = tuple(c for c in cols if c in rows.columns)
+    out = []
+    for signals, g in rows.groupby("signals"):
+        size = g.mpr.nunique() * g.demand.nunique()
+        for rep, h in g.groupby("rep"):
+            if h.groupby(["mpr", "demand"]).ngroups < size:
+                continue  # an unfinished repetition
+            e = mpr_effect(h.groupby(["signals", "mpr", "demand"])[list(cols)].mean().reset_index())
+            out += [{"signals": signals, "rep": rep, "mpr": r.mpr, **{c: getattr(r, f"{c}_change") for c in cols}}
+                    for r in e.itertuples()]
+    if not out:
+        return pd.DataFrame()
+    per_rep = pd.DataFrame(out)
+    agg = per_rep.groupby(["signals", "mpr"])[list(cols)].agg(["mean", "min", "max"])
+    agg.columns = [f"{c}_change_{stat}" for c, stat in agg.columns]
+    agg.insert(0, "reps", per_rep.groupby(["signals", "mpr"]).rep.nunique())
+    return agg.reset_index()
+
+
 def return_parts(parts: pd.DataFrame) -> pd.DataFrame:
     """Mean episode sum of each reward component per method and setting (one row per episode in,
     columns method, signals, the components and reward); the components add up to the return."""

@@ -30,6 +30,7 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
     pd.DataFrame([run_cell(plain), row]).to_parquet(run / "mixed" / "mixed.parquet")
     index = build(run, tmp_path / "report")
     text = index.read_text()
+    assert "within each finished repetition" in text  # the one repetition has the whole (2-cell) grid
     assert "## Mixed traffic" in text and (tmp_path / "report" / "figures" / "mixed-traffic.png").is_file()
     effect = mpr_effect(mixed_cells(pd.read_parquet(run / "mixed" / "mixed.parquet")))
     assert effect.all_energy_change.iloc[0] == 0 and effect.all_energy_change.notna().all()
@@ -163,6 +164,22 @@ def test_mixed_coverage_and_like_for_like_effect():
     effect = mpr_effect(mixed_cells(rows)).set_index("mpr")
     # MPR 1 has only 200 veh/h/lane: both levels are compared there (90 / 100), not against the 200-700 mean
     assert abs(effect.loc[1.0, "all_energy_per_km_change"] - (-0.1)) < 1e-12
+
+
+def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
+    from reports.metrics import mpr_effect_spread
+
+    # rep 0: -10% at MPR 1; rep 1: -30%; rep 2 lacks a cell (not counted)
+    rows = pd.DataFrame([{"signals": "uncoordinated", "mpr": m, "demand": d, "rep": r,
+                          "all_energy_per_km": base * (1 - cut * m)}
+                         for r, base, cut in ((0, 100.0, 0.1), (1, 200.0, 0.3), (2, 50.0, 0.9))
+                         for m in (0.0, 1.0) for d in (200, 700) if not (r == 2 and m == 1.0 and d == 700)])
+    s = mpr_effect_spread(rows).set_index("mpr")
+    assert s.loc[1.0, "reps"] == 2
+    assert abs(s.loc[1.0, "all_energy_per_km_change_mean"] - (-0.2)) < 1e-12  # not the pooled -23.3%
+    assert abs(s.loc[1.0, "all_energy_per_km_change_min"] - (-0.3)) < 1e-12
+    assert abs(s.loc[1.0, "all_energy_per_km_change_max"] - (-0.1)) < 1e-12
+    assert mpr_effect_spread(rows[rows.rep == 2]).empty
 
 
 def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
