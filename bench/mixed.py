@@ -8,8 +8,9 @@ One 1800 s simulation per cell (signals, MPR, demand [veh/h/lane], repetition), 
 PRL policy of that signal setting acting for all CVs in one batched call per step. Each cell writes
 ``<logs>/<run-id>/mixed/<signals>/mpr<M>-d<D>-r<R>.mcap`` (``/fleet/vehicle`` records and a
 ``/fleet/cell`` summary) and is skipped when that file is complete; ``mixed.parquet`` collects
-the cells. ``--cv-lateral stay`` (an ablation) masks every CV's lane changes, so PRL's 'stay' head
-drives; its cells and table get a ``-stay`` suffix.
+the cells. Cells run repetition by repetition (a sweep stopped early leaves whole ones).
+``--cv-lateral stay`` (an ablation) masks every CV's lane changes, so PRL's 'stay' head drives;
+its cells and table get a ``-stay`` suffix.
 """
 from __future__ import annotations
 
@@ -191,6 +192,14 @@ def _done(cell: Cell) -> dict[str, Any] | None:
     return row
 
 
+def plan(args: argparse.Namespace, root: Path, suffix: str = "") -> list[Cell]:
+    """The cells asked for, repetition by repetition: a sweep stopped early (or a pool running
+    cells in order) leaves whole repetitions of the grid, which the report can pair across MPR."""
+    return [Cell(s, m, d, r, args.duration, str(root / s / f"mpr{m:.1f}-d{d:g}-r{r}{suffix}.mcap"),
+                 str(policy_dir("prl", s, MODELS)), args.cv_lateral)
+            for r in range(args.reps) for s in args.signals for m in args.mpr for d in args.demand]
+
+
 CELL_NAME = re.compile(r"^mpr\d\.\d-d[\d.]+-r\d+(?P<suffix>-[a-z]+)?\.mcap$")
 
 
@@ -215,7 +224,7 @@ def write_table(rows: dict[str, dict[str, Any]], table: Path) -> pd.DataFrame:
     return df
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS))
     ap.add_argument("--mpr", nargs="+", type=float, default=list(MPRS))
@@ -235,6 +244,11 @@ def main(argv: list[str] | None = None) -> int:
     if bad or not 10 <= args.duration <= 7200 or args.reps < 1:
         ap.error(f"out of range: {bad or [args.duration, args.reps]}; accepted: mpr in [0, 1], demand in "
                  f"(0, 1000] veh/h/lane, duration in [10, 7200] s, reps >= 1")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
     for s in args.signals:
         if any(m > 0 for m in args.mpr) and not (policy_dir("prl", s) / "manifest.json").is_file():
             print(f"error: no trained PRL policy for {s} ({policy_dir('prl', s)}); "
@@ -242,9 +256,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     root = args.logs / args.run_id / "mixed"
     suffix = "" if args.cv_lateral == "policy" else f"-{args.cv_lateral}"
-    cells = [Cell(s, m, d, r, args.duration, str(root / s / f"mpr{m:.1f}-d{d:g}-r{r}{suffix}.mcap"),
-                  str(policy_dir("prl", s, MODELS)), args.cv_lateral)
-             for s in args.signals for m in args.mpr for d in args.demand for r in range(args.reps)]
+    cells = plan(args, root, suffix)
     table = root / f"mixed{suffix}.parquet"  # the report reads mixed.parquet: an ablation never lands there
     rows = collect(root, suffix)  # every finished cell in the run, not only this grid's (one read each)
     try:

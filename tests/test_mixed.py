@@ -166,6 +166,16 @@ def test_mixed_coverage_and_like_for_like_effect():
     assert abs(effect.loc[1.0, "all_energy_per_km_change"] - (-0.1)) < 1e-12
 
 
+def test_cells_run_repetition_by_repetition(tmp_path):
+    from bench.mixed import parse, plan
+
+    cells = plan(parse(["--reps", "3", "--mpr", "0", "1", "--demand", "200", "700"]), tmp_path)
+    per_rep = 2 * 2 * 2  # settings x MPR x demand
+    assert len(cells) == 3 * per_rep
+    assert [c.rep for c in cells] == [r for r in range(3) for _ in range(per_rep)]
+    assert len({c.path for c in cells}) == len(cells)
+
+
 def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
     from reports.metrics import mpr_effect_spread
 
