@@ -83,7 +83,7 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         cells = metrics.mixed_cells(rows)
         p = figures.mixed_panels(cells, figs)
         images.append(("mixed traffic", p[0]))
-        effect = metrics.mpr_effect(cells)
+        effect = metrics.mpr_effect(metrics.mixed_cells(metrics.common_runs(rows)))
         spread = metrics.mpr_effect_spread(rows)
         br = cells[cells.demand.isin(MPR_BREAKDOWN_DEMANDS) & (cells.signals == "uncoordinated")]
         cols = ["mpr", "demand"] + [c for c in (f"{k}_{m}" for k in ("cv", "hdv") for m in (
@@ -92,8 +92,8 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         md += ["## Mixed traffic (fig:dd, fig:avg)", "", f"![mixed traffic](figures/{p[0].name})", "",
                "Cells finished per setting and MPR (`missing`: demand x repetition pairs of the "
                "setting's grid not run yet):", "", _table(cover.set_index(["signals", "mpr"])), "",
-               "Fleet metrics by MPR (mean over the demands that every MPR level has), change against "
-               "MPR = 0. `energy` and `speed` "
+               "Fleet metrics by MPR (mean over the demand x repetition pairs that every MPR level "
+               "has), change against MPR = 0. `energy` and `speed` "
                "are the paper's means over the vehicles that finished in the run; `energy_per_km` and "
                "`space_mean_speed` count every vehicle inserted, finished or not, so a policy that "
                "congests the arterial cannot look better by keeping its slow vehicles inside:", "",

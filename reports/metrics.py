@@ -166,6 +166,18 @@ def common_demands(cells: pd.DataFrame) -> pd.DataFrame:
     return pd.concat(keep) if keep else cells
 
 
+def common_runs(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per signal setting, only the cells whose (demand, repetition) every MPR level of that setting
+    has: the MPR levels are then averaged over the same traffic draws (a sweep in progress has
+    more repetitions at some levels than at others)."""
+    keep = []
+    for _, g in rows.groupby("signals"):
+        levels = g.groupby(["demand", "rep"]).mpr.nunique()
+        full = set(levels[levels == g.mpr.nunique()].index)
+        keep.append(g[[pair in full for pair in zip(g.demand, g.rep)]])
+    return pd.concat(keep) if keep else rows
+
+
 def mixed_coverage(rows: pd.DataFrame) -> pd.DataFrame:
     """Per signal setting and MPR: the cells finished, the demands and repetitions they cover, and
     the (demand, rep) pairs of that setting's grid (every demand x rep seen in it) still missing."""

@@ -190,6 +190,14 @@ def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
     assert abs(s.loc[1.0, "all_energy_per_km_change_min"] - (-0.3)) < 1e-12
     assert abs(s.loc[1.0, "all_energy_per_km_change_max"] - (-0.1)) < 1e-12
     assert mpr_effect_spread(rows[rows.rep == 2]).empty
+    # the pooled effect over the runs every MPR level has drops rep 2's MPR-0 cell at 700 as well
+    from reports.metrics import common_runs
+
+    kept = common_runs(rows)
+    assert len(kept) == 10 and not ((kept.rep == 2) & (kept.demand == 700)).any()
+    effect = mpr_effect(mixed_cells(kept)).set_index("mpr")
+    # MPR 0: d200 (100+200+50)/3, d700 (100+200)/2 -> 133.33; MPR 1: (90+140+5)/3, (90+140)/2 -> 96.67
+    assert abs(effect.loc[1.0, "all_energy_per_km_change"] - (96.666667 / 133.333333 - 1)) < 1e-6
 
 
 def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
