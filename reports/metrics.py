@@ -202,8 +202,10 @@ def mpr_effect(cells: pd.DataFrame) -> pd.DataFrame:
     g = common_demands(cells).groupby(["signals", "mpr"])[cols].mean().reset_index()
     for col in cols:
         ref = g[g.mpr == 0].set_index("signals")[col]
-        with np.errstate(invalid="ignore", divide="ignore"):  # 0/0 (e.g. nothing pending at MPR 0) is NaN
+        with np.errstate(invalid="ignore", divide="ignore"):
             g[f"{col}_change"] = g.apply(lambda r, c=col, ref=ref: r[c] / ref.get(r.signals, np.nan) - 1.0, axis=1)
+        # a change against 0 (e.g. nothing pending at MPR 0) has no relative size: NaN, not inf
+        g[f"{col}_change"] = g[f"{col}_change"].replace([np.inf, -np.inf], np.nan)
     return g
 
 

@@ -157,13 +157,15 @@ def test_sweep_table_collects_every_finished_cell_and_refuses_a_mismatch(tmp_pat
 def test_mixed_coverage_and_like_for_like_effect():
     from reports.metrics import mixed_coverage
 
-    rows = pd.DataFrame([{"signals": "coordinated", "mpr": m, "demand": d, "rep": 0, "all_energy_per_km": e}
+    rows = pd.DataFrame([{"signals": "coordinated", "mpr": m, "demand": d, "rep": 0, "all_energy_per_km": e,
+                          "all_pending": 0.0 if m == 0 else 4.0}
                          for m, d, e in ((0.0, 200, 100.0), (0.0, 700, 300.0), (1.0, 200, 90.0))])
     cover = mixed_coverage(rows).set_index("mpr")
     assert cover.loc[0.0, "missing"] == 0 and cover.loc[1.0, "missing"] == 1 and cover.loc[1.0, "demands"] == "200"
     effect = mpr_effect(mixed_cells(rows)).set_index("mpr")
     # MPR 1 has only 200 veh/h/lane: both levels are compared there (90 / 100), not against the 200-700 mean
     assert abs(effect.loc[1.0, "all_energy_per_km_change"] - (-0.1)) < 1e-12
+    assert pd.isna(effect.loc[1.0, "all_pending_change"])  # 4 against 0 has no relative change
 
 
 def test_cells_run_repetition_by_repetition(tmp_path):
