@@ -33,6 +33,7 @@ def test_heatmap_job_trains_evaluates_and_resumes(tmp_path, monkeypatch):
     text = index.read_text()
     assert "## Reward study" in text and "## Sensitivity heatmap" in text
     assert "Lowest energy at |r_p^s| = 20, |r_p^j| = 20" in text
+    assert text.count("2 training episodes (shorter than the paper's 1000") == 2  # both sections say so
     assert (tmp_path / "report" / "figures" / "heatmap.png").is_file()
     assert (tmp_path / "report" / "figures" / "reward-study.pdf").is_file()
 
