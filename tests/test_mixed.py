@@ -202,6 +202,23 @@ def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
     assert abs(effect.loc[1.0, "all_energy_per_km_change"] - (96.666667 / 133.333333 - 1)) < 1e-6
 
 
+def test_mixed_claims_on_a_grid():
+    from reports.metrics import mixed_claims
+
+    effect = pd.DataFrame({"signals": ["coordinated"] * 3 + ["uncoordinated"] * 2, "mpr": [0.0, 0.5, 1.0, 0.0, 0.5],
+                           "all_energy_per_km_change": [0.0, -0.1, -0.2, 0.0, 0.01],
+                           "all_space_mean_speed_change": [0.0, -0.02, -0.3, 0.0, 0.0],
+                           "hdv_energy_per_km_change": [0.0, 0.04, None, 0.0, 0.06],
+                           "hdv_space_mean_speed_change": [0.0, -0.08, None, 0.0, 0.01]})
+    c = mixed_claims(effect, speed_loss_tol=0.1, hdv_tol=0.05).set_index(["signals", "claim"]).status
+    assert c["coordinated", "fleet energy per km falls from MPR 0 to 1"] == "PASS"
+    assert c["coordinated", "space-mean speed loss at MPR 1 < 10%"] == "FAIL"  # -30%
+    assert c["coordinated", "HDV energy per km not worse by > 5% at any MPR in (0, 1)"] == "PASS"
+    assert c["coordinated", "HDV space-mean speed not worse by > 5% at any MPR in (0, 1)"] == "FAIL"  # -8%
+    assert c["uncoordinated", "fleet energy and speed at MPR 1 against 0"] == "NOT CHECKED"
+    assert c["uncoordinated", "HDV energy per km not worse by > 5% at any MPR in (0, 1)"] == "FAIL"  # +6%
+
+
 def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
     """Uncoordinated, MPR 0.6, 200 veh/h/lane, the shipped PRL policy: at t = 493 s an HDV stops
     at a yellow light at its decel of 4.5 m/s^2, 13 m ahead of a CV whose decel (the action bound)
