@@ -228,6 +228,10 @@ def mixed_claims(effect: pd.DataFrame, speed_loss_tol: float, hdv_tol: float) ->
                 f"{100 * e:+.1f}% (paper: about -13.8% per vehicle)")
             add(f"space-mean speed loss at MPR 1 < {100 * speed_loss_tol:.0f}%", bool(-v < speed_loss_tol),
                 f"speed {100 * v:+.1f}%")
+        above = g.loc[g.index > 0, "all_energy_per_km_change"].dropna()
+        if not above.empty:
+            add("fleet energy per km below MPR 0 at every MPR > 0", bool((above < 0).all()),
+                f"highest {100 * above.max():+.1f}% (MPR {above.idxmax():g})")
         mid = g[(g.index > 0) & (g.index < 1)]
         for col, sign, what in (("hdv_energy_per_km_change", 1, "energy per km"),
                                 ("hdv_space_mean_speed_change", -1, "space-mean speed")):

@@ -215,6 +215,8 @@ def test_mixed_claims_on_a_grid():
     assert c["coordinated", "space-mean speed loss at MPR 1 < 10%"] == "FAIL"  # -30%
     assert c["coordinated", "HDV energy per km not worse by > 5% at any MPR in (0, 1)"] == "PASS"
     assert c["coordinated", "HDV space-mean speed not worse by > 5% at any MPR in (0, 1)"] == "FAIL"  # -8%
+    assert c["coordinated", "fleet energy per km below MPR 0 at every MPR > 0"] == "PASS"
+    assert c["uncoordinated", "fleet energy per km below MPR 0 at every MPR > 0"] == "FAIL"  # +1% at 0.5
     assert c["uncoordinated", "fleet energy and speed at MPR 1 against 0"] == "NOT CHECKED"
     assert c["uncoordinated", "HDV energy per km not worse by > 5% at any MPR in (0, 1)"] == "FAIL"  # +6%
 
