@@ -28,6 +28,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from envs.config import SIGNALS
+from envs.sumo import SPEED_MODE_SAFE  # the safety layer every CV drives under, recorded per cell
 
 from .checkpoint import MODELS, CheckpointError, atomic_parquet, policy_dir
 from .executors import EXECUTORS, run_local, run_ray
@@ -103,8 +104,8 @@ def run_cell(cell: Cell) -> dict[str, Any]:
         teleports=st.teleports, control_over_sim=ratio, wall_s=wall)
     msgs.append(("/fleet/cell", done, len(msgs)))
     write_records(Path(cell.path), msgs, {"git_sha": git_sha(), "kind": "mixed-traffic cell",
-                                          "policy_sha256": policy_sha, "speed_mode": str(_speed_mode())})
-    return _row(done, cell.path, policy_sha, _speed_mode())
+                                          "policy_sha256": policy_sha, "speed_mode": str(SPEED_MODE_SAFE)})
+    return _row(done, cell.path, policy_sha, SPEED_MODE_SAFE)
 
 
 def _stay(act_batch):
@@ -160,13 +161,6 @@ def _read(path: Path) -> dict[str, Any] | None:
     return _row(c, str(path), meta.get("policy_sha256"), int(mode) if mode is not None else None)
 
 
-def _speed_mode() -> int:
-    """The SUMO speed mode the safety layer gives every CV now."""
-    from envs.sumo import SPEED_MODE_SAFE
-
-    return SPEED_MODE_SAFE
-
-
 def _check(cell: Cell, row: dict[str, Any]) -> None:
     """CellMismatch when a finished cell was made with another duration or seed or, for cells with
     CVs, another PRL policy (when its file says) or another safety layer than the current one."""
@@ -174,10 +168,10 @@ def _check(cell: Cell, row: dict[str, Any]) -> None:
         ("duration", row["duration"], cell.duration), ("seed", row["seed"], cell.seed)) if got != want]
     if row["policy_sha256"] is not None and row["policy_sha256"] != _policy_sha(cell):
         bad.append(f"PRL policy sha256 {row['policy_sha256'][:12]} (asked {_policy_sha(cell)[:12]})")
-    if cell.mpr > 0 and row["speed_mode"] != _speed_mode():
+    if cell.mpr > 0 and row["speed_mode"] != SPEED_MODE_SAFE:
         # older cells do not record it; until commit c7dab69 their CVs ran under speed mode 31
         got = "not recorded (31 until commit c7dab69)" if row["speed_mode"] is None else row["speed_mode"]
-        bad.append(f"CV speed mode {got} (asked {_speed_mode()})")
+        bad.append(f"CV speed mode {got} (asked {SPEED_MODE_SAFE})")
     if bad:
         raise CellMismatch(f"{cell.path}: finished with {', '.join(bad)}; use another --run-id, or move the "
                            f"file away to rerun it")
