@@ -143,7 +143,7 @@ class DDPGAgent:
             state.update({
                 "actor_target": self.actor_target.state_dict(), "critic_target": self.critic_target.state_dict(),
                 "opt_actor": self.opt_actor.state_dict(), "opt_critic": self.opt_critic.state_dict(),
-                "rng": self.rng.bit_generator.state, "ou": self.noise.state.copy(), "updates": self.updates,
+                "rng": self.rng.bit_generator.state, "ou": torch.from_numpy(self.noise.state.copy()), "updates": self.updates,
             })
         return state
 
@@ -158,5 +158,5 @@ class DDPGAgent:
             self.opt_actor.load_state_dict(state["opt_actor"])
             self.opt_critic.load_state_dict(state["opt_critic"])
             self.rng.bit_generator.state = state["rng"]
-            self.noise.state[:] = state["ou"]
+            self.noise.state[:] = np.asarray(state["ou"])
             self.updates = state["updates"]

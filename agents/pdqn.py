@@ -230,7 +230,7 @@ class PDQNAgent:
             state.update({
                 "q_target": self.q_target.state_dict(), "param_target": self.param_target.state_dict(),
                 "opt_q": self.opt_q.state_dict(), "opt_param": self.opt_param.state_dict(),
-                "rng": self.rng.bit_generator.state, "ou": self.noise.state.copy(),
+                "rng": self.rng.bit_generator.state, "ou": torch.from_numpy(self.noise.state.copy()),
                 "epsilon": self.epsilon, "updates": self.updates,
             })
             if self.cfg.twin_q:  # acting needs only q and param
@@ -254,7 +254,7 @@ class PDQNAgent:
             self.opt_q.load_state_dict(state["opt_q"])
             self.opt_param.load_state_dict(state["opt_param"])
             self.rng.bit_generator.state = state["rng"]
-            self.noise.state[:] = state["ou"]
+            self.noise.state[:] = np.asarray(state["ou"])
             self.epsilon, self.updates = state["epsilon"], state["updates"]
         else:
             self.q_target.load_state_dict(state["q"])

@@ -9,6 +9,7 @@ import hashlib
 import io
 import json
 import os
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,20 @@ def atomic_parquet(df: Any, path: Path) -> None:
     os.replace(tmp, path)
 
 
+def load_torch(path: Path) -> Any:
+    """A torch file read as data (``weights_only=True``): tensors and plain Python containers
+    only. A pickle that names any other global (a planted ``__reduce__`` payload, say) is a
+    ``CheckpointError``, and nothing in it runs."""
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        why = next((ln.strip().rstrip(".") for ln in str(e).splitlines() if "GLOBAL" in ln), "not plain data")
+        raise CheckpointError(f"{path}: refused, it holds more than tensors and plain data ({why}); "
+                              f"policies and checkpoints are loaded as data, never as code") from None
+    except Exception as e:
+        raise CheckpointError(f"{path}: cannot be loaded ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})") from None
+
+
 def policy_dir(method: str, signals: str, root: Path = MODELS) -> Path:
     return root / f"{method}-{signals}"
 
@@ -63,18 +78,17 @@ def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = Non
                               f"train one with the command in the README")
     try:
         manifest = json.loads(man_path.read_text())
-    except json.JSONDecodeError as e:
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise CheckpointError(f"{man_path}: manifest is not valid JSON ({e})") from None
+    if not isinstance(manifest, dict):
+        raise CheckpointError(f"{man_path}: manifest is a JSON {type(manifest).__name__}, expected an object")
     digest = sha256(path)
     if manifest.get("sha256") != digest:
         raise CheckpointError(f"{path}: sha256 {digest[:12]}... does not match the manifest's "
                               f"{str(manifest.get('sha256'))[:12]}...: the file is corrupt or was replaced")
     if manifest.get("method") != method:
         raise CheckpointError(f"{path}: policy is for method {manifest.get('method')!r}, not {method!r}")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as e:  # a matching sha256 but unreadable content
-        raise CheckpointError(f"{path}: cannot be loaded ({type(e).__name__}: {e})") from None
+    state = load_torch(path)
     if scenario is not None:
         from envs.config import ConfigError, ScenarioConfig, backfill, diff
 

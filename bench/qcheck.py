@@ -26,7 +26,7 @@ import numpy as np
 
 from envs.action import LATERAL
 
-from .checkpoint import MODELS, CheckpointError, load_policy, policy_dir
+from .checkpoint import MODELS, CheckpointError, load_policy, load_torch, policy_dir
 
 HEADS = {-1: "left", 0: "stay", 1: "right"}
 
@@ -90,7 +90,7 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
         ckpt = run / "checkpoint.pt"
         if not ckpt.is_file():
             raise CheckpointError(f"{run}: no checkpoint.pt (a training run folder has one)")
-        saved = torch.load(ckpt, map_location="cpu", weights_only=False)
+        saved = load_torch(ckpt)
         ident = saved.get("identity", {})
         if (ident.get("method"), ident.get("signals")) != (method, signals):
             raise CheckpointError(f"{ckpt}: a run of {ident.get('method')}/{ident.get('signals')}, "

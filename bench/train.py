@@ -36,7 +36,7 @@ from agents.registry import LEARNING, make_agent
 from envs.config import SIGNALS, added_values, backfill, flat
 
 from .cases import Case
-from .checkpoint import MODELS, atomic_torch_save, policy_dir, save_policy
+from .checkpoint import MODELS, CheckpointError, atomic_torch_save, load_torch, policy_dir, save_policy
 from .episode import deep_merge, make_env, run_episode
 from .mcaplog import write_train_log
 from .provenance import git_sha, package_versions
@@ -45,6 +45,10 @@ from .provenance import git_sha, package_versions
 VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/cases.json's test cases)
 RUNS = Path(os.environ.get("ECODRIVE_RUNS", Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train"))
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
+# Checkpoint selection on the validation cases: criterion -> sign (+1: higher is better).
+# "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
+# "return" is the greedy return under the training reward, shaping penalties included.
+SELECTION = {"objective": -1, "return": +1}
 
 
 def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
@@ -83,16 +87,22 @@ def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
 def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
-          stop_after: int | None = None, progress: bool = True, validation_cases: int = 20) -> pd.DataFrame:
+          stop_after: int | None = None, progress: bool = True, validation_cases: int = 20,
+          select: str = "objective") -> pd.DataFrame:
     """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
     after that many episodes of this call (used to test resumption).
 
     At every checkpoint the greedy policy is scored on ``validation_cases`` cases drawn from
-    ``VALIDATION_SEED`` (never the test cases); the exported policy is the best-scoring one
-    (mean greedy return), and its episode and validation metrics go in the manifest."""
+    ``VALIDATION_SEED`` (never the test cases). The run keeps the best checkpoint under each
+    criterion of ``SELECTION``; the one named by ``select`` is exported, with its episode and
+    validation metrics in the manifest. Epsilon decays over the run's own ``episodes`` (eq. 12
+    with N = the training length) unless ``agent_config`` sets ``eps_decay_episodes``."""
+    if select not in SELECTION:
+        raise ValueError(f"select {select!r} is not accepted; choose one of {', '.join(SELECTION)}")
     torch.set_num_threads(1)
     env = make_env(method, signals, scenario)
-    agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **(agent_config or {}))
+    decay = {} if method not in ("prl", "mpdqn", "dqn") else {"eps_decay_episodes": episodes}
+    agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **{**decay, **(agent_config or {})})
     identity = {"method": method, "signals": signals, "seed": seed, "agent_config": agent_config or {},
                 "scenario": env.cfg.to_dict()}
     out.mkdir(parents=True, exist_ok=True)
@@ -102,7 +112,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     start, wall = 0, 0.0
     best: dict[str, Any] = {}
     if ckpt.exists():
-        state = torch.load(ckpt, map_location="cpu", weights_only=False)
+        state = load_torch(ckpt)
         kept = added_values(state["identity"].get("scenario", {}))
         if deep_merge(env.cfg.to_dict(), kept) != env.cfg.to_dict():  # the run keeps what it started with
             env.close()
@@ -114,13 +124,15 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
         if saved != identity:
             diff = [k for k in identity if saved.get(k) != identity[k]]
-            raise SystemExit(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
-                             f"use another --out or remove the folder")
+            raise CheckpointError(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
+                                  f"use another --out or remove the folder")
         agent.load_state_dict(state["agent"])
         agent.replay.load(out / state["replay"])
         rng.bit_generator.state = state["rng"]
         rows, start, wall = state["rows"], state["episode"], state["wall_time"]
         best = state.get("best", {})
+        if best and "episode" in best:  # a checkpoint that kept one criterion's best: return
+            best = {"return": best}
     bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
     done_here = 0
     t_call = time.perf_counter()
@@ -151,9 +163,13 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         if (ep + 1) % checkpoint_every == 0 or last or (stop_after is not None and done_here >= stop_after):
             if validation_cases:
                 score = validate(env, agent, validation_cases)
+                score["objective"] = round(score["energy"] + env.cfg.reward.phi * score["travel_time"], 4)
                 rows[-1].update({f"val_{k}": v for k, v in score.items()})
-                if not best or score["return"] > best["score"]["return"]:
-                    best = {"episode": ep + 1, "score": score, "agent": snapshot(agent)}
+                policy = None
+                for crit, sign in SELECTION.items():
+                    if crit not in best or sign * score[crit] > sign * best[crit]["score"][crit]:
+                        policy = policy or snapshot(agent)
+                        best[crit] = {"episode": ep + 1, "score": score, "agent": policy}
             wall_now = wall + time.perf_counter() - t_call
             _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity, best)
         if stop_after is not None and done_here >= stop_after and not last:
@@ -165,6 +181,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     wall_total = wall + time.perf_counter() - t_call
     df = pd.DataFrame(rows)
     if models is not None and len(df) == episodes:
+        chosen = best.get(select, {})
         tail = df.tail(FINAL_WINDOW)
         manifest = {
             "method": method, "signals": signals, "seed": seed, "episodes": episodes,
@@ -173,10 +190,11 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
             "scenario": identity["scenario"],
             "final_metrics": {f"mean_last_{FINAL_WINDOW}_{k}": round(float(tail[k].mean()), 3)
                               for k in ("energy", "travel_time", "return_", "collisions", "lane_changes")},
-            "selected_episode": best.get("episode", episodes),
-            "validation": {"cases": validation_cases, "master_seed": VALIDATION_SEED, **best.get("score", {})},
+            "selection": select if chosen else "final",
+            "selected_episode": chosen.get("episode", episodes),
+            "validation": {"cases": validation_cases, "master_seed": VALIDATION_SEED, **chosen.get("score", {})},
         }
-        policy = best["agent"] if best else agent.state_dict(with_training=False)
+        policy = chosen["agent"] if chosen else agent.state_dict(with_training=False)
         save_policy(policy_dir(method, signals, models), policy, manifest)
     return df
 
@@ -226,7 +244,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
     ap.add_argument("--validation-cases", type=int, default=20, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
-    ap.add_argument("--no-export", action="store_true", help="do not write models/<method>-<signals>/ at the end")
+    ap.add_argument("--select", default="objective", choices=list(SELECTION),
+                    help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
+    ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
+    ap.add_argument("--no-export", action="store_true", help="do not write <models>/<method>-<signals>/ at the end")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override an agent config field for an experiment (repeatable; such runs are not exported)")
     args = ap.parse_args(argv)
@@ -248,10 +269,14 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
     if overrides and not args.no_export:
         print(f"note: an experiment ({suffix[1:]}); it is not exported to models/", file=sys.stderr)
-    df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
-               models=None if args.no_export or overrides else MODELS,
-               command=["python", "-m", "bench.train", *sys.argv[1:]],
-               validation_cases=args.validation_cases, agent_config=overrides or None)
+    try:
+        df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
+                   models=None if args.no_export or overrides else args.models,
+                   command=["python", "-m", "bench.train", *sys.argv[1:]],
+                   validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select)
+    except CheckpointError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     tail = df.tail(FINAL_WINDOW)
     print(json.dumps({"episodes": len(df), "energy": round(float(tail.energy.mean()), 2),
                       "travel_time": round(float(tail.travel_time.mean()), 2)}))

@@ -228,8 +228,8 @@ def test_resumed_training_equals_uninterrupted(tmp_path, extra):
     assert len(part) == 2
     resumed = train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "cut", **kw)
     pd.testing.assert_frame_equal(full, resumed)
-    a = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=False)["agent"]
-    b = torch.load(tmp_path / "cut" / "checkpoint.pt", weights_only=False)["agent"]
+    a = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=True)["agent"]
+    b = torch.load(tmp_path / "cut" / "checkpoint.pt", weights_only=True)["agent"]
     for net in ("q", "param", *(("q2", "q2_target") if "twin_q" in extra else ())):
         for k in a[net]:
             assert torch.equal(a[net][k], b[net][k])
@@ -238,7 +238,7 @@ def test_resumed_training_equals_uninterrupted(tmp_path, extra):
 def test_resume_refuses_another_run(tmp_path):
     kw = dict(models=None, agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
     train("prl", "uncoordinated", 1, seed=2, out=tmp_path / "r", **kw)
-    with pytest.raises(SystemExit, match="differs in seed"):
+    with pytest.raises(CheckpointError, match="differs in seed"):
         train("prl", "uncoordinated", 2, seed=3, out=tmp_path / "r", **kw)
 
 
@@ -248,24 +248,24 @@ def test_resume_accepts_a_checkpoint_from_before_an_added_field(tmp_path):
     kw = dict(models=None, agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False)
     train("prl", "uncoordinated", 1, seed=2, out=tmp_path / "r", **kw)
     ckpt = tmp_path / "r" / "checkpoint.pt"
-    state = torch.load(ckpt, weights_only=False)
+    state = torch.load(ckpt, weights_only=True)
     del state["identity"]["scenario"]["ego_sigma"]
     del state["identity"]["scenario"]["reward"]["lane_change_charge"]
     torch.save(state, ckpt)
     assert len(train("prl", "uncoordinated", 2, seed=2, out=tmp_path / "r", **kw)) == 2
-    state = torch.load(ckpt, weights_only=False)
+    state = torch.load(ckpt, weights_only=True)
     assert state["identity"]["scenario"]["ego_sigma"] == 0.5  # rewritten in the current form
     # the run keeps the lane-change charging it started with, not today's default
     assert state["identity"]["scenario"]["reward"]["lane_change_charge"] == "lane"
     assert ScenarioConfig().reward.lane_change_charge == "request"
     # resumed again, from the checkpoint that now names 'lane' explicitly, it still keeps it
     assert len(train("prl", "uncoordinated", 3, seed=2, out=tmp_path / "r", **kw)) == 3
-    state = torch.load(ckpt, weights_only=False)
+    state = torch.load(ckpt, weights_only=True)
     assert state["identity"]["scenario"]["reward"]["lane_change_charge"] == "lane"
     del state["identity"]["scenario"]["ego_sigma"]
     state["identity"]["scenario"]["reward"]["cost_timing"] = "end"
     torch.save(state, ckpt)
-    with pytest.raises(SystemExit, match="differs in scenario"):
+    with pytest.raises(CheckpointError, match="differs in scenario"):
         train("prl", "uncoordinated", 4, seed=2, out=tmp_path / "r", **kw)
 
 
@@ -386,3 +386,16 @@ def test_replay_round_trip_and_files_from_before_n_step(tmp_path):
     old.steps[:] = 7
     old.load(tmp_path / "old.npz")
     assert list(old.steps[:4]) == [1, 1, 1, 1] and list(old.logic[:4, 0]) == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("select", ["objective", "return"])
+def test_export_picks_the_best_checkpoint_by_the_chosen_criterion(select, tmp_path):
+    df = train("prl", "uncoordinated", 3, seed=1, out=tmp_path / "run", checkpoint_every=1, models=tmp_path / "m",
+               agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False, validation_cases=1, select=select)
+    man = json.loads((tmp_path / "m" / "prl-uncoordinated" / "manifest.json").read_text())
+    scored = df.dropna(subset=["val_objective"])
+    assert np.allclose(scored.val_objective, scored.val_energy + scored.val_travel_time)  # phi = 1
+    col = scored[f"val_{select}"]
+    best = scored.episode[col.idxmin() if select == "objective" else col.idxmax()] + 1
+    assert man["selection"] == select and man["selected_episode"] == best
+    assert man["validation"][select] == col.loc[best - 1 + scored.index[0] - scored.episode.iloc[0]]
