@@ -1,42 +1,56 @@
-"""Sessions run in the current environment (``pip install -e ".[dev]"`` first): torch is pinned
-to a local CPU wheel, and a fresh virtualenv per session would only reinstall it."""
+"""Sessions run in the current environment (the README's commands make and activate ``.venv``
+first): torch is pinned to a local CPU wheel, and a fresh virtualenv per session would only
+reinstall it. Each session calls the ``ecodrive`` command."""
 from __future__ import annotations
 
 import nox
 
 nox.options.default_venv_backend = "none"
-nox.options.sessions = ["tests", "regression"]
+nox.options.sessions = ["tests", "regression", "lint", "docs"]
 
 
 @nox.session
 def tests(session: nox.Session) -> None:
     """The test suite (CI runs this)."""
-    session.run("python", "-m", "bench.cases", "--check")
+    session.run("ecodrive", "cases", "--check")
     session.run("python", "-m", "pytest", "-q", *session.posargs)
 
 
 @nox.session
 def benchmark(session: nox.Session) -> None:
     """The main job: every available method over the fixed cases, MCAP logs, results, report."""
-    from bench.run import parse
+    from bench.harness.run import parse
 
-    session.run("python", "-m", "bench.run", *session.posargs)
+    session.run("ecodrive", "run", *session.posargs)
     opts = parse(list(session.posargs))
     if opts["profile"] == "full":  # section 5's further experiments, into the same run folder
         common = ["--executor", opts["executor"], "--workers", str(opts["workers"]),
                   "--run-id", opts["run_id"], "--logs", str(opts["logs"])]
         common += ["--address", opts["address"]] if opts["address"] else []
-        session.run("python", "-m", "bench.lateral", *common)
-        session.run("python", "-m", "bench.mixed", *common)
-        session.run("python", "-m", "bench.sweep", "reward", *common)  # days on 2 cores: see README
-        session.run("python", "-m", "bench.sweep", "heatmap", *common)
-    session.run("python", "-m", "reports.build", str(opts["logs"] / opts["run_id"]))
+        session.run("ecodrive", "lateral", *common)
+        session.run("ecodrive", "mixed", *common)
+        session.run("ecodrive", "sweep", "reward", *common)  # days on 2 cores: see docs/experiments.md
+        session.run("ecodrive", "sweep", "heatmap", *common)
+    session.run("ecodrive", "report", str(opts["logs"] / opts["run_id"]))
 
 
 @nox.session
 def regression(session: nox.Session) -> None:
     """The paper's claims, Table 4's baseline row and the own reference, on the CI cases."""
-    session.run("python", "-m", "bench.regression", *session.posargs)
+    session.run("ecodrive", "regress", *session.posargs)
+
+
+@nox.session
+def lint(session: nox.Session) -> None:
+    """ruff (pyproject.toml's [tool.ruff]) over the whole tree (CI runs this)."""
+    session.run("ruff", "check", ".")
+
+
+@nox.session
+def docs(session: nox.Session) -> None:
+    """The docs site (mkdocs.yml, docs/) built with --strict: a broken link or a page missing from
+    the nav fails (CI runs this)."""
+    session.run("mkdocs", "build", "--strict", "--site-dir", "build/site")
 
 
 @nox.session
@@ -45,16 +59,16 @@ def perf(session: nox.Session) -> None:
     session.run("mkdir", "-p", ".benchmarks", external=True)
     session.run("python", "-m", "pytest", "tests/benchmarks", "-q", "--benchmark-only",
                 "--benchmark-json=.benchmarks/perf.json", *session.posargs)
-    session.run("python", "-m", "bench.perf", ".benchmarks/perf.json", success_codes=[0, 1])
+    session.run("ecodrive", "perf", ".benchmarks/perf.json", success_codes=[0, 1])
 
 
 @nox.session
 def train(session: nox.Session) -> None:
     """Train all learning methods for both settings (hours; resumable: rerun to continue)."""
-    session.run("python", "-m", "bench.train_all", *session.posargs)
+    session.run("ecodrive", "train-all", *session.posargs)
 
 
 @nox.session
 def calibrate(session: nox.Session) -> None:
     """SUMO's default driving over the fixed cases against Table 4's baseline row."""
-    session.run("python", "-m", "bench.calibrate", *session.posargs)
+    session.run("ecodrive", "calibrate", *session.posargs)

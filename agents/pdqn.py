@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import torch
 import torch.nn.functional as F
-from torch.func import functional_call
 from gymnasium import spaces
+from torch.func import functional_call
 
 from .base import check_config
 from .nets import Head, ObsScaler, OUNoise, features, linear_epsilon, soft_update

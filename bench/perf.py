@@ -1,12 +1,14 @@
 """Ratios from one pytest-benchmark JSON file (all numbers from the same run).
 
-    python -m bench.perf .benchmarks/perf.json
+    ecodrive perf .benchmarks/perf.json
 """
 from __future__ import annotations
 
 import json
 import sys
 from pathlib import Path
+
+from bench.args import Parser, fail
 
 STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes run longer than greedy ones)
 TARGETS = {  # name: (numerator, denominator, limit, what)
@@ -50,15 +52,15 @@ def ratios(path: Path) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 1 or not Path(argv[0]).is_file():
-        print("usage: python -m bench.perf BENCHMARK_JSON (a file written by --benchmark-json)")
-        return 2
+    ap = Parser(description=__doc__)
+    ap.add_argument("benchmark_json", type=Path, help="a file written by pytest --benchmark-json (nox -s perf)")
+    args = ap.parse_args(argv)
+    if not args.benchmark_json.is_file():
+        return fail(ap.prog, f"{args.benchmark_json}: no such file (expected a pytest-benchmark JSON)")
     try:
-        r = ratios(Path(argv[0]))
-    except (json.JSONDecodeError, KeyError) as e:
-        print(f"{argv[0]}: not a pytest-benchmark JSON file ({type(e).__name__}: {e})")
-        return 2
+        r = ratios(args.benchmark_json)
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as e:
+        return fail(ap.prog, f"{args.benchmark_json}: not a pytest-benchmark JSON file ({type(e).__name__}: {e})")
     ok = True
     for key, (_, _, limit, what) in TARGETS.items():
         if key in r:

@@ -9,8 +9,9 @@ import dataclasses
 import hashlib
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any, Mapping
+from typing import Any
 
 SIGNALS = ("coordinated", "uncoordinated")
 REWARDS = ("r1", "r2", "r")
@@ -18,7 +19,7 @@ COST_TIMINGS = ("step", "end")
 LANE_CHANGE_CHARGES = ("request", "lane")
 # Scenario fields added after saved runs existed ("a.b" = field b of sub-config a), with the value
 # their absence meant: the behaviour from before the field. Only these are filled into an older
-# saved config; a run resumed from such a config keeps that value (bench.train).
+# saved config; a run resumed from such a config keeps that value (bench.training.train).
 ADDED_FIELDS: dict[str, Any] = {"ego_sigma": 0.5, "reward.lane_change_charge": "lane"}
 
 
@@ -142,10 +143,10 @@ class ScenarioConfig:
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "ScenarioConfig":
+    def from_dict(cls, data: Mapping[str, Any]) -> ScenarioConfig:
         return _from_dict(cls, data, "")
 
-    def replace(self, **overrides: Any) -> "ScenarioConfig":
+    def replace(self, **overrides: Any) -> ScenarioConfig:
         d = self.to_dict()
         d.update(overrides)
         return ScenarioConfig.from_dict(d)

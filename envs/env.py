@@ -1,7 +1,8 @@
 """EcoDrive-v0: one electric CV on the SUMO corridor, driven through a pluggable action type."""
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np

@@ -8,8 +8,9 @@ one action per CV, in the action type's format.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -117,7 +118,7 @@ class Fleet:
         dt = self.cfg.step_length
         for vid, rec in self.active.items():  # only vehicles still driving: the records grow all run
             rec.energy += s.energy_rate(vid) * dt
-        for vid, cv in self.cvs.items():
+        for cv in self.cvs.values():
             if cv._pending:
                 cv.measure()
         st.sim_time_s += t2 - t1

@@ -6,8 +6,8 @@ gathers those arrays from the SUMO session for any vehicle ID.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 from gymnasium import spaces

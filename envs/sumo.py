@@ -14,7 +14,7 @@ from libsumo import constants as tc
 from .config import ScenarioConfig
 from .scenario import EGO_ROUTE, EGO_TYPE, GLOSA_TYPE, HDV_TYPE, ScenarioFiles
 
-_ACTIVE: "SumoSession | None" = None
+_ACTIVE: SumoSession | None = None
 # context-subscription variables, as keys of ``neighbours()`` results
 VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_SPEED
 _GREEN = frozenset("gG")

@@ -1,21 +1,22 @@
 """Build the report of a run folder: Table 4, statistics, violin and trajectory figures, and the
 sections of the further experiments found in it (reward study, heatmap, mixed traffic).
 
-    python -m reports.build logs/<run-id> [--out reports/<run-id>]
+    ecodrive report logs/<run-id> [--out reports/<run-id>]
 
 Reads only ``results.parquet``, ``manifest.json`` and the step logs; writes ``index.md`` and
 ``index.html`` (which shows the figures) plus the tables and figures.
 """
 from __future__ import annotations
 
-import argparse
 import html
+import shutil
 import sys
 from pathlib import Path
 
 import pandas as pd
 
-from bench.mcaplog import LogError
+from bench.args import Parser, fail
+from bench.logs.mcaplog import LogError, resolve_log
 
 from . import experiments, figures, metrics, tables
 from .load import RunError, component_sums, load_run, load_steps, stop_lines
@@ -25,8 +26,13 @@ TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 
 
 def build(run_dir: Path, out: Path) -> Path:
+    if not run_dir.is_dir():
+        raise RunError(f"{run_dir}: not a run folder (a directory written by `ecodrive run`)")
+    if not (run_dir / "results.parquet").is_file() and not experiments.present(run_dir):
+        raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
+                       f"`ecodrive run`?)")
     out.mkdir(parents=True, exist_ok=True)
-    if (run_dir / "results.parquet").is_file() or not experiments.present(run_dir):
+    if (run_dir / "results.parquet").is_file():
         md, images, warnings, html_tables = _single_vehicle(run_dir, out)
     else:
         md, images, warnings, html_tables = [f"# Report: {run_dir.name}", ""], [], [], []
@@ -41,11 +47,11 @@ def build(run_dir: Path, out: Path) -> Path:
     (out / "index.html").write_text(f"<html><head><meta charset='utf-8'><title>{html.escape(run_dir.name)}</title>"
                                     f"</head><body><h1>Report: {html.escape(run_dir.name)}</h1>{tables_html}{body}"
                                     "</body></html>")
-    return out / "index.md"
+    return out / "index.md", warnings
 
 
 def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str], list]:
-    """Table 4, statistics, violins and trajectories of a ``bench.run`` folder."""
+    """Table 4, statistics, violins and trajectories of a ``bench.harness.run`` folder."""
     results, manifest = load_run(run_dir)
     methods = [m for m in METHOD_ORDER if m in set(results.method)]
     t4 = metrics.table4(results)
@@ -67,7 +73,10 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
            "25% trimmed mean; P(improve) = chance an episode of the method uses less than one of the baseline.",
            "", tables.stats_markdown(st)]
     warnings = []
-    parts = _return_parts(results, warnings)
+    parts, partial = _return_parts(results, run_dir, warnings)
+    if partial:
+        md += [f"**{partial} step log(s) are partial** (cut short after the results were written); they are left "
+               "out of the return split and the trajectories, and listed under Warnings.", ""]
     if parts is not None:
         parts.to_csv(out / "return_parts.csv", index=False)
         md += ["## Return by reward component", "",
@@ -95,14 +104,15 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
                     :TRAJECTORY_CASES]:
                 trajs, bands, longest = {}, None, 0
                 for method in ("baseline", compare):
-                    path = Path(sub[(sub.method == method) & (sub.case == case)].mcap.iloc[0])
+                    path = resolve_log(run_dir, sub[(sub.method == method) & (sub.case == case)].mcap.iloc[0])
                     try:
                         steps, warn = load_steps(path)
                     except LogError as e:
                         warnings.append(str(e))
                         continue
-                    if warn:
-                        warnings.append(warn)
+                    if warn:  # a partial log is never drawn as a whole drive
+                        warnings.append(f"{warn} (not drawn)")
+                        continue
                     trajs[method] = metrics.trajectory(steps)
                     if len(steps) > longest:  # bands over the longer drive
                         longest, bands = len(steps), metrics.signal_bands(steps, *stop_lines(steps))
@@ -115,38 +125,46 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
                                                                           if parts is not None else [])
 
 
-def _return_parts(results: pd.DataFrame, warnings: list[str]) -> pd.DataFrame | None:
-    """Per method and setting, the mean episode sum of each reward component (from the logs)."""
-    rows = []
+def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str]) -> tuple[pd.DataFrame | None, int]:
+    """Per method and setting, the mean episode sum of each reward component (from the logs),
+    and the number of partial logs left out (a partial log never counts as an episode)."""
+    rows, partial = [], 0
     for r in results.itertuples(index=False):
         try:
-            sums, warn = component_sums(Path(r.mcap))
+            sums, warn = component_sums(resolve_log(run_dir, r.mcap))
         except (LogError, OSError) as e:
             warnings.append(str(e))
+            partial += 1
             continue
         if warn:
-            warnings.append(warn)
+            warnings.append(f"{warn} (left out of the return split)")
+            partial += 1
+            continue
         rows.append({"method": r.method, "signals": r.signals, "case": r.case, **sums})
     if not rows:
-        return None
+        return None, partial
     parts = metrics.return_parts(pd.DataFrame(rows))
     order = {m: i for i, m in enumerate(METHOD_ORDER)}
     parts = parts.sort_values(["signals", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
     keep = [c for c in parts.columns if c in ("method", "signals", "episodes") or (parts[c] != 0).any()]
-    return parts[keep].reset_index(drop=True)
+    return parts[keep].reset_index(drop=True), partial
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("run_dir", type=Path, help="a run folder written by python -m bench.run")
+    ap = Parser(description=__doc__)
+    ap.add_argument("run_dir", type=Path, help="a run folder written by ecodrive run")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default reports/<run-id>)")
     args = ap.parse_args(argv)
     out = args.out or Path("reports") / args.run_dir.name
+    created = not out.exists()
     try:
-        index = build(args.run_dir, out)
+        index, warnings = build(args.run_dir, out)
     except (RunError, LogError, OSError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        if created and out.exists():  # nothing is left behind
+            shutil.rmtree(out)
+        return fail(ap.prog, str(e))
+    for w in warnings:
+        print(f"warning: {w}", file=sys.stderr)
     print(f"report: {index} and {index.with_suffix('.html')}")
     return 0
 

@@ -1,6 +1,6 @@
 """Report sections of section 5.2 and 5.5: reward study, sensitivity heatmap, mixed traffic.
 
-Each reads what ``bench.sweep`` and ``bench.mixed`` left in the run folder (parquet tables and
+Each reads what ``bench.experiments.sweep`` and ``bench.experiments.mixed`` left in the run folder (parquet tables and
 the copied ``/train`` logs); a missing experiment is simply not reported.
 """
 from __future__ import annotations
@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.mcaplog import LogError, read_log
-from bench.regression_mixed import HDV_TOL, PAPER_FLEET_SAVING, SPEED_LOSS_TOL
+from bench.logs.mcaplog import LogError, read_log
+from bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
+from bench.paper import HDV_TOL, SPEED_LOSS_TOL
 
 from . import figures, metrics, tables
 

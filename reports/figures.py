@@ -116,7 +116,7 @@ def lateral(trajs: dict[str, pd.DataFrame], scenario: str, out: Path) -> list[Pa
     grey), time-distance and time-speed, one line per method."""
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     first = next(iter(trajs.values()))
-    for vid, g in first[first.vehicle != "ego"].groupby("vehicle"):
+    for _, g in first[first.vehicle != "ego"].groupby("vehicle"):
         axes[0].plot(g.x, g.lane, color="0.7", lw=6, alpha=0.5, solid_capstyle="butt")
         axes[1].plot(g.time - first.time.min(), g.x - first.x.min(), color="0.7", lw=1)
     for method, df in trajs.items():

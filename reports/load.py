@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.mcaplog import LogError, read_log
+from bench.logs.mcaplog import LogError, read_log
 
 
 class RunError(RuntimeError):
@@ -17,9 +17,20 @@ class RunError(RuntimeError):
 def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict]:
     res, man = run_dir / "results.parquet", run_dir / "manifest.json"
     if not res.is_file():
-        raise RunError(f"{run_dir}: no results.parquet (is this a folder written by `python -m bench.run`?)")
-    manifest = json.loads(man.read_text()) if man.is_file() else {}
-    return pd.read_parquet(res), manifest
+        raise RunError(f"{run_dir}: no results.parquet (is this a folder written by `ecodrive run`?)")
+    try:
+        manifest = json.loads(man.read_text()) if man.is_file() else {}
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise RunError(f"{man}: not valid JSON ({e})") from None
+    if not isinstance(manifest, dict):
+        raise RunError(f"{man}: a JSON {type(manifest).__name__}, expected an object")
+    try:
+        results = pd.read_parquet(res)
+    except Exception as e:  # pyarrow's errors for a truncated or foreign file have no common base
+        raise RunError(f"{res}: not a readable results table ({type(e).__name__}: {str(e).splitlines()[0]})") from None
+    if "mcap" not in results.columns:
+        raise RunError(f"{res}: no 'mcap' column (is this a results table written by `ecodrive run`?)")
+    return results, manifest
 
 
 def load_steps(path: Path) -> tuple[pd.DataFrame, str]:

@@ -9,12 +9,9 @@ import numpy as np
 import pandas as pd
 from scipy import signal, stats
 
-PAPER_TABLE4 = {  # (method, signals) -> (energy [Wh], travel time [s]); Table 4 and section 5.3 text
-    ("baseline", "coordinated"): (231.13, 189.08),
-    ("baseline", "uncoordinated"): (253.79, 260.21),
-    ("prl", "coordinated"): (221.75, 204.79),
-    ("prl", "uncoordinated"): (184.93, 289.82),
-}
+from bench.paper import TABLE4 as PAPER_TABLE4
+from bench.paper import improvement
+
 METRICS = ("energy", "travel_time")
 BOOTSTRAP_RESAMPLES = 2000
 CI_LEVEL = 0.95
@@ -38,11 +35,6 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
     """P(X < Y) + 0.5 P(X = Y) over all pairs: the chance a run of X beats a run of Y."""
     x, y = np.asarray(x, dtype=float)[:, None], np.asarray(y, dtype=float)[None, :]
     return float(np.mean((x < y) + 0.5 * (x == y)))
-
-
-def improvement(value: float, baseline: float) -> float:
-    """Table 4's 'Imp.': (baseline - value) / baseline, positive when lower than the baseline."""
-    return (baseline - value) / baseline
 
 
 def table4(results: pd.DataFrame) -> pd.DataFrame:
@@ -82,6 +74,44 @@ def statistics(results: pd.DataFrame) -> pd.DataFrame:
                          "ci_low": lo, "ci_high": hi, "iqm": iqm(x), "iqm_ci_low": ilo, "iqm_ci_high": ihi,
                          "p_improve_vs_baseline": probability_of_improvement(x, base[m].to_numpy())
                          if len(base) and method != "baseline" else np.nan})
+    return pd.DataFrame(rows)
+
+
+def stratified_seed_bootstrap(scores: np.ndarray, reps: int = BOOTSTRAP_RESAMPLES, seed: int = 0,
+                              statistic=np.mean) -> tuple[float, float]:
+    """Percentile CI of ``statistic`` over a [training seeds, cases] score matrix, resampling the
+    seeds with replacement independently for each case (rliable's stratified bootstrap, the cases
+    as its tasks). With fewer than two seeds there is no spread to sample: (nan, nan)."""
+    scores = np.asarray(scores, dtype=float)
+    n_seeds, n_cases = scores.shape
+    if n_seeds < 2:
+        return float("nan"), float("nan")
+    idx = np.random.default_rng(seed).integers(0, n_seeds, size=(reps, n_seeds, n_cases))
+    boot = statistic(scores[idx, np.arange(n_cases)].reshape(reps, -1), axis=1)
+    alpha = (1 - CI_LEVEL) / 2
+    return float(np.quantile(boot, alpha)), float(np.quantile(boot, 1 - alpha))
+
+
+def across_seeds(results: pd.DataFrame) -> pd.DataFrame:
+    """Per (method, signals, metric) over the training seeds in ``results`` (column
+    ``train_seed``; rule-based methods have one, -1): the mean over seeds and cases with its
+    stratified bootstrap CI over seeds, the IQM over all runs (seed x case) with the same CI, the
+    per-seed means' min and max, and the number of seeds. Only cases that every seed of the
+    method ran are used, so each seed weighs the same."""
+    rows = []
+    for (method, signals), g in results.groupby(["method", "signals"]):
+        seeds = sorted(set(g.train_seed))
+        common = set.intersection(*(set(g[g.train_seed == sd].case) for sd in seeds))
+        g = g[g.case.isin(common)]
+        for m in METRICS:
+            mat = g.pivot_table(index="train_seed", columns="case", values=m).to_numpy()
+            per_seed = mat.mean(axis=1)
+            lo, hi = stratified_seed_bootstrap(mat)
+            ilo, ihi = stratified_seed_bootstrap(mat, statistic=lambda a, axis: stats.trim_mean(a, 0.25, axis=axis))
+            rows.append({"method": method, "signals": signals, "metric": m, "seeds": len(seeds),
+                         "cases": mat.shape[1], "mean": float(mat.mean()), "ci_low": lo, "ci_high": hi,
+                         "iqm": iqm(mat.ravel()), "iqm_ci_low": ilo, "iqm_ci_high": ihi,
+                         "seed_min": float(per_seed.min()), "seed_max": float(per_seed.max())})
     return pd.DataFrame(rows)
 
 
@@ -218,7 +248,7 @@ def mixed_claims(effect: pd.DataFrame, speed_loss_tol: float, hdv_tol: float, pa
     out = []
     for signals, g in effect.groupby("signals"):
         g = g.set_index("mpr")
-        def add(claim: str, ok: bool | None, detail: str) -> None:
+        def add(claim: str, ok: bool | None, detail: str, signals: str = signals) -> None:
             out.append({"signals": signals, "claim": claim,
                         "status": "NOT CHECKED" if ok is None else ("PASS" if ok else "FAIL"), "detail": detail})
         if not {0.0, 1.0} <= set(g.index):

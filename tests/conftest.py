@@ -16,6 +16,6 @@ os.environ.setdefault("XDG_DATA_HOME", str(_XDG / "data"))
 
 @pytest.fixture(scope="session")
 def cases():
-    from bench.cases import load
+    from bench.harness.cases import load
 
     return load()

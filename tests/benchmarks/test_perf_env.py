@@ -1,6 +1,6 @@
 """pytest-benchmark: env step against a raw libsumo step, reset cost, and MCAP logging overhead.
 
-Run with ``nox -s perf`` (saves JSON and prints the ratios via ``python -m bench.perf``).
+Run with ``nox -s perf`` (saves JSON and prints the ratios via ``ecodrive perf``).
 Each benchmark replays the same fixed case, so the simulated traffic is identical.
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from agents import BaselineAgent
-from bench.episode import make_env, run_episode
+from bench.harness.episode import make_env, run_episode
 
 STEPS = 150  # simulated seconds after the ego's insertion
 ROUNDS = 15
@@ -94,7 +94,7 @@ def test_episode_unlogged(benchmark, baseline_env, cases):
 def test_episode_logged(benchmark, baseline_env, cases, tmp_path, monkeypatch):
     """extra_info["log_share"]: time inside the logger (record + finish) over episode time
     without it, measured in the same episodes."""
-    from bench import mcaplog
+    from bench.logs import mcaplog
 
     agent, env = baseline_env
     spent = [0.0]

@@ -1,0 +1,52 @@
+"""``ecodrive``: one command for every job of the suite; each subcommand is a thin shell over one
+module's ``main`` (``python -m <module>`` runs the same thing)."""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from bench.args import Parser
+
+# subcommand -> (module, one-line description)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "run": ("bench.harness.run", "evaluate methods over the fixed test cases: MCAP logs, results.parquet, manifest"),
+    "report": ("reports.build", "rebuild the paper's tables and figures from a run folder"),
+    "view": ("bench.logs.view", "open step logs in the Rerun viewer, or save an .rrd recording"),
+    "regress": ("bench.regression.check", "check the paper's claims and the own reference on the CI cases"),
+    "train": ("bench.training.train", "train one learning method on one signal setting (resumable)"),
+    "train-all": ("bench.training.train_all", "train every learning method for both settings (resumable)"),
+    "qcheck": ("bench.training.qcheck", "compare a trained critic's Q values with the returns it earns"),
+    "lateral": ("bench.experiments.lateral", "the lateral scenarios A and B (section 5.4)"),
+    "mixed": ("bench.experiments.mixed", "mixed traffic over MPR x demand (section 5.5)"),
+    "sweep": ("bench.experiments.sweep", "the reward study or the penalty heatmap (section 5.2)"),
+    "stalls": ("bench.experiments.stalls", "trace the CVs that stall in one mixed-traffic cell"),
+    "calibrate": ("bench.experiments.calibrate", "SUMO's driver over the fixed cases against Table 4's baseline row"),
+    "cases": ("bench.harness.cases", "write or check the fixed test cases (bench/harness/cases.json)"),
+    "perf": ("bench.perf", "ratios from a pytest-benchmark JSON (env step vs raw SUMO, update vs FLOP floor)"),
+}
+
+
+def parser() -> Parser:
+    width = max(map(len, COMMANDS))
+    listing = "\n".join(f"  {name:<{width}}  {desc}" for name, (_, desc) in COMMANDS.items())
+    ap = Parser(prog="ecodrive", description=f"{__doc__}\ncommands:\n{listing}\n\n"
+                "`ecodrive COMMAND --help` gives a command's options and their accepted values.")
+    ap.add_argument("command", choices=list(COMMANDS), metavar="COMMAND", help=f"one of {', '.join(COMMANDS)}")
+    ap.add_argument("args", nargs=argparse.REMAINDER, help="the command's own options")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] not in ("-h", "--help") and argv[0] in COMMANDS:
+        ns = argparse.Namespace(command=argv[0], args=argv[1:])
+    else:
+        ns = parser().parse_args(argv)
+    module = importlib.import_module(COMMANDS[ns.command][0])
+    sys.argv[0] = f"ecodrive {ns.command}"  # argparse's prog in the command's help and errors
+    return int(module.main(ns.args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,241 @@
+"""The paper's synthetic lateral scenarios (section 5.4), scripted through the same environment.
+
+A: the ego follows HDV1 in its lane; HDV1 brakes at -2 m/s^2 for three consecutive steps while
+   HDV2 drives in the adjacent (left) lane.
+B: the ego follows a platoon of HDVs that queues at the first intersection on red; the lane to
+   the left holds a shorter queue and the one to the right none.
+Both run on an empty corridor (no random demand) with uncoordinated signals, so every method
+sees exactly the same situation. ``run_scenario`` returns the trajectories of the ego and the
+scripted vehicles; the lateral behaviour is judged from them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from agents.base import Agent
+from bench.args import Parser, int_in, name
+from bench.harness.cases import Case
+from bench.harness.episode import make_env, run_episode
+from bench.io import atomic_parquet
+
+EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0, "max_episode_time": 300.0}
+HDV1_BRAKE = -2.0  # [m/s^2] (paper)
+BRAKE_STEPS = 3  # (paper)
+BRAKE_AT = 5  # [steps after the ego enters]
+INSERT_A = 10.0  # [s] ego insertion, scenario A
+INSERT_B = 40.0  # [s] ego insertion, scenario B: J1 is red when the platoon arrives
+
+
+@dataclass(frozen=True)
+class Scripted:
+    vid: str
+    lane_offset: int  # relative to the ego's lane (+1 = left)
+    gap: float  # [m] ahead of the ego at insertion
+    speed: float  # [m/s]
+    hold: bool  # True: scripted speed (no Krauss); False: Krauss after insertion
+
+
+SCENARIO_NAMES = ("A", "B")
+SCENARIOS: dict[str, list[Scripted]] = {
+    "A": [Scripted("hdv1", 0, 25.0, 13.0, True), Scripted("hdv2", 1, 8.0, 13.0, True)],
+    "B": [Scripted(f"platoon{i}", 0, 40.0 + 9.0 * i, 13.0, False) for i in range(5)]
+         + [Scripted(f"left{i}", 1, 70.0 + 9.0 * i, 13.0, False) for i in range(2)],
+}
+
+
+class Script:
+    """Adds the scenario's scripted vehicles after the reset, brakes HDV1 (A) and records every
+    vehicle's trajectory; used as ``run_episode(..., script=)``."""
+
+    def __init__(self, name: str) -> None:
+        self.name, self.vehicles, self.rows = name, SCENARIOS[name], []
+
+    def start(self, env) -> None:
+        s = env.session
+        x, _, _, _, _, lane, _ = env.ego.kin
+        for v in self.vehicles:
+            target = min(max(lane + v.lane_offset, 0), env.cfg.lanes - 1)
+            s.add_scripted(v.vid, lane=target, pos=x + v.gap, speed=v.speed)
+            if not v.hold:
+                s.release_speed(v.vid)
+
+    def before(self, env, step: int) -> None:
+        s = env.session
+        if self.name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in s.vehicle_ids():
+            v1 = s.kinematics("hdv1")[3]
+            s.set_speed("hdv1", max(0.0, v1 + HDV1_BRAKE * env.cfg.step_length))
+        if step == BRAKE_AT + BRAKE_STEPS:  # the event is over: the HDVs drive by Krauss (and signals) again
+            for v in self.vehicles:
+                if v.hold and v.vid in s.vehicle_ids():
+                    s.release_speed(v.vid)
+
+    def after(self, env, step: int) -> None:
+        s = env.session
+        t, ego = s.time(), env.ego.kin
+        self.rows.append({"time": t, "vehicle": "ego", "x": ego[0], "lane": ego[5], "speed": ego[3]})
+        present = set(s.vehicle_ids())
+        for v in self.vehicles:
+            if v.vid in present:
+                k = s.kinematics(v.vid)
+                self.rows.append({"time": t, "vehicle": v.vid, "x": k[0], "lane": k[5], "speed": k[3]})
+
+
+def case_of(name: str) -> Case:
+    """The fixed case of a scenario: SUMO seed 1 on the empty corridor."""
+    return Case(index=SCENARIO_NAMES.index(name), sumo_seed=1, insert_time=INSERT_A if name == "A" else INSERT_B, group=0)
+
+
+def scenario_env(method: str):
+    """The env of the lateral scenarios: empty corridor, uncoordinated signals."""
+    return make_env(method, "uncoordinated", EMPTY)
+
+
+def run_scenario(name: str, agent: Agent, method: str, log_path: Path | None = None,
+                 agent_sha256: str = "", env=None) -> pd.DataFrame:
+    """Trajectories (time, vehicle, x, lane, speed) of scenario ``name`` driven by ``agent``;
+    with ``log_path`` the ego's steps (the scripted vehicles among its neighbours) go to MCAP.
+    ``env`` (from ``scenario_env``) is used and closed; by default one is made."""
+    env = env or scenario_env(method)
+    script = Script(name)
+    try:
+        run_episode(env, agent, case_of(name), method, log_path=log_path, agent_sha256=agent_sha256, script=script)
+    finally:
+        env.close()
+    df = pd.DataFrame(script.rows)
+    df["method"] = method
+    return df
+
+
+def left_lane_of(df: pd.DataFrame, vid: str) -> bool:
+    """Whether the ego ever drove in a lane other than ``vid``'s while behind it."""
+    ego = df[df.vehicle == "ego"].set_index("time")
+    other = df[df.vehicle == vid].set_index("time")
+    both = ego.join(other, lsuffix="_ego", rsuffix="_o", how="inner")
+    behind = both[both.x_ego < both.x_o]
+    return bool((behind.lane_ego != behind.lane_o).any())
+
+
+def queue_lengths(df: pd.DataFrame) -> dict[int, int]:
+    """Vehicles stopped (speed < 0.1 m/s) per lane at the moment the longest queue formed."""
+    others = df[(df.vehicle != "ego") & (df.speed < 0.1)]
+    if others.empty:
+        return {}
+    t = others.groupby("time").size().idxmax()
+    return others[others.time == t].groupby("lane").size().to_dict()
+
+
+def final_lane(df: pd.DataFrame) -> int:
+    return int(df[df.vehicle == "ego"].lane.iloc[-1])
+
+
+def summary(df: pd.DataFrame, name: str, lanes: int = 5) -> dict[str, Any]:
+    ego = df[df.vehicle == "ego"]
+    out = {"scenario": name, "method": df.method.iloc[0], "lanes_visited": sorted(set(ego.lane)),
+           "lane_changes": int((np.diff(ego.lane.to_numpy()) != 0).sum()), "final_lane": final_lane(df)}
+    if name == "A":
+        out["left_hdv1_lane"] = left_lane_of(df, "hdv1")
+    else:
+        q = queue_lengths(df)
+        out["queues_by_lane"] = q
+        fewest = min(q.get(ln, 0) for ln in range(lanes))
+        out["ended_in_shortest_queue_lane"] = q.get(final_lane(df), 0) == fewest if q else None
+    return out
+
+
+# ---------------------------------------------------------------- command line
+LATERAL_METHODS = ("baseline", "prl", "ddpg")  # the paper's fig:scenario_compare
+
+
+@dataclass(frozen=True)
+class LateralTask:
+    scenario: str
+    method: str
+    policy_dir: str  # "" for rule-based methods
+    path: str  # MCAP of the ego's steps; the trajectories go next to it as .parquet
+
+
+def run_task(task: LateralTask) -> dict[str, Any]:
+    """One scenario for one method, in an executor worker. The policy is the shipped one for the
+    uncoordinated setting, used here on the empty scripted corridor on purpose (no scenario check)."""
+    import torch
+
+    from agents.registry import LEARNING, make_agent
+    from bench.harness.policies import load_policy
+
+    torch.set_num_threads(1)
+    env = scenario_env(task.method)
+    agent = make_agent(task.method, env.observation_space, env.action_space)
+    sha = ""
+    if task.method in LEARNING:
+        state, manifest = load_policy(Path(task.policy_dir), task.method)
+        agent.load_state_dict(state)
+        sha = manifest["sha256"]
+    df = run_scenario(task.scenario, agent, task.method, log_path=Path(task.path), agent_sha256=sha, env=env)
+    atomic_parquet(df, Path(task.path).with_suffix(".parquet"))
+    return _flat(summary(df, task.scenario))
+
+
+def _flat(s: dict[str, Any]) -> dict[str, Any]:
+    return {k: (str(v) if isinstance(v, (dict, list)) else v) for k, v in s.items()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    import sys
+
+    from agents.registry import LEARNING, METHODS
+    from bench.harness.executors import EXECUTORS, run_local, run_ray
+    from bench.harness.policies import MODELS, policy_dir
+    from bench.io import sha256
+    from bench.logs.mcaplog import episode_summary
+
+    ap = Parser(description="Run the lateral scenarios A and B (section 5.4) for each method.")
+    ap.add_argument("--methods", nargs="+", default=list(LATERAL_METHODS), help=f"among {', '.join(METHODS)}")
+    ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
+    ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
+    ap.add_argument("--workers", type=int_in(1), default=2, help="parallel episodes (>= 1)")
+    ap.add_argument("--run-id", type=name, default="paper", help="run folder under --logs (letters, digits, '.', '_', '-')")
+    ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
+    ap.add_argument("--models", type=Path, default=MODELS, help="shipped policies (default: models/)")
+    args = ap.parse_args(argv)
+    bad = ", ".join(m for m in args.methods if m not in METHODS)
+    error = (bad and f"--methods {bad} is not accepted; accepted: {', '.join(METHODS)}"
+             or args.executor not in EXECUTORS and f"--executor {args.executor} is not accepted; accepted: {', '.join(EXECUTORS)}"
+             or args.workers < 1 and f"--workers {args.workers} is not accepted; accepted: >= 1")
+    if error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    missing = [m for m in args.methods if m in LEARNING
+               and not (policy_dir(m, "uncoordinated", args.models) / "manifest.json").is_file()]
+    if missing:
+        print(f"note: no shipped uncoordinated policy for {', '.join(missing)}; skipped", file=sys.stderr)
+    root = args.logs / args.run_id / "lateral"
+    tasks = [LateralTask(name, m, str(policy_dir(m, "uncoordinated", args.models)) if m in LEARNING else "",
+                         str(root / name / f"{m}.mcap"))
+             for name in SCENARIO_NAMES for m in args.methods if m not in missing]
+    for t in tasks:
+        Path(t.path).parent.mkdir(parents=True, exist_ok=True)
+    rows, todo = [], []
+    for t in tasks:
+        traj = Path(t.path).with_suffix(".parquet")
+        sha = sha256(Path(t.policy_dir) / "policy.pt") if t.policy_dir else ""  # another policy's log is rerun
+        if episode_summary(t.path, agent_sha256=sha) is not None and traj.is_file():
+            rows.append(_flat(summary(pd.read_parquet(traj), t.scenario)))
+        else:
+            todo.append(t)
+    it = run_local(todo, args.workers, run_task) if args.executor == "local" else run_ray(todo, args.address, args.workers, run_task)
+    rows += list(it)
+    out = pd.DataFrame(rows).sort_values(["scenario", "method"], ignore_index=True)
+    atomic_parquet(out, root / "lateral.parquet")
+    print(out.to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

@@ -1,0 +1,244 @@
+"""Training sweeps of section 5.2: the reward study and the r_p^s x r_p^j sensitivity heatmap.
+
+    ecodrive sweep reward  [--forms r1 r2 r] [--phi 0.5 1 2] [--seeds 0 1 2]
+    ecodrive sweep heatmap [--values 10 20 30 40 50] [--seeds 0]
+        common: [--signals uncoordinated] [--episodes 1000] [--cases 100]
+                [--executor local|ray] [--address A] [--workers 2] [--run-id paper] [--logs logs]
+
+A job trains PRL with one reward configuration (``bench.training.train``, so it resumes from its own
+checkpoints under ``$ECODRIVE_RUNS/sweeps/<study>/``), copies its ``/train`` log into
+``<logs>/<run-id>/<study>/<name>/train.mcap``, then runs the exported (validation-selected) policy
+greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it, and writes
+``job.json`` there last. A rerun skips what is finished; a finished folder made with other values
+(episodes, cases, reward, ...) is refused, never overwritten. ``sweep.parquet`` (one row per
+finished job of the study folder, whatever command ran it) and ``episodes.parquet`` (one row per
+test episode) collect the results after every job; ``ecodrive report`` draws them.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from tqdm import tqdm
+
+from bench.args import Parser, int_in, name
+from bench.harness.executors import EXECUTORS, run_local, run_ray
+from bench.io import atomic_json, atomic_parquet
+from bench.logs.mcaplog import episode_summary
+from envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig
+
+STUDIES = ("reward", "heatmap")
+PHIS = (0.5, 1.0, 2.0)  # section 5.2 varies phi; our set
+HEATMAP_VALUES = (10.0, 20.0, 30.0, 40.0, 50.0)  # |r_p^s| and |r_p^j|; r_p^c fixed at 50
+HEATMAP_LANE_CHANGE = 50.0
+
+
+@dataclass(frozen=True)
+class Job:
+    study: str
+    name: str  # configuration label, e.g. "r-phi1" or "s40-j30"
+    signals: str
+    seed: int
+    episodes: int
+    cases: int  # first N fixed test cases for the greedy evaluation
+    run_dir: str  # training folder (checkpoints, replay)
+    log_dir: str  # <logs>/<run-id>/<study>/<name>-s<seed>
+    reward: dict[str, Any] = field(default_factory=dict)
+    validation_cases: int = 20  # validation cases scored at every training checkpoint
+    max_episode_time: float | None = None  # [s] episode truncation; None = the scenario default
+
+    @property
+    def label(self) -> str:
+        return f"{self.name}-s{self.seed}"
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """Train (or resume), copy the training log, evaluate greedily on the test cases."""
+    import torch
+
+    from agents.registry import make_agent
+    from bench.harness.cases import load
+    from bench.harness.episode import make_env, run_episode
+    from bench.harness.policies import load_policy, policy_dir
+    from bench.training.train import train
+
+    torch.set_num_threads(1)
+    run_dir, log_dir = Path(job.run_dir), Path(job.log_dir)
+    scenario: dict[str, Any] = {"reward": job.reward}
+    if job.max_episode_time is not None:
+        scenario["max_episode_time"] = job.max_episode_time
+    models = run_dir / "export"
+    folder = policy_dir("prl", job.signals, models)
+    t0 = time.perf_counter()
+    if not (folder / "manifest.json").is_file():
+        # epsilon decays over the job's own episodes (eq. 12 with N = the training length)
+        train("prl", job.signals, job.episodes, job.seed, run_dir, models=models, scenario=scenario, progress=False,
+              agent_config={"eps_decay_episodes": job.episodes}, validation_cases=job.validation_cases,
+              command=["ecodrive", "sweep", job.study, f"# job {job.label}"])
+    log_dir.mkdir(parents=True, exist_ok=True)
+    for fname in ("train.mcap", "metrics.parquet"):
+        shutil.copyfile(run_dir / fname, log_dir / fname)
+    env = make_env("prl", job.signals, scenario)
+    agent = make_agent("prl", env.observation_space, env.action_space)
+    state, manifest = load_policy(folder, "prl", env.cfg.to_dict())
+    agent.load_state_dict(state)
+    rows = []
+    for case in load()[: job.cases]:
+        path = log_dir / f"case-{case.index:03d}.mcap"
+        row = episode_summary(path, agent_sha256=manifest["sha256"])  # a log of an earlier policy is rerun
+        if row is None:
+            row = run_episode(env, agent, case, "prl", log_path=path, agent_sha256=manifest["sha256"])
+        rows.append({**row, "config": job.name, "seed": job.seed, "case": case.index, "mcap": str(path)})
+    env.close()
+    ep = pd.DataFrame(rows)
+    atomic_parquet(ep, log_dir / "episodes.parquet")
+    row = {"study": job.study, "config": job.name, "seed": job.seed, "signals": job.signals,
+           **{f"reward_{k}": v for k, v in job.reward.items()}, "episodes": job.episodes,
+           "selected_episode": manifest.get("selected_episode"), "cases": len(ep),
+           "energy": ep.energy.mean(), "travel_time": ep.travel_time.mean(),
+           "collisions": int(ep.collisions.sum()), "lane_changes": ep.lane_changes_applied.mean(),
+           "job_wall_s": time.perf_counter() - t0, "log_dir": str(log_dir)}
+    atomic_json({"job": _identity(job), "row": row}, log_dir / "job.json", default=float)  # last: present = finished
+    return row
+
+
+def _identity(job: Job) -> dict[str, Any]:
+    """What makes a job's results: a finished log folder made with other values is not reused."""
+    return {"signals": job.signals, "seed": job.seed, "episodes": job.episodes, "cases": job.cases,
+            "reward": job.reward, "validation_cases": job.validation_cases, "max_episode_time": job.max_episode_time}
+
+
+def finished(root: Path) -> dict[str, dict[str, Any]]:
+    """Rows of every finished job under a study folder (whatever command made them), by log folder."""
+    rows = {}
+    for path in sorted(root.glob("*/job.json")):
+        try:
+            rows[str(path.parent)] = json.loads(path.read_text())["row"]
+        except (OSError, ValueError, KeyError):
+            continue
+    return rows
+
+
+def is_finished(job: Job) -> bool:
+    """Whether the job's log folder holds this job, finished; ConfigError if it holds a finished
+    job made with other values."""
+    path = Path(job.log_dir) / "job.json"
+    if not path.is_file():
+        return False
+    try:
+        stored = json.loads(path.read_text())["job"]
+    except (OSError, ValueError, KeyError):
+        return False  # unreadable: the job reruns and rewrites it
+    want = json.loads(json.dumps(_identity(job), default=float))
+    diff = [f"{k} {stored.get(k)!r} (asked {v!r})" for k, v in want.items() if stored.get(k) != v]
+    if diff:
+        raise ConfigError(f"{job.log_dir}: finished with {', '.join(diff)}; use another --run-id, or move the "
+                          f"folder away to rerun it")
+    return True
+
+
+def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
+    """``sweep.parquet`` and ``episodes.parquet`` of the study folder, replaced atomically."""
+    df = pd.DataFrame(list(rows.values()))
+    if not df.empty:
+        df = df.sort_values(["config", "seed"], ignore_index=True)
+    atomic_parquet(df, root / "sweep.parquet")
+    episodes = [pd.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()]
+    if episodes:
+        atomic_parquet(pd.concat(episodes, ignore_index=True), root / "episodes.parquet")
+    return df
+
+
+
+def jobs(study: str, args: argparse.Namespace) -> list[Job]:
+    """The job list of a study; every reward configuration is validated before anything runs."""
+    from bench.training.train import RUNS
+
+    if study == "reward":
+        configs = [(f"{form}-phi{phi:g}", {"form": form, "phi": phi}) for form in args.forms for phi in args.phi]
+    else:
+        configs = [(f"s{s:g}-j{j:g}", {"speed_penalty": s, "jerk_penalty": j, "lane_change_penalty": HEATMAP_LANE_CHANGE})
+                   for s in args.values for j in args.values]
+    for _, reward in configs:
+        RewardConfig(**reward)  # raises ConfigError naming the value and its range
+    if args.max_episode_time is not None:
+        ScenarioConfig(max_episode_time=args.max_episode_time)
+    root = Path(args.logs) / args.run_id / study
+    return [Job(study, name, args.signals, seed, args.episodes, args.cases,
+                str(RUNS / "sweeps" / study / f"{args.signals}-{name}-s{seed}-e{args.episodes}"),
+                str(root / f"{name}-s{seed}"), reward, args.validation_cases, args.max_episode_time)
+            for name, reward in configs for seed in args.seeds]
+
+
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    ap = Parser(description=__doc__)
+    ap.add_argument("study", help=f"one of {', '.join(STUDIES)}")
+    ap.add_argument("--signals", default="uncoordinated", help=f"one of {', '.join(SIGNALS)}")
+    ap.add_argument("--forms", nargs="+", default=list(REWARDS), help=f"reward study: forms among {', '.join(REWARDS)}")
+    ap.add_argument("--phi", nargs="+", type=float, default=list(PHIS), help="reward study: phi values [Wh/s]")
+    ap.add_argument("--values", nargs="+", type=float, default=list(HEATMAP_VALUES), help="heatmap: |r_p^s| = |r_p^j| grid")
+    ap.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (reward: 0 1 2; heatmap: 0)")
+    ap.add_argument("--episodes", type=int, default=1000, help="training episodes per job (1-100000)")
+    ap.add_argument("--cases", type=int, default=100, help="fixed test cases evaluated per job (0-100)")
+    ap.add_argument("--validation-cases", type=int, default=20, help="validation cases per training checkpoint (1-100)")
+    ap.add_argument("--max-episode-time", type=float, default=None, help="episode truncation [s] (default: the scenario's)")
+    ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
+    ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
+    ap.add_argument("--workers", type=int_in(1), default=2, help="parallel jobs (>= 1)")
+    ap.add_argument("--run-id", type=name, default="paper", help="run folder under --logs")
+    ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
+    args = ap.parse_args(argv)
+    for flag, value, accepted in (("study", args.study, STUDIES), ("--signals", args.signals, SIGNALS),
+                                  ("--executor", args.executor, EXECUTORS)):
+        if value not in accepted:
+            ap.error(f"{flag} {value!r} is not accepted; choose one of {', '.join(accepted)}")
+    if args.seeds is None:
+        args.seeds = [0, 1, 2] if args.study == "reward" else [0]
+    if (not 1 <= args.episodes <= 100_000 or not 0 <= args.cases <= 100 or args.workers < 1 or min(args.seeds) < 0
+            or not 1 <= args.validation_cases <= 100):
+        ap.error(f"out of range: --episodes {args.episodes} (1-100000), --cases {args.cases} (0-100), "
+                 f"--workers {args.workers} (>= 1), --seeds {args.seeds} (>= 0), "
+                 f"--validation-cases {args.validation_cases} (1-100)")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    try:
+        todo = jobs(args.study, args)
+    except ConfigError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    root = Path(args.logs) / args.run_id / args.study
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        print(f"error: cannot write {root}: {e.strerror}", file=sys.stderr)
+        return 2
+    try:
+        todo = [job for job in todo if not is_finished(job)]
+    except ConfigError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    rows = finished(root)  # every finished job of the study, not only this command's
+    write_tables(root, rows)
+    it = (run_local(todo, args.workers, run_job) if args.executor == "local"
+          else run_ray(todo, args.address, args.workers, run_job))
+    for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
+        rows[row["log_dir"]] = row
+        write_tables(root, rows)  # a killed sweep leaves the tables of its finished jobs
+    df = write_tables(root, rows)
+    print(df[["config", "seed", "selected_episode", "energy", "travel_time", "collisions"]].round(2).to_string(index=False))
+    print(f"results: {root / 'sweep.parquet'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

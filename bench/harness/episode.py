@@ -1,0 +1,118 @@
+"""Run one episode of an agent on a fixed case, optionally logging every step to MCAP."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agents.base import Agent
+from bench.harness.cases import Case
+from bench.harness.provenance import git_sha, package_versions
+from bench.logs.mcaplog import EpisodeLog, meta_json
+from envs.env import EcoDriveEnv
+from envs.scenario import LANE_WIDTH
+from envs.sumo import sumo_version
+
+STOP_SPEED = 0.1  # [m/s] below this the ego counts as stopped
+
+
+def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = None) -> EcoDriveEnv:
+    """The raw env for an agent (or a method name), with the agent's scenario overrides."""
+    from agents.registry import ACTION_INTERFACE, ENV_OVERRIDES
+
+    if isinstance(agent, str):
+        interface, overrides = ACTION_INTERFACE[agent], ENV_OVERRIDES.get(agent, {})
+    else:
+        interface, overrides = agent.action_interface, agent.env_overrides
+    cfg = deep_merge(config or {}, overrides)
+    env = gym.make("EcoDrive-v0", signals=signals, action=interface, config=cfg)
+    return env.unwrapped  # the harness steps the raw env: no wrappers in the timed loop
+
+
+def run_episode(
+    env: EcoDriveEnv, agent: Agent, case: Case, method: str, log_path: Path | None = None,
+    agent_sha256: str = "", script: Any = None,
+) -> dict[str, Any]:
+    """Greedy episode of ``agent`` on ``case``; returns the summary row (also the /episode record).
+
+    ``script`` (the lateral scenarios) has ``start(env)``, called after the reset, and
+    ``before(env, step)`` / ``after(env, step)``, called around every step."""
+    log = None
+    if log_path is not None:
+        meta = {
+            "config_json": meta_json(env.cfg.to_dict()), "method": method, "signals": env.cfg.signals,
+            "case_index": case.index, "sumo_seed": case.sumo_seed, "insert_time": case.insert_time,
+            "sumo_version": sumo_version(), "git_sha": git_sha(), "packages_json": meta_json(package_versions()),
+            "agent_sha256": agent_sha256,
+            "geometry_json": meta_json({"lane_y": env.files.lane_y, "stop_lines": env.files.stop_lines,
+                                        "junction_x": env.files.junction_x, "tls": env.files.tls_ids,
+                                        "lane_width": LANE_WIDTH, "v2i_range": env.cfg.v2i_range}),
+        }
+        log = EpisodeLog(log_path, meta)
+        env.recorder = log.record
+    try:
+        obs, info = env.reset(seed=case.sumo_seed, options=case.options())
+        depart = env.t_depart
+        steps = stops = jerk_ex = lc_req = 0
+        time_stopped = ret = 0.0
+        moving = True
+        jerk_max = env.cfg.reward.jerk_threshold
+        if script is not None:
+            script.start(env)
+        while True:
+            action = agent.act(obs, info, explore=False)
+            if log is not None:
+                log.raw_action = _flatten(action)
+            if script is not None:
+                script.before(env, steps)
+            obs, r, terminated, truncated, info = env.step(action)
+            if script is not None:
+                script.after(env, steps)
+            steps += 1
+            ret += r
+            speed = float(obs["logic"][env.cfg.lanes + 1])
+            if speed < STOP_SPEED:
+                time_stopped += env.cfg.step_length
+                stops += moving
+                moving = False
+            else:
+                moving = True
+            jerk_ex += abs(info["jerk"]) > jerk_max
+            lc_req += bool(info["requested"] and info["requested"][0])
+            if terminated or truncated:
+                break
+        consumed, regenerated = (env.session.battery_totals(env.ego.vid)
+                                 if not info["ego_left_simulation"] else (float("nan"), float("nan")))
+        summary = {
+            "method": method, "signals": env.cfg.signals, "case_index": case.index, "sumo_seed": case.sumo_seed,
+            "insert_time": case.insert_time, "depart_time": depart, "energy": info["energy"],
+            "travel_time": info["travel_time"], "steps": steps, "terminated": terminated, "truncated": truncated,
+            "return_": ret, "stops": stops, "time_stopped": time_stopped, "lane_changes_requested": lc_req,
+            "lane_changes_applied": info["lane_changes"], "clips": info["clips"], "jerk_exceedances": jerk_ex,
+            "collisions": info["collisions"], "teleports": info["teleports"],
+            "battery_consumed": consumed, "battery_regenerated": regenerated,
+        }
+        if log is not None:
+            log.finish(summary)
+        return summary
+    except BaseException:
+        if log is not None:
+            log.abort()
+        raise
+    finally:
+        env.recorder = None
+
+
+def _flatten(action: Any) -> list[float]:
+    if isinstance(action, tuple):
+        return [float(v) for part in action for v in np.ravel(part)]
+    return [float(v) for v in np.ravel(action)]

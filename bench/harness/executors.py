@@ -1,0 +1,113 @@
+"""Where episodes run: a local process pool (one SUMO per process) or a Ray cluster.
+
+Both run the same ``run_task`` and yield result rows as episodes finish; the rows do not depend
+on the executor (tests compare them).
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bench.harness.cases import Case
+
+EXECUTORS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Task:
+    method: str
+    signals: str
+    case: Case
+    path: str  # MCAP to write
+    policy_dir: str  # models/<method>-<signals> for learning methods, "" otherwise
+
+
+_CACHE: dict[tuple[str, str], tuple[Any, Any, str]] = {}  # per worker process: env, agent, sha256
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """One greedy episode in this worker; envs and policies are loaded once per worker."""
+    import torch
+
+    from agents.registry import LEARNING, make_agent
+    from bench.harness.episode import make_env, run_episode
+    from bench.harness.policies import load_policy
+
+    torch.set_num_threads(1)
+    key = (task.method, task.signals)
+    if key not in _CACHE:
+        env = make_env(task.method, task.signals)
+        agent = make_agent(task.method, env.observation_space, env.action_space)
+        sha = ""
+        if task.method in LEARNING:
+            state, manifest = load_policy(Path(task.policy_dir), task.method, env.cfg.to_dict())
+            agent.load_state_dict(state)
+            sha = manifest["sha256"]
+        _CACHE[key] = (env, agent, sha)
+    env, agent, sha = _CACHE[key]
+    t0 = time.perf_counter()
+    row = run_episode(env, agent, task.case, task.method, log_path=Path(task.path), agent_sha256=sha)
+    row["episode_wall_s"] = time.perf_counter() - t0
+    row["mcap"] = task.path
+    return row
+
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def _die_with_parent(parent: int) -> None:
+    """Worker initializer: on Linux, ask for SIGTERM when the process that started the pool dies
+    (a killed sweep must not leave orphans computing its cells); elsewhere nothing."""
+    import ctypes
+    import signal
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # it died before prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = run_task) -> Iterator[dict[str, Any]]:
+    ctx = mp.get_context("spawn")  # a fresh interpreter per worker: no libsumo state is inherited
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_die_with_parent,
+                             initargs=(os.getpid(),)) as pool:
+        futures = [pool.submit(fn, t) for t in tasks]
+        try:
+            for f in as_completed(futures):
+                yield f.result()
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
+
+
+def run_ray(tasks: Iterable[Any], address: str | None, workers: int,
+            fn: Callable[[Any], dict] = run_task) -> Iterator[dict[str, Any]]:
+    try:
+        import ray
+    except ImportError:
+        raise SystemExit("error: --executor ray needs Ray: pip install '.[distributed]'") from None
+    root = str(Path(__file__).resolve().parents[2])
+    if not ray.is_initialized():
+        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
+                                  "runtime_env": {"env_vars": {"PYTHONPATH": root}}}
+        if address:
+            ray.init(address=address, **kwargs)
+        else:
+            ray.init(num_cpus=workers, **kwargs)
+    remote = ray.remote(num_cpus=1)(fn)
+    pending = [remote.remote(t) for t in tasks]
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        yield ray.get(done[0])

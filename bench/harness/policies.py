@@ -1,0 +1,82 @@
+"""Shipped policies: ``models/<method>-<signals>/policy.pt`` plus ``manifest.json``.
+
+Loading checks the file's sha256 against the manifest and the method and scenario config
+against what the caller expects; anything else is a ``CheckpointError`` naming the file.
+"""
+from __future__ import annotations
+
+import json
+import pickle
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from bench.io import atomic_json, atomic_torch_save, sha256
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+
+
+class CheckpointError(RuntimeError):
+    pass
+
+
+def load_torch(path: Path) -> Any:
+    """A torch file read as data (``weights_only=True``): tensors and plain Python containers
+    only. A pickle that names any other global (a planted ``__reduce__`` payload, say) is a
+    ``CheckpointError``, and nothing in it runs."""
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        why = next((ln.strip().rstrip(".") for ln in str(e).splitlines() if "GLOBAL" in ln), "not plain data")
+        raise CheckpointError(f"{path}: refused, it holds more than tensors and plain data ({why}); "
+                              f"policies and checkpoints are loaded as data, never as code") from None
+    except Exception as e:
+        raise CheckpointError(f"{path}: cannot be loaded ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})") from None
+
+
+def policy_dir(method: str, signals: str, root: Path = MODELS) -> Path:
+    return root / f"{method}-{signals}"
+
+
+def save_policy(folder: Path, state: dict[str, Any], manifest: dict[str, Any]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "policy.pt"
+    atomic_torch_save(state, path)
+    manifest = {**manifest, "file": path.name, "sha256": sha256(path)}
+    atomic_json(manifest, folder / "manifest.json", sort_keys=True)
+    return path
+
+
+def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = None) -> tuple[dict, dict]:
+    """(state, manifest) of a shipped policy, verified."""
+    man_path, path = folder / "manifest.json", folder / "policy.pt"
+    if not man_path.is_file() or not path.is_file():
+        raise CheckpointError(f"{folder}: no trained policy (expected policy.pt and manifest.json); "
+                              f"train one with the command in the README")
+    try:
+        manifest = json.loads(man_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CheckpointError(f"{man_path}: manifest is not valid JSON ({e})") from None
+    if not isinstance(manifest, dict):
+        raise CheckpointError(f"{man_path}: manifest is a JSON {type(manifest).__name__}, expected an object")
+    digest = sha256(path)
+    if manifest.get("sha256") != digest:
+        raise CheckpointError(f"{path}: sha256 {digest[:12]}... does not match the manifest's "
+                              f"{str(manifest.get('sha256'))[:12]}...: the file is corrupt or was replaced")
+    if manifest.get("method") != method:
+        raise CheckpointError(f"{path}: policy is for method {manifest.get('method')!r}, not {method!r}")
+    state = load_torch(path)
+    if scenario is not None:
+        from envs.config import ConfigError, ScenarioConfig, backfill, diff
+
+        trained = manifest.get("scenario", {})
+        try:
+            ScenarioConfig.from_dict(backfill(trained))  # fields added later: the value their absence meant
+        except ConfigError as e:
+            raise CheckpointError(f"{man_path}: scenario config not accepted ({e})") from None
+        # the reward is what the policy was trained for, not what it sees or drives in: not compared
+        differs = sorted({k.split(".")[0] for k in diff(trained, scenario)} - {"signals", "glosa", "reward"})
+        if differs:
+            raise CheckpointError(f"{path}: trained on a different scenario config (differs in: {', '.join(differs)})")
+    return state, manifest

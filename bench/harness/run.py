@@ -1,0 +1,198 @@
+"""The benchmark harness: every method over the fixed test cases, one MCAP per episode.
+
+    ecodrive run [--profile smoke|paper|full] [--executor local|ray] [--address ADDR]
+                        [--workers N] [--methods ...] [--signals ...] [--run-id ID] [--logs DIR]
+
+Writes ``<logs>/<run-id>/<signals>/<method>/case-XXX.mcap``, ``results.parquet`` and
+``manifest.json``. Rerunning the same command skips cases whose MCAP is complete and reruns the
+rest, so a killed run loses nothing that finished. Evaluation is greedy.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from tqdm import tqdm
+
+from agents.registry import LEARNING, METHODS
+from bench.args import Parser, fail, int_in, name
+from bench.harness.cases import load
+from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
+from bench.harness.policies import MODELS, CheckpointError, policy_dir
+from bench.harness.provenance import git_sha, package_versions
+from bench.io import atomic_json, atomic_parquet, sha256
+from bench.logs.mcaplog import episode_summary, resolve_log
+from envs.config import SIGNALS
+
+PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, mixed, reward and heatmap)
+    "smoke": 3,
+    "paper": 100,
+    "full": 100,
+}
+KEEP = ("method", "signals", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
+        "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",
+        "lane_changes_applied", "clips", "jerk_exceedances", "collisions", "teleports", "battery_consumed",
+        "battery_regenerated", "mcap")
+
+
+class UsageError(Exception):
+    """Bad input; printed as one line, nothing touched."""
+
+
+def parser() -> Parser:
+    ap = Parser(description=__doc__)
+    ap.add_argument("--profile", default="paper", choices=list(PROFILES),
+                    help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
+                         "experiments (in `nox -s benchmark`)")
+    ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=list(METHODS),
+                    help=f"among {', '.join(METHODS)} (default: every method with a shipped policy)")
+    ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS), help="signal settings")
+    ap.add_argument("--executor", default="local", choices=list(EXECUTORS), help="local process pool, or Ray")
+    ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray; default: a local Ray)")
+    ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, help="parallel episodes (>= 1)")
+    ap.add_argument("--run-id", type=name, default=None,
+                    help="run folder under --logs: letters, digits, '.', '_', '-' (default: the profile)")
+    ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
+    ap.add_argument("--models", type=Path, default=MODELS, help="shipped policies (default: models/)")
+    return ap
+
+
+def parse(argv: list[str]) -> dict[str, Any]:
+    """The options as a dict; bad input exits 2 with one line (``bench.args.Parser``)."""
+    opts = vars(parser().parse_args(argv))
+    opts["run_id"] = opts["run_id"] or opts["profile"]
+    return opts
+
+
+def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str]], list[str]]:
+    """((method, signals) pairs to run, "method/signals" skipped for want of a shipped policy).
+
+    Without ``--methods``, a learning method runs in each setting it has a policy for; named in
+    ``--methods``, a missing policy is an error."""
+    explicit = opts["methods"] is not None
+    pairs, skipped = [], []
+    for m in (opts["methods"] if explicit else METHODS):
+        for s in opts["signals"]:
+            if m in LEARNING and not (policy_dir(m, s, opts["models"]) / "manifest.json").is_file():
+                if explicit:
+                    raise UsageError(f"no trained policy for {m} / {s} (expected {policy_dir(m, s, opts['models'])}); "
+                                     f"train it: ecodrive train --method {m} --signals {s}")
+                skipped.append(f"{m}/{s}")
+            else:
+                pairs.append((m, s))
+    return pairs, skipped
+
+
+def check_writable(run_dir: Path) -> None:
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        probe = run_dir / f".write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as e:
+        raise UsageError(f"log folder {run_dir} is not writable ({e.strerror})") from None
+
+
+def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
+    pairs, skipped = resolve_methods(opts)
+    methods = list(dict.fromkeys(m for m, _ in pairs))
+    if skipped:
+        print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
+    run_dir = opts["logs"] / opts["run_id"]
+    check_writable(run_dir)
+    cases = load()[: PROFILES[opts["profile"]]]
+    rows, tasks = [], []
+    for signals in opts["signals"]:
+        for method in [m for m, s in pairs if s == signals]:
+            pdir = str(policy_dir(method, signals, opts["models"])) if method in LEARNING else ""
+            sha = sha256(Path(pdir) / "policy.pt") if pdir else ""  # a log of another policy is rerun
+            for case in cases:
+                path = run_dir / signals / method / f"case-{case.index:03d}.mcap"
+                done = episode_summary(path, agent_sha256=sha)
+                if done is not None:
+                    rows.append({**done, "mcap": str(path), "episode_wall_s": float("nan")})
+                else:
+                    tasks.append(Task(method, signals, case, str(path), pdir))
+    t0 = time.perf_counter()
+    it = (run_local(tasks, opts["workers"]) if opts["executor"] == "local"
+          else run_ray(tasks, opts["address"], opts["workers"]))
+    with tqdm(total=len(rows) + len(tasks), initial=len(rows), desc="episodes", unit="ep", disable=not progress) as bar:
+        for row in it:
+            rows.append(row)
+            bar.update(1)
+    wall = time.perf_counter() - t0
+    df = pd.DataFrame(rows).rename(columns={"return_": "return", "case_index": "case", "sumo_seed": "seed"})
+    ran = df["episode_wall_s"].dropna()
+    kept = earlier_rows(run_dir, df)
+    df = pd.concat([df[list(KEEP)], kept], ignore_index=True) if len(kept) else df[list(KEEP)]
+    df = df.sort_values(["signals", "method", "case"], ignore_index=True)
+    df["mcap"] = [_relative(run_dir, m) for m in df.mcap]  # the run folder moves as a whole
+    atomic_parquet(df, run_dir / "results.parquet")
+    shas = {f"{m}-{s}": sha256(policy_dir(m, s, opts["models"]) / "policy.pt")
+            for m, s in pairs if m in LEARNING}
+    manifest = {
+        "command": " ".join(["ecodrive", "run", *opts.get("argv", [])]), "profile": opts["profile"],
+        "executor": opts["executor"], "workers": opts["workers"], "methods": methods, "skipped_methods": skipped,
+        "signals": opts["signals"], "cases_per_setting": len(cases), "git_sha": git_sha(),
+        "packages": package_versions(), "checkpoint_sha256": shas,
+        "episodes_run": int(len(ran)), "episodes_reused": int(len(df) - len(ran) - len(kept)),
+        "episodes_kept_from_earlier_commands": int(len(kept)),
+        "wall_time_s": round(wall, 2), "episode_time_sum_s": round(float(ran.sum()), 2),
+        "harness_overhead": round(float(wall * min(opts["workers"], max(len(ran), 1)) / ran.sum() - 1), 4)
+        if len(ran) else None,
+    }
+    from envs.config import ScenarioConfig
+
+    manifest["scenario"] = {s: ScenarioConfig(signals=s).to_dict() for s in opts["signals"]}
+    atomic_json(manifest, run_dir / "manifest.json")
+    return df
+
+
+def earlier_rows(run_dir: Path, df: pd.DataFrame) -> pd.DataFrame:
+    """Rows of ``results.parquet`` from earlier commands on this run folder that this command did
+    not run (other methods, settings or cases) and whose step log is still complete: a rerun with
+    fewer methods keeps them instead of shrinking the table."""
+    path = run_dir / "results.parquet"
+    if not path.is_file():
+        return pd.DataFrame(columns=list(KEEP))
+    try:
+        old = pd.read_parquet(path)
+    except Exception as e:  # pyarrow's errors for a truncated file have no common base
+        raise UsageError(f"{path}: not a readable results table ({type(e).__name__}); move it away to start "
+                         f"afresh, or use another --run-id") from None
+    if not set(KEEP) <= set(old.columns):
+        return pd.DataFrame(columns=list(KEEP))
+    now = set(zip(df.signals, df.method, df.case))
+    rows = [r for r in old.itertuples(index=False) if (r.signals, r.method, r.case) not in now]
+    keep = [r._asdict() for r in rows if episode_summary(resolve_log(run_dir, r.mcap)) is not None]
+    return pd.DataFrame(keep, columns=list(KEEP))
+
+
+def _relative(run_dir: Path, mcap: str) -> str:
+    p = resolve_log(run_dir, mcap)
+    return str(p.relative_to(run_dir)) if p.is_relative_to(run_dir) else str(p)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    opts = parse(argv)
+    opts["argv"] = argv
+    try:
+        df = run(opts)
+    except (UsageError, CheckpointError) as e:
+        return fail(parser().prog, str(e))
+    except KeyboardInterrupt:
+        print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)
+        return 130
+    summary = df.groupby(["signals", "method"])[["energy", "travel_time", "collisions"]].mean().round(2)
+    print(summary.to_string())
+    print(f"results: {opts['logs'] / opts['run_id'] / 'results.parquet'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,260 @@
+"""MCAP step log: protobuf messages, zstd chunks, one file per episode.
+
+Channels: ``/meta`` (one ``Metadata``), ``/step`` (one ``Step`` per simulation step, log time =
+simulation time) and ``/episode`` (one ``Episode`` summary, written last). A file is written as
+``<name>.part`` and renamed when finished, so a finished ``.mcap`` is complete by construction;
+a killed run leaves a ``.part`` that ``read_log`` reads up to its last complete chunk.
+"""
+from __future__ import annotations
+
+import json
+import os
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.records import Message
+from mcap.stream_reader import StreamReader
+from mcap.well_known import MessageEncoding
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+from mcap_protobuf.schema import build_file_descriptor_set
+
+from bench.logs import schema
+
+CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
+TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode,
+          "/train": schema.TrainEpisode, "/fleet/vehicle": schema.FleetVehicle, "/fleet/cell": schema.FleetCell}
+PART = ".part"
+# serialized FileDescriptorSets, built once per process (they are the same for every file)
+_SCHEMAS = {topic: (cls.DESCRIPTOR.full_name, build_file_descriptor_set(cls).SerializeToString())
+            for topic, cls in TOPICS.items()}
+
+
+class LogError(RuntimeError):
+    """A step log that cannot be read at all; the message names the file and the cause."""
+
+
+def _ns(t: float) -> int:
+    return int(round(t * 1e9))
+
+
+class EpisodeLog:
+    """Writes one episode. Use as the env's recorder: ``env.unwrapped.recorder = log.record``."""
+
+    def __init__(self, path: str | Path, meta: dict[str, Any]) -> None:
+        self.path = Path(path)
+        self.part = self.path.with_name(self.path.name + PART)
+        self.part.parent.mkdir(parents=True, exist_ok=True)
+        self._f = open(self.part, "wb")
+        self._w = McapWriter(self._f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        self._w.start(profile="", library="ecodrive-bench")
+        self._channels = {
+            topic: self._w.register_channel(
+                topic=topic, message_encoding=MessageEncoding.Protobuf,
+                schema_id=self._w.register_schema(name=name, encoding="protobuf", data=data))
+            for topic, (name, data) in _SCHEMAS.items()
+        }
+        self._step_channel = self._channels["/step"]
+        self._w.add_metadata("ecodrive", {k: str(v) for k, v in meta.items()})
+        m = schema.Metadata(**{k: v for k, v in meta.items() if k in schema.Metadata.DESCRIPTOR.fields_by_name})
+        self._write("/meta", m, 0)
+        self._last_time = 0.0
+        self.raw_action: list[float] = []
+
+    def _write(self, topic: str, msg: Any, t: int) -> None:
+        self._w.add_message(channel_id=self._channels[topic], log_time=t, data=msg.SerializeToString(),
+                            publish_time=t)
+
+    def record(self, rec: dict[str, Any]) -> None:
+        info, m, obs, sig = rec["info"], rec["measure"], rec["obs"], rec["signal"]
+        grid = obs["grid"]
+        s = schema.Step(
+            time=rec["time"], travel_time=info["travel_time"], x=rec["x"], y=rec["y"], angle=rec["angle"],
+            speed=rec["speed"], accel=rec["accel"], lane=rec["lane"], edge=rec["edge"],
+            grid=np.asarray(grid, dtype=np.uint8).tobytes(), grid_rows=grid.shape[0], grid_cols=grid.shape[1],
+            logic=obs["logic"].tolist(), action_mask=info["action_mask"].tolist(), raw_action=self.raw_action,
+            energy_step=info["energy_step"], energy_total=info["energy"], jerk=info["jerk"], reward=rec["reward"],
+            tls_states=rec["tls_states"], collisions=info["collisions"], teleports=info["teleports"],
+        )
+        if m is not None:
+            s.has_request = info["requested"] is not None
+            s.requested_lateral = m.requested_lateral
+            s.requested_accel = 0.0 if m.requested_accel != m.requested_accel else m.requested_accel  # nan -> 0
+            s.applied_lateral, s.applied_accel, s.clipped = m.applied_lateral, m.applied_accel, m.clipped
+        comps = rec["components"]
+        if comps:
+            c = s.components
+            c.speed, c.jerk, c.lane_change = comps["speed"], comps["jerk"], comps["lane_change"]
+            c.distance, c.energy, c.terminal = comps["distance"], comps["energy"], comps["terminal"]
+            c.time = comps["time"]
+        if sig is not None:
+            g = s.signal
+            g.tls, g.link, g.distance, g.state = sig.tls, sig.link, sig.distance, sig.state
+            g.in_range, g.red, g.time_to_green = sig.in_range, sig.red, sig.time_to_green
+        others = rec["others"]
+        if others:
+            xs, ys, angles, lengths = zip(*others)
+            s.neighbour_x.extend(xs)
+            s.neighbour_y.extend(ys)
+            s.neighbour_angle.extend(angles)
+            s.neighbour_length.extend(lengths)
+        self._last_time = rec["time"]
+        t = _ns(rec["time"])
+        self._w.add_message(channel_id=self._step_channel, log_time=t, data=s.SerializeToString(), publish_time=t)
+
+    def finish(self, summary: dict[str, Any]) -> Path:
+        """Write the episode summary, close, and publish the file under its final name."""
+        t = _ns(self._last_time)
+        self._write("/episode", schema.Episode(**summary), t)
+        self._w.finish()
+        self._f.close()
+        os.replace(self.part, self.path)  # atomic against a killed process (no fsync: not power loss)
+        return self.path
+
+    def abort(self) -> None:
+        """Close without publishing (the ``.part`` stays for inspection)."""
+        if not self._f.closed:
+            self._f.close()
+
+
+@dataclass
+class LogData:
+    path: Path
+    meta: dict[str, str] = field(default_factory=dict)
+    metadata: Any = None  # the /meta message
+    steps: list[Any] = field(default_factory=list)
+    episode: Any = None  # the /episode message, None if the run did not finish
+    train: list[Any] = field(default_factory=list)  # /train messages (training logs)
+    fleet_vehicles: list[Any] = field(default_factory=list)  # /fleet/vehicle (mixed traffic)
+    fleet_cell: Any = None  # /fleet/cell summary (mixed traffic)
+    complete: bool = False  # footer read and episode summary present
+    warning: str = ""
+
+    def grid(self, i: int) -> np.ndarray:
+        s = self.steps[i]
+        return np.frombuffer(s.grid, dtype=np.uint8).reshape(s.grid_rows, s.grid_cols)
+
+
+def read_log(path: str | Path) -> LogData:
+    """Read a step log, complete or truncated. Raises ``LogError`` if nothing can be read."""
+    path = Path(path)
+    if not path.exists():
+        raise LogError(f"{path}: no such log file")
+    data = LogData(path)
+    channels: dict[int, str] = {}
+    footer = False
+    try:
+        with open(path, "rb") as f:
+            for rec in StreamReader(f, validate_crcs=True).records:
+                kind = type(rec).__name__
+                if kind == "Channel":
+                    channels[rec.id] = rec.topic
+                elif kind == "Metadata" and rec.name == "ecodrive":
+                    data.meta = dict(rec.metadata)
+                elif kind == "Footer":
+                    footer = True
+                elif isinstance(rec, Message):
+                    topic = channels.get(rec.channel_id)
+                    cls = TOPICS.get(topic or "")
+                    if cls is None:
+                        continue
+                    msg = cls.FromString(rec.data)
+                    if topic == "/step":
+                        data.steps.append(msg)
+                    elif topic == "/episode":
+                        data.episode = msg
+                    elif topic == "/train":
+                        data.train.append(msg)
+                    elif topic == "/fleet/vehicle":
+                        data.fleet_vehicles.append(msg)
+                    elif topic == "/fleet/cell":
+                        data.fleet_cell = msg
+                    else:
+                        data.metadata = msg
+    except (McapError, struct.error, ValueError, EOFError, OSError) as e:  # truncated or corrupt tail
+        if data.metadata is None and not data.steps:
+            raise LogError(f"{path}: not a readable MCAP step log ({type(e).__name__}: {e})") from None
+        data.warning = f"{path}: log is truncated or corrupt after {len(data.steps)} steps ({type(e).__name__})"
+    except Exception as e:  # decoder errors from a damaged message
+        if data.metadata is None and not data.steps:
+            raise LogError(f"{path}: not a readable MCAP step log ({type(e).__name__}: {e})") from None
+        data.warning = f"{path}: log is corrupt after {len(data.steps)} steps ({type(e).__name__}: {e})"
+    data.complete = footer and data.episode is not None and not data.warning
+    if not data.complete and not data.warning:
+        data.warning = f"{path}: log is incomplete ({len(data.steps)} steps, no episode summary)"
+    return data
+
+
+def write_records(path: Path, messages: list[tuple[str, Any, int]], meta: dict[str, Any]) -> None:
+    """A whole small log at once (training metrics, mixed-traffic cells): (topic, message, log
+    time ns) records, written as ``.part`` and renamed."""
+    tmp = path.with_name(path.name + PART)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(tmp, "wb") as f:
+        w = McapWriter(f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        w.start(profile="", library="ecodrive-bench")
+        channels: dict[str, int] = {}
+        w.add_metadata("ecodrive", {k: str(v) for k, v in meta.items()})
+        for topic, msg, t in messages:
+            if topic not in channels:
+                name, data = _SCHEMAS[topic]
+                channels[topic] = w.register_channel(
+                    topic=topic, message_encoding=MessageEncoding.Protobuf,
+                    schema_id=w.register_schema(name=name, encoding="protobuf", data=data))
+            w.add_message(channel_id=channels[topic], log_time=t, data=msg.SerializeToString(), publish_time=t)
+        w.finish()
+    os.replace(tmp, path)
+
+
+def write_train_log(path: Path, rows: list[dict[str, Any]], meta: dict[str, Any]) -> None:
+    """All training episodes so far as a ``/train`` channel (rewritten whole, atomically)."""
+    fields = schema.TrainEpisode.DESCRIPTOR.fields_by_name
+    write_records(path, [("/train", schema.TrainEpisode(**{k: v for k, v in r.items() if k in fields}),
+                          int(r["episode"])) for r in rows], meta)
+
+
+def is_complete(path: str | Path) -> bool:
+    """True for a finished, fully readable log."""
+    try:
+        return read_log(path).complete
+    except LogError:
+        return False
+
+
+def episode_summary(path: str | Path, agent_sha256: str | None = None) -> dict[str, Any] | None:
+    """The /episode record of a finished log through the MCAP index (fast), or None when the
+    file is missing, unfinished or damaged, or (given ``agent_sha256``) was written by another
+    policy: the harness then reruns the case."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f, validate_crcs=True)
+            if agent_sha256 is not None:
+                meta = next((m.metadata for m in reader.iter_metadata() if m.name == "ecodrive"), {})
+                if meta.get("agent_sha256", "") != agent_sha256:
+                    return None
+            for _, channel, message in reader.iter_messages(topics=["/episode"]):
+                ep = schema.Episode.FromString(message.data)
+                return {fd.name: getattr(ep, fd.name) for fd in ep.DESCRIPTOR.fields}
+    except Exception:  # any damage means: run the case again
+        return None
+    return None
+
+
+def meta_json(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, default=str)
+
+
+def resolve_log(run_dir: Path, mcap: str) -> Path:
+    """A step log named in ``results.parquet``: relative to the run folder, so that a report is the
+    same from any working directory (tables that stored working-directory paths still read)."""
+    p = Path(mcap)
+    if p.is_absolute():
+        return p
+    inside = run_dir / p
+    return inside if inside.exists() or not p.exists() else p

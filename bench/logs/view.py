@@ -1,0 +1,146 @@
+"""Open a step log in Rerun with a blueprint, or save it as an .rrd recording.
+
+    ecodrive view logs/<run>/<signals>/<method>/case-000.mcap [--save out.rrd]
+
+Entities (timeline ``sim_time``, simulation seconds):
+  /world/lanes, /world/stop_lines    static corridor drawing (top-down, metres)
+  /world/signals                     signal heads coloured by the ego's phase
+  /world/ego, /world/neighbours      vehicles as boxes; /world/trail the ego's last 60 s
+  /series/<name>                     speed, requested vs applied acceleration, energy, reward parts
+  /grid                              the occupancy grid as an image
+  /events                            lane-change requests and executed changes
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from bench.logs.mcaplog import LogError, read_log
+from bench.args import Parser
+
+GREEN, RED, YELLOW = (40, 180, 60), (220, 40, 40), (230, 190, 30)
+TRAIL_S = 60  # [s] of ego trail
+SERIES = ("speed", "requested_accel", "applied_accel", "energy_step", "energy_total", "reward")
+COMPONENTS = ("speed", "jerk", "lane_change", "distance", "energy", "time", "terminal")
+
+
+def _colour(state: str) -> tuple[int, int, int]:
+    return GREEN if state in "gG" else (YELLOW if state in "yY" else RED)
+
+
+def build_recording(path: Path, rec) -> tuple[int, str]:
+    """Log the MCAP's content into ``rec``; returns (steps, warning)."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    data = read_log(path)
+    if not data.steps:
+        raise LogError(f"{path}: the log has no steps to show")
+    geo = json.loads(data.metadata.geometry_json) if data.metadata and data.metadata.geometry_json else {}
+    steps = data.steps
+    lane_y = geo.get("lane_y") or sorted({s.y for s in steps})
+    half = geo.get("lane_width", 3.2) / 2
+    x_end = max(geo.get("stop_lines", [max(s.x for s in steps)])) + 200
+    rec.log("/world/lanes", rr.LineStrips2D([[[0, y - half], [x_end, y - half]] for y in lane_y] +
+                                            [[[0, lane_y[-1] + half], [x_end, lane_y[-1] + half]]],
+                                            colors=(150, 150, 150)), static=True)
+    stops = geo.get("stop_lines", [])
+    rec.log("/world/stop_lines", rr.LineStrips2D([[[x, lane_y[0] - half], [x, lane_y[-1] + half]] for x in stops],
+                                                 colors=(255, 255, 255)), static=True)
+    # the ego's link index at each signal, recovered from the log
+    links: dict[str, int] = {}
+    for s in steps:
+        if s.signal.tls and s.signal.tls not in links:
+            links[s.signal.tls] = s.signal.link
+    tls_ids = geo.get("tls", sorted(links))
+    times = np.array([s.time for s in steps])
+    trail: list[tuple[float, float]] = []
+    for i, s in enumerate(steps):
+        rec.set_time("sim_time", duration=s.time)
+        trail.append((s.x, s.y))
+        trail[:] = trail[-TRAIL_S:]
+        rec.log("/world/ego", rr.Boxes2D(centers=[[s.x - 2.5, s.y]], sizes=[[5.0, 1.8]], colors=(30, 120, 255),
+                                         labels=["ego"]))
+        rec.log("/world/trail", rr.LineStrips2D([trail], colors=(30, 120, 255)))
+        n = len(s.neighbour_x)
+        if n:
+            lengths = np.array(s.neighbour_length)
+            rec.log("/world/neighbours", rr.Boxes2D(
+                centers=np.c_[np.array(s.neighbour_x) - lengths / 2, s.neighbour_y],
+                sizes=np.c_[lengths, np.full(n, 1.8)], colors=(180, 180, 180)))
+        else:
+            rec.log("/world/neighbours", rr.Clear(recursive=False))
+        if stops and s.tls_states:
+            cols = [_colour(st[links[t]]) if t in links else (128, 128, 128) for t, st in zip(tls_ids, s.tls_states)]
+            rec.log("/world/signals", rr.Points2D([[x, lane_y[-1] + 2 * half] for x in stops[: len(cols)]],
+                                                  colors=cols, radii=2.0))
+        grid = np.frombuffer(s.grid, dtype=np.uint8).reshape(s.grid_rows, s.grid_cols)
+        rec.log("/grid", rr.Image((grid[::-1] * 255).astype(np.uint8)))  # ahead at the top
+        if s.requested_lateral:
+            rec.log("/events", rr.TextLog(f"lane change requested: k={s.requested_lateral:+d}",
+                                          level="INFO"))
+        if s.applied_lateral:
+            rec.log("/events", rr.TextLog(f"lane change executed: k={s.applied_lateral:+d}", level="WARN"))
+    idx = rr.TimeColumn("sim_time", duration=times)
+    cols = {
+        "speed": [s.speed for s in steps],
+        "requested_accel": [s.requested_accel if s.has_request else np.nan for s in steps],
+        "applied_accel": [s.applied_accel for s in steps],
+        "energy_step": [s.energy_step for s in steps],
+        "energy_total": [s.energy_total for s in steps],
+        "reward": [s.reward for s in steps],
+    }
+    for name, vals in cols.items():
+        rec.send_columns(f"/series/{name}", indexes=[idx], columns=rr.Scalars.columns(scalars=np.asarray(vals, float)))
+    for c in COMPONENTS:
+        vals = np.array([getattr(s.components, c) for s in steps])
+        rec.send_columns(f"/series/reward_parts/{c}", indexes=[idx], columns=rr.Scalars.columns(scalars=vals))
+    blueprint = rrb.Blueprint(rrb.Vertical(
+        rrb.Horizontal(rrb.Spatial2DView(name="corridor", origin="/world"),
+                       rrb.Spatial2DView(name="occupancy grid", origin="/grid"), column_shares=[5, 1]),
+        rrb.Horizontal(
+            rrb.TimeSeriesView(name="speed [m/s]", origin="/series", contents=["/series/speed"]),
+            rrb.TimeSeriesView(name="acceleration [m/s^2]", origin="/series",
+                               contents=["/series/requested_accel", "/series/applied_accel"]),
+            rrb.TimeSeriesView(name="energy [Wh]", origin="/series",
+                               contents=["/series/energy_step", "/series/energy_total"]),
+            rrb.TimeSeriesView(name="reward", origin="/series", contents=["/series/reward", "/series/reward_parts/**"]),
+            rrb.TextLogView(name="lane decisions", origin="/events"),
+        ),
+        row_shares=[3, 2],
+    ), collapse_panels=True)
+    rec.send_blueprint(blueprint)
+    return len(steps), data.warning
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = Parser(description=__doc__)
+    ap.add_argument("mcap", type=Path, help="a step log (.mcap, or a killed run's .mcap.part)")
+    ap.add_argument("--save", type=Path, default=None, help="write an .rrd instead of spawning the viewer")
+    args = ap.parse_args(argv)
+    import rerun as rr
+
+    rec = rr.RecordingStream("ecodrive")
+    try:
+        if args.save:
+            rec.save(args.save)
+        else:
+            rec.spawn()
+        n, warning = build_recording(args.mcap, rec)
+    except LogError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    finally:
+        rec.flush()
+    if warning:
+        print(f"warning: {warning} (showing the {n} steps read)", file=sys.stderr)
+    if args.save:
+        print(f"saved {n} steps to {args.save}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

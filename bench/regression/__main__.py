@@ -1,0 +1,5 @@
+import sys
+
+from bench.regression.check import main
+
+sys.exit(main())

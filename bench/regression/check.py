@@ -1,0 +1,177 @@
+"""Regression check of the published numbers and of the project's own reference.
+
+    ecodrive regress [--write-reference]
+
+Runs every method with a shipped policy on the first ``CI_CASES`` fixed cases per setting (the
+``smoke`` cases are among them), then checks, and prints side by side:
+1. the paper's claims, each an inequality (a claim about a method without a shipped policy is
+   reported as NOT CHECKED, never as passed);
+2. Table 4's baseline row within the calibration tolerance, and the RL rows' improvements beside
+   the published ones within a stated band;
+3. the project's own reference results (``bench/regression/reference/ci.csv``, written by
+   ``--write-reference`` from the same command) with tight tolerances.
+Exits 1 on any failed check. Tolerances and their reasons: ``docs/tolerances.md``.
+"""
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.args import Parser
+from bench.harness.run import parse, run
+from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, improvement
+from bench.paper import TABLE4 as PAPER_TABLE4
+
+CI_CASES = 20
+REFERENCE = Path(__file__).with_name("reference") / "ci.csv"
+REF_RTOL = 1e-9  # own reference: runs are deterministic, so only float noise is allowed
+CLAIMS_RECORD = REFERENCE.with_name("claims.csv")  # the claims' statuses when the reference was written
+REF_COLUMNS = ["method", "signals", "case", "energy", "travel_time", "steps", "stops", "lane_changes_applied",
+               "clips", "collisions"]
+
+
+def _mean(df: pd.DataFrame, method: str, signals: str, col: str) -> float | None:
+    sub = df[(df.method == method) & (df.signals == signals)]
+    return float(sub[col].mean()) if len(sub) else None
+
+
+def claims(df: pd.DataFrame) -> list[tuple[str, str, str]]:
+    """(claim, status PASS/FAIL/NOT CHECKED, detail)."""
+    out = []
+    m = lambda meth, s, c: _mean(df, meth, s, c)  # noqa: E731
+    sig = ("coordinated", "uncoordinated")
+
+    def add(name: str, needs: list[str], test, detail, settings: tuple[str, ...] = sig) -> None:
+        missing = sorted({f"{x}/{st}" for st in settings for x in needs if x not in set(df.method[df.signals == st])})
+        if missing:
+            out.append((name, "NOT CHECKED", f"no shipped policy: {', '.join(missing)}"))
+        else:
+            out.append((name, "PASS" if test() else "FAIL", detail()))
+    save = {s: (lambda s=s: improvement(m("prl", s, "energy"), m("baseline", s, "energy"))) for s in sig}
+    for s in sig:
+        add(f"PRL saves energy vs baseline ({s})", ["prl", "baseline"], lambda s=s: save[s]() > 0,
+            lambda s=s: f"saving {100 * save[s]():.2f}%", (s,))
+    add("saving larger uncoordinated than coordinated", ["prl", "baseline"],
+        lambda: save["uncoordinated"]() > save["coordinated"](),
+        lambda: f"{100 * save['uncoordinated']():.2f}% vs {100 * save['coordinated']():.2f}%")
+    for s in sig:
+        pen = lambda s=s: -improvement(m("prl", s, "travel_time"), m("baseline", s, "travel_time"))  # noqa: E731
+        add(f"PRL travel-time penalty < 15% ({s})", ["prl", "baseline"], lambda pen=pen: pen() < 0.15,
+            lambda pen=pen: f"penalty {100 * pen():.2f}%", (s,))
+        add(f"PRL uses less energy than DDPG+LC2013 ({s})", ["prl", "ddpg"],
+            lambda s=s: m("prl", s, "energy") < m("ddpg", s, "energy"),
+            lambda s=s: f"{m('prl', s, 'energy'):.1f} vs {m('ddpg', s, 'energy'):.1f} Wh", (s,))
+        others = ["baseline", "prl", "ddpg"]
+        add(f"DQN has the worst travel time ({s})", ["dqn", *others],
+            lambda s=s, others=others: m("dqn", s, "travel_time") > max(m(o, s, "travel_time") for o in others),
+            lambda s=s: f"dqn {m('dqn', s, 'travel_time'):.1f} s", (s,))
+    # section 5.3 (violin plots): "DDPG is close to the baseline, but much worse in non-coordinate
+    # signal settings due to the increased travel time"
+    ddpg_pen = {s: (lambda s=s: -improvement(m("ddpg", s, "travel_time"), m("baseline", s, "travel_time"))) for s in sig}
+    add("DDPG+LC2013 slower than baseline uncoordinated, more than coordinated", ["ddpg", "baseline"],
+        lambda: 0 < ddpg_pen["uncoordinated"]() and ddpg_pen["uncoordinated"]() > ddpg_pen["coordinated"](),
+        lambda: f"penalty {100 * ddpg_pen['uncoordinated']():.2f}% vs {100 * ddpg_pen['coordinated']():.2f}%")
+    out.append(("no collisions", "PASS" if int(df.collisions.sum()) == 0 else "FAIL",
+                f"{int(df.collisions.sum())} in {len(df)} episodes"))
+    return out
+
+
+def published(df: pd.DataFrame) -> list[tuple[str, str, str]]:
+    out = []
+    for s in ("coordinated", "uncoordinated"):
+        for col, idx, unit in (("energy", 0, "Wh"), ("travel_time", 1, "s")):
+            ours, paper = _mean(df, "baseline", s, col), PAPER_TABLE4[("baseline", s)][idx]
+            dev = ours / paper - 1
+            out.append((f"baseline {col} ({s})", "PASS" if abs(dev) <= BASELINE_TOL else "FAIL",
+                        f"{ours:.2f} vs paper {paper:.2f} {unit} ({100 * dev:+.1f}%, tolerance "
+                        f"{100 * BASELINE_TOL:.0f}%)"))
+            if "prl" in set(df.method):
+                ours_imp = improvement(_mean(df, "prl", s, col), _mean(df, "baseline", s, col))
+                paper_imp = improvement(PAPER_TABLE4[("prl", s)][idx], paper)
+                ok = abs(ours_imp - paper_imp) <= IMPROVEMENT_BAND
+                out.append((f"PRL {col} improvement ({s})", "PASS" if ok else "OUTSIDE BAND",
+                            f"{100 * ours_imp:+.2f}% vs paper {100 * paper_imp:+.2f}% (band "
+                            f"{100 * IMPROVEMENT_BAND:.0f} points; reported, not failed)"))
+    return out
+
+
+def reference(df: pd.DataFrame) -> list[tuple[str, str, str]]:
+    if not REFERENCE.is_file():
+        return [("own reference", "FAIL", f"{REFERENCE} missing: ecodrive regress --write-reference")]
+    ref = pd.read_csv(REFERENCE)
+    ours = df[REF_COLUMNS].sort_values(["signals", "method", "case"], ignore_index=True)
+    ref = ref.sort_values(["signals", "method", "case"], ignore_index=True)
+    out = []
+    for (method, s), r in ref.groupby(["method", "signals"]):
+        o = ours[(ours.method == method) & (ours.signals == s)]
+        if len(o) != len(r):
+            out.append((f"reference {method}/{s}", "FAIL", f"{len(o)} episodes, reference has {len(r)}"))
+            continue
+        bad = [c for c in REF_COLUMNS[3:] if not np.allclose(o[c].to_numpy(float), r[c].to_numpy(float),
+                                                               rtol=REF_RTOL, atol=1e-9)]
+        out.append((f"reference {method}/{s}", "FAIL" if bad else "PASS",
+                    f"differs in {', '.join(bad)}" if bad else f"{len(r)} episodes identical"))
+    new = sorted(set(map(tuple, ours[["method", "signals"]].values)) - set(map(tuple, ref[["method", "signals"]].values)))
+    for method, s in new:
+        out.append((f"reference {method}/{s}", "FAIL", "not in the reference: regenerate it in its own commit"))
+    return out
+
+
+def against_record(rows: list[tuple[str, str, str]], record: dict[str, str]) -> list[tuple[str, str, str]]:
+    """A claim that failed when the reference was written and still fails is a KNOWN FAIL (a
+    documented gap of the reproduction, not a regression); one that now passes fails the check
+    until the record is rewritten, like a strict xfail. Everything else is unchanged."""
+    out = []
+    for name, status, detail in rows:
+        was = record.get(name)
+        if was == "FAIL" and status == "FAIL":
+            status, detail = "KNOWN FAIL", f"{detail} (failed when the reference was written; see README)"
+        elif was == "FAIL" and status == "PASS":
+            status, detail = "FAIL", f"{detail} (now passes: rewrite the reference in its own commit)"
+        out.append((name, status, detail))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = Parser(description=__doc__)
+    ap.add_argument("--write-reference", action="store_true", help=f"write {REFERENCE} from this run")
+    ap.add_argument("--no-mixed", action="store_true", help="skip the mixed-traffic cells (reported NOT CHECKED)")
+    ap.add_argument("--logs", default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
+    args = ap.parse_args(argv)
+    import bench.harness.run as br
+
+    br.PROFILES["regression"] = CI_CASES
+    logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
+    df = run(parse(["--profile", "regression", "--logs", logs]), progress=False)
+    if args.write_reference:
+        REFERENCE.parent.mkdir(exist_ok=True)
+        df[REF_COLUMNS].to_csv(REFERENCE, index=False, float_format="%.10g")
+        print(f"wrote {REFERENCE} ({len(df)} episodes)")
+    from bench.regression import mixed as regression_mixed
+
+    mixed = (regression_mixed.claims(None, "--no-mixed given") if args.no_mixed
+             else regression_mixed.claims(regression_mixed.run_cells()))
+    paper = claims(df)
+    if args.write_reference:
+        pd.DataFrame(paper + mixed, columns=["claim", "status", "detail"]).to_csv(CLAIMS_RECORD, index=False)
+        print(f"wrote {CLAIMS_RECORD}")
+    record = dict(pd.read_csv(CLAIMS_RECORD)[["claim", "status"]].values) if CLAIMS_RECORD.is_file() else {}
+    paper, mixed = against_record(paper, record), against_record(mixed, record)
+    failed = False
+    for title, rows in (("1. the paper's claims", paper), ("2. the published numbers", published(df)),
+                        ("3. the project's own reference", reference(df)),
+                        ("4. mixed traffic (section 5.5)", mixed)):
+        print(f"\n{title}")
+        for name, status, detail in rows:
+            print(f"  {status:12s} {name:50s} {detail}")
+            failed |= status == "FAIL"
+    print("\nregression: FAILED" if failed else "\nregression: ok")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Training the learning methods, and the Q-calibration check of a trained critic."""

@@ -1,0 +1,285 @@
+"""Train a learning method on one signal setting, resumably.
+
+    ecodrive train --method prl --signals uncoordinated --episodes 1000 --seed 0
+
+Every ``--checkpoint-every`` episodes the run folder (``$ECODRIVE_RUNS`` or
+``~/.cache/ecodrive-bench/runs/train``, then ``<method>-<signals>-s<seed>``)
+gets a checkpoint: networks, optimizers, epsilon, OU state, episode counter, every RNG state and
+the replay buffer, so a killed run that is started again with the same command continues
+exactly as if it had never stopped. Per-episode metrics go to ``metrics.parquet`` and a
+``/train`` MCAP channel (``train.mcap``). At the end the greedy policy is exported to
+``models/<method>-<signals>/`` with a manifest (command, seed, git SHA, sha256, wall time,
+final metrics).
+
+``--set FIELD=VALUE`` (repeatable) overrides a field of the method's agent config for an
+experiment (e.g. ``--set twin_q=true`` for PRL). Such a run gets its own folder
+(``<method>-<signals>-s<seed>+FIELD=VALUE``) and is never exported to ``models/``: the shipped
+policies are the paper's agents.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+from tqdm import tqdm
+
+from agents.registry import LEARNING, make_agent
+from bench.args import Parser
+from bench.harness.cases import Case
+from bench.harness.episode import deep_merge, make_env, run_episode
+from bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
+from bench.harness.provenance import git_sha, package_versions
+from bench.io import atomic_parquet, atomic_torch_save
+from bench.logs.mcaplog import write_train_log
+from envs.config import SIGNALS, added_values, backfill, flat
+
+# outside the work tree, so a session that gets a fresh checkout on the same machine can resume
+VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/harness/cases.json's test cases)
+RUNS = Path(os.environ.get("ECODRIVE_RUNS", Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train"))
+FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
+# Checkpoint selection on the validation cases: criterion -> sign (+1: higher is better).
+# "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
+# "return" is the greedy return under the training reward, shaping penalties included.
+SELECTION = {"objective": -1, "return": +1}
+
+
+def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
+    """``FIELD=VALUE`` strings -> typed overrides of ``method``'s agent config dataclass; a
+    ValueError names the bad item and the accepted fields or values."""
+    import dataclasses
+
+    from agents.ddpg import DDPGConfig
+    from agents.dqn import DQNConfig
+    from agents.pdqn import PDQNConfig
+
+    cls = {"prl": PDQNConfig, "mpdqn": PDQNConfig, "dqn": DQNConfig, "ddpg": DDPGConfig}[method]
+    defaults = {f.name: f.default for f in dataclasses.fields(cls) if f.name not in ("seed", "multipass")}
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, raw = item.partition("=")
+        if not sep or name not in defaults:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(defaults)}")
+        kind = type(defaults[name])
+        if kind is bool:
+            if raw.lower() not in ("true", "false"):
+                raise ValueError(f"--set {item!r}: {name} takes true or false")
+            out[name] = raw.lower() == "true"
+        else:
+            try:
+                out[name] = kind(raw)
+            except ValueError:
+                raise ValueError(f"--set {item!r}: {name} takes a {kind.__name__}") from None
+    try:
+        cls(**out)  # range checks (agents.base.check_config)
+    except ValueError as e:
+        raise ValueError(f"--set {' '.join(items)}: {e}") from None
+    return out
+
+
+def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
+          models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
+          scenario: dict[str, Any] | None = None, command: list[str] | None = None,
+          stop_after: int | None = None, progress: bool = True, validation_cases: int = 20,
+          select: str = "objective") -> pd.DataFrame:
+    """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
+    after that many episodes of this call (used to test resumption).
+
+    At every checkpoint the greedy policy is scored on ``validation_cases`` cases drawn from
+    ``VALIDATION_SEED`` (never the test cases). The run keeps the best checkpoint under each
+    criterion of ``SELECTION``; the one named by ``select`` is exported, with its episode and
+    validation metrics in the manifest. Epsilon decays over the run's own ``episodes`` (eq. 12
+    with N = the training length) unless ``agent_config`` sets ``eps_decay_episodes``."""
+    if select not in SELECTION:
+        raise ValueError(f"select {select!r} is not accepted; choose one of {', '.join(SELECTION)}")
+    torch.set_num_threads(1)
+    env = make_env(method, signals, scenario)
+    decay = {} if method not in ("prl", "mpdqn", "dqn") else {"eps_decay_episodes": episodes}
+    agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **{**decay, **(agent_config or {})})
+    identity = {"method": method, "signals": signals, "seed": seed, "agent_config": agent_config or {},
+                "scenario": env.cfg.to_dict()}
+    out.mkdir(parents=True, exist_ok=True)
+    ckpt = out / "checkpoint.pt"
+    rng = np.random.default_rng([seed, 7919])  # episode seeds; separate stream from the agent's
+    rows: list[dict[str, Any]] = []
+    start, wall = 0, 0.0
+    best: dict[str, Any] = {}
+    if ckpt.exists():
+        state = load_torch(ckpt)
+        kept = added_values(state["identity"].get("scenario", {}))
+        if deep_merge(env.cfg.to_dict(), kept) != env.cfg.to_dict():  # the run keeps what it started with
+            env.close()
+            env = make_env(method, signals, deep_merge(kept, scenario or {}))  # explicit settings still win
+            identity["scenario"] = env.cfg.to_dict()
+            if progress:
+                print(f"note: this run keeps the behaviour it started with: {', '.join(f'{k}={v}' for k, v in flat(kept).items())}",
+                      file=sys.stderr)
+        saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
+        if saved != identity:
+            diff = [k for k in identity if saved.get(k) != identity[k]]
+            raise CheckpointError(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
+                                  f"use another --out or remove the folder")
+        agent.load_state_dict(state["agent"])
+        agent.replay.load(out / state["replay"])
+        rng.bit_generator.state = state["rng"]
+        rows, start, wall = state["rows"], state["episode"], state["wall_time"]
+        best = state.get("best", {})
+        if best and "episode" in best:  # a checkpoint that kept one criterion's best: return
+            best = {"return": best}
+    bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
+    done_here = 0
+    t_call = time.perf_counter()
+    for ep in range(start, episodes):
+        agent.begin_episode(ep)
+        obs, info = env.reset(seed=int(rng.integers(0, 2**31 - 1)))
+        ret, steps, losses = 0.0, 0, []
+        while True:
+            action = agent.act(obs, info, explore=True)
+            next_obs, r, terminated, truncated, info = env.step(action)
+            m = agent.observe(obs, action, r, next_obs, terminated, truncated, info)
+            if m:
+                losses.append((m.get("loss_q", np.nan), m.get("loss_param", np.nan)))
+            obs, ret, steps = next_obs, ret + r, steps + 1
+            if terminated or truncated:
+                break
+        lq, lp = (np.mean(losses, axis=0) if losses else (np.nan, np.nan))
+        rows.append({"episode": ep, "energy": info["energy"], "travel_time": info["travel_time"], "return_": ret,
+                     "epsilon": getattr(agent, "epsilon", 0.0), "loss_q": float(lq), "loss_param": float(lp),
+                     "lane_changes": info["lane_changes"], "collisions": info["collisions"], "steps": steps,
+                     "updates": agent.updates, "truncated": bool(truncated)})
+        recent = rows[-20:]
+        bar.set_postfix(E=f"{np.mean([r['energy'] for r in recent]):.0f}Wh",
+                        T=f"{np.mean([r['travel_time'] for r in recent]):.0f}s", eps=f"{rows[-1]['epsilon']:.2f}")
+        bar.update(1)
+        done_here += 1
+        last = ep + 1 == episodes
+        if (ep + 1) % checkpoint_every == 0 or last or (stop_after is not None and done_here >= stop_after):
+            if validation_cases:
+                score = validate(env, agent, validation_cases)
+                score["objective"] = round(score["energy"] + env.cfg.reward.phi * score["travel_time"], 4)
+                rows[-1].update({f"val_{k}": v for k, v in score.items()})
+                policy = None
+                for crit, sign in SELECTION.items():
+                    if crit not in best or sign * score[crit] > sign * best[crit]["score"][crit]:
+                        policy = policy or snapshot(agent)
+                        best[crit] = {"episode": ep + 1, "score": score, "agent": policy}
+            wall_now = wall + time.perf_counter() - t_call
+            _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity, best)
+        if stop_after is not None and done_here >= stop_after and not last:
+            bar.close()
+            env.close()
+            return pd.DataFrame(rows)
+    bar.close()
+    env.close()
+    wall_total = wall + time.perf_counter() - t_call
+    df = pd.DataFrame(rows)
+    if models is not None and len(df) == episodes:
+        chosen = best.get(select, {})
+        tail = df.tail(FINAL_WINDOW)
+        manifest = {
+            "method": method, "signals": signals, "seed": seed, "episodes": episodes,
+            "command": " ".join(command or sys.argv), "git_sha": git_sha(), "packages": package_versions(),
+            "training_wall_time_s": round(wall_total, 1), "agent_config": agent_config or {},
+            "scenario": identity["scenario"],
+            "final_metrics": {f"mean_last_{FINAL_WINDOW}_{k}": round(float(tail[k].mean()), 3)
+                              for k in ("energy", "travel_time", "return_", "collisions", "lane_changes")},
+            "selection": select if chosen else "final",
+            "selected_episode": chosen.get("episode", episodes),
+            "validation": {"cases": validation_cases, "master_seed": VALIDATION_SEED, **chosen.get("score", {})},
+        }
+        policy = chosen["agent"] if chosen else agent.state_dict(with_training=False)
+        save_policy(policy_dir(method, signals, models), policy, manifest)
+    return df
+
+
+def snapshot(agent) -> dict[str, Any]:
+    """A deep copy of the greedy policy: ``state_dict`` returns live tensors that training changes."""
+    return copy.deepcopy(agent.state_dict(with_training=False))
+
+
+def validation_cases(cfg, n: int) -> list[Case]:
+    """``n`` cases drawn like the test cases but from ``VALIDATION_SEED``."""
+    vr = np.random.default_rng(VALIDATION_SEED)
+    seeds, times = vr.integers(0, 2**31 - 1, size=n), vr.uniform(cfg.insert_min, cfg.insert_max, size=n)
+    return [Case(index=i, sumo_seed=int(sd), insert_time=round(float(t), 1), group=0)
+            for i, (sd, t) in enumerate(zip(seeds, times))]
+
+
+def validate(env, agent, n: int) -> dict[str, float]:
+    """Mean greedy energy, travel time and return on ``n`` validation cases."""
+    rows = [run_episode(env, agent, case, "validation") for case in validation_cases(env.cfg, n)]
+    return {k: round(float(np.mean([r[col] for r in rows])), 4)
+            for k, col in (("energy", "energy"), ("travel_time", "travel_time"), ("return", "return_"))}
+
+
+def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict, best: dict) -> None:
+    replay_name = f"replay-{episode:05d}.npz"
+    agent.replay.save(out / replay_name)
+    state = {"identity": identity, "agent": agent.state_dict(), "replay": replay_name, "best": best,
+             "rng": rng.bit_generator.state, "rows": rows, "episode": episode, "wall_time": wall}
+    atomic_torch_save(state, out / "checkpoint.pt")  # the commit point: it names the replay file
+    for old in out.glob("replay-*.npz"):
+        if old.name != replay_name:
+            old.unlink()
+    atomic_parquet(pd.DataFrame(rows), out / "metrics.parquet")
+    write_train_log(out / "train.mcap", rows, {"method": identity["method"], "signals": identity["signals"],
+                                               "seed": identity["seed"], "git_sha": git_sha()})
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = Parser(description=__doc__)
+    ap.add_argument("--method", required=True, help=f"one of {', '.join(LEARNING)}")
+    ap.add_argument("--signals", required=True, help=f"one of {', '.join(SIGNALS)}")
+    ap.add_argument("--episodes", type=int, default=1000, help="training episodes (1-100000)")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the agent and of the episode draws (>= 0)")
+    ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
+    ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
+    ap.add_argument("--validation-cases", type=int, default=20, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
+    ap.add_argument("--select", default="objective", choices=list(SELECTION),
+                    help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
+    ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
+    ap.add_argument("--no-export", action="store_true", help="do not write <models>/<method>-<signals>/ at the end")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="override an agent config field for an experiment (repeatable; such runs are not exported)")
+    args = ap.parse_args(argv)
+    if args.method not in LEARNING:
+        ap.error(f"--method {args.method!r} is not accepted; choose one of {', '.join(LEARNING)}")
+    if args.signals not in SIGNALS:
+        ap.error(f"--signals {args.signals!r} is not accepted; choose one of {', '.join(SIGNALS)}")
+    if not 1 <= args.episodes <= 100_000:
+        ap.error(f"--episodes {args.episodes} is out of range; accepted: 1..100000")
+    if args.seed < 0 or args.checkpoint_every < 1:
+        ap.error(f"--seed {args.seed} must be >= 0 and --checkpoint-every {args.checkpoint_every} >= 1")
+    if not 0 <= args.validation_cases <= 100:
+        ap.error(f"--validation-cases {args.validation_cases} is out of range; accepted: 0..100")
+    try:
+        overrides = agent_overrides(args.method, args.set)
+    except ValueError as e:
+        ap.error(str(e))
+    suffix = "".join(f"+{k}={v}" for k, v in sorted(overrides.items()))
+    out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
+    if overrides and not args.no_export:
+        print(f"note: an experiment ({suffix[1:]}); it is not exported to models/", file=sys.stderr)
+    try:
+        df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
+                   models=None if args.no_export or overrides else args.models,
+                   command=["ecodrive", "train", *(argv if argv is not None else sys.argv[1:])],
+                   validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select)
+    except CheckpointError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    tail = df.tail(FINAL_WINDOW)
+    print(json.dumps({"episodes": len(df), "energy": round(float(tail.energy.mean()), 2),
+                      "travel_time": round(float(tail.travel_time.mean()), 2)}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,72 @@
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import bench.training.train
+from bench.experiments import sweep
+from bench.logs.mcaplog import is_complete
+from reports.build import build
+from reports.metrics import reward_curves, smooth
+
+
+def test_heatmap_job_trains_evaluates_and_resumes(tmp_path, monkeypatch):
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    argv = ["heatmap", "--values", "20", "--episodes", "2", "--cases", "2", "--validation-cases", "1", "--max-episode-time", "60",
+            "--workers", "1", "--logs", str(tmp_path / "logs"), "--run-id", "t"]
+    assert sweep.main(argv) == 0
+    root = tmp_path / "logs" / "t" / "heatmap"
+    df = pd.read_parquet(root / "sweep.parquet")
+    assert df.config.tolist() == ["s20-j20"] and df.cases.iloc[0] == 2
+    assert df.reward_speed_penalty.iloc[0] == 20 and df.reward_lane_change_penalty.iloc[0] == 50
+    logs = sorted((root / "s20-j20-s0").glob("case-*.mcap"))
+    assert [p.name for p in logs] == ["case-000.mcap", "case-001.mcap"] and all(is_complete(p) for p in logs)
+    assert (root / "s20-j20-s0" / "train.mcap").is_file()
+    stamps = [p.stat().st_mtime_ns for p in logs]
+    assert sweep.main(argv) == 0  # rerun: nothing is trained or evaluated again
+    assert [p.stat().st_mtime_ns for p in logs] == stamps
+    assert pd.read_parquet(root / "sweep.parquet").energy.iloc[0] == df.energy.iloc[0]
+    reward_argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0"] + argv[3:]
+    assert sweep.main(reward_argv) == 0
+    index, _ = build(tmp_path / "logs" / "t", tmp_path / "report")  # no results.parquet: experiments only
+    text = index.read_text()
+    assert "## Reward study" in text and "## Sensitivity heatmap" in text
+    assert "Lowest energy at |r_p^s| = 20, |r_p^j| = 20" in text
+    assert text.count("2 training episodes (shorter than the paper's 1000") == 2  # both sections say so
+    assert (tmp_path / "report" / "figures" / "heatmap.png").is_file()
+    assert (tmp_path / "report" / "figures" / "reward-study.pdf").is_file()
+
+
+def test_smoothing_is_the_papers():
+    x = np.array([10.0, 0.0, 0.0])
+    assert smooth(x).tolist() == pytest.approx([10.0, 9.8, 9.604])
+    curves = reward_curves(pd.DataFrame({"config": ["a"] * 4, "seed": [0, 0, 1, 1], "episode": [0, 1, 0, 1],
+                                         "energy": [1.0, 3.0, 3.0, 5.0], "travel_time": [1.0] * 4}))
+    assert curves.energy.tolist() == pytest.approx([2.0, 2.04]) and curves.energy_hi.iloc[1] == pytest.approx(3.04)
+
+
+def test_bad_sweep_input_is_one_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        sweep.parse(["heatmaps"])
+    assert e.value.code == 2 and "choose one of reward, heatmap" in capsys.readouterr().err
+    rc = sweep.main(["heatmap", "--values", "2000", "--logs", str(tmp_path)])
+    assert rc == 2 and "2000" in capsys.readouterr().err
+
+
+def test_sweep_table_keeps_earlier_jobs_and_refuses_a_mismatch(tmp_path, monkeypatch, capsys):
+    """Two commands over different heatmap cells add up in one table; asking a finished cell again
+    with another episode count is refused and its folder is left as it was."""
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    common = ["--episodes", "1", "--cases", "1", "--validation-cases", "1", "--max-episode-time", "30",
+              "--workers", "1", "--logs", str(tmp_path / "logs"), "--run-id", "t"]
+    assert sweep.main(["heatmap", "--values", "10"] + common) == 0
+    assert sweep.main(["heatmap", "--values", "50"] + common) == 0
+    root = tmp_path / "logs" / "t" / "heatmap"
+    assert pd.read_parquet(root / "sweep.parquet").config.tolist() == ["s10-j10", "s50-j50"]
+    assert len(pd.read_parquet(root / "episodes.parquet")) == 2
+    before = {p.name: p.read_bytes() for p in (root / "s10-j10-s0").iterdir()}
+    common[1] = "2"
+    assert sweep.main(["heatmap", "--values", "10"] + common) == 2
+    assert "episodes 1 (asked 2)" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in (root / "s10-j10-s0").iterdir()} == before

@@ -1,0 +1,148 @@
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from bench.harness.run import parse, run
+
+COMPARE = ["method", "signals", "case", "seed", "energy", "travel_time", "steps", "stops", "clips", "collisions"]
+
+
+def _opts(logs: Path, *extra: str) -> dict:
+    return parse(["--profile", "smoke", "--logs", str(logs), "--methods", "baseline", *extra])
+
+
+@pytest.fixture(scope="module")
+def local_results(tmp_path_factory):
+    logs = tmp_path_factory.mktemp("local")
+    return run(_opts(logs, "--workers", "2"), progress=False), logs
+
+
+def test_layout_and_results(local_results):
+    df, logs = local_results
+    assert len(df) == 2 * 3 and set(df.signals) == {"coordinated", "uncoordinated"}
+    for p in df.mcap:  # relative to the run folder
+        assert not Path(p).is_absolute() and (logs / "smoke" / p).is_file() and Path(p).parent.name == "baseline"
+    assert (logs / "smoke" / "results.parquet").is_file() and (logs / "smoke" / "manifest.json").is_file()
+    assert (df.collisions == 0).all()
+
+
+def test_ray_matches_local(local_results, tmp_path):
+    pytest.importorskip("ray")
+    import ray
+
+    df_local, _ = local_results
+    try:
+        df_ray = run(_opts(tmp_path, "--executor", "ray", "--workers", "2"), progress=False)
+    finally:
+        ray.shutdown()
+    pd.testing.assert_frame_equal(df_local[COMPARE], df_ray[COMPARE])
+
+
+def test_killed_run_resumes_to_the_same_results(local_results, tmp_path):
+    df_local, _ = local_results
+    cmd = [sys.executable, "-m", "bench.harness.run", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
+           "--workers", "1"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(tmp_path.rglob("*.mcap"))) < 2:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)  # the pool's workers too
+    proc.wait()
+    finished = list(tmp_path.rglob("*.mcap"))
+    assert 2 <= len(finished) < 6
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    df = pd.read_parquet(tmp_path / "smoke" / "results.parquet")
+    pd.testing.assert_frame_equal(df_local[COMPARE], df[COMPARE])
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\nState:\tZ" not in state  # a zombie has exited
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux-only")
+def test_killing_the_parent_stops_its_workers(tmp_path):
+    """A sweep killed by its PID alone (not its process group) leaves no worker computing on."""
+    cmd = [sys.executable, "-m", "bench.harness.run", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
+           "--workers", "1"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        workers: list[int] = []
+        deadline = time.time() + 120
+        while time.time() < deadline and not (workers and list(tmp_path.rglob("*.mcap*"))):
+            kids = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
+            workers = [int(k) for k in kids if b"spawn_main" in Path(f"/proc/{k}/cmdline").read_bytes()]
+            time.sleep(0.05)
+        assert workers, "no pool worker started"
+        proc.kill()
+        proc.wait()
+        deadline = time.time() + 20
+        while time.time() < deadline and any(_alive(w) for w in workers):
+            time.sleep(0.1)
+        assert not any(_alive(w) for w in workers)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--methods", "teleporter"], ["teleporter", "baseline", "glosa", "baseline0", "prl"]),
+    (["--profile", "huge"], ["huge", "smoke", "paper", "full"]),
+    (["--executor", "slurm"], ["slurm", "local", "ray"]),
+    (["--methods", "prl"], ["no trained policy for prl"]),
+    (["--workers", "0"], ["--workers", "'0'", "1.."]),
+    (["--frobnicate"], ["unrecognized arguments: --frobnicate"]),
+    (["--run-id", "../../etc"], ["--run-id", "'../../etc'", "no path separator"]),
+    (["--run-id", "/abs"], ["--run-id", "'/abs'"]),
+])
+def test_bad_input_is_one_line_and_touches_nothing(args, words, tmp_path):
+    keep = tmp_path / "smoke" / "coordinated" / "baseline" / "case-000.mcap"
+    keep.parent.mkdir(parents=True)
+    keep.write_bytes(b"existing")
+    cmd = [sys.executable, "-m", "bench.harness.run", "--logs", str(tmp_path), "--models", str(tmp_path / "no-models"), *args]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    err = [line for line in out.stderr.splitlines() if "pyarrow" not in line and "Try to uninstall" not in line]
+    assert out.returncode == 2 and len(err) == 1 and "Traceback" not in out.stderr
+    for w in words:
+        assert w in err[0]
+    assert keep.read_bytes() == b"existing"
+
+
+def test_unwritable_log_folder(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    cmd = [sys.executable, "-m", "bench.harness.run", "--profile", "smoke", "--methods", "baseline", "--logs", str(blocker)]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "not writable" in out.stderr and "Traceback" not in out.stderr
+    assert blocker.read_text() == "not a folder"
+
+
+def test_a_rerun_with_fewer_methods_keeps_the_finished_rows(tmp_path):
+    common = ["--profile", "smoke", "--logs", str(tmp_path), "--signals", "coordinated", "--workers", "2"]
+    first = run(parse([*common, "--methods", "baseline", "glosa"]), progress=False)
+    again = run(parse([*common, "--methods", "baseline"]), progress=False)
+    table = pd.read_parquet(tmp_path / "smoke" / "results.parquet")
+    assert len(first) == len(table) == 6 and sorted(set(table.method)) == ["baseline", "glosa"]
+    assert len(again) == 6
+    man = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
+    assert man["episodes_kept_from_earlier_commands"] == 3 and man["episodes_reused"] == 3
+    # a log that is no longer complete is not kept
+    log = tmp_path / "smoke" / "coordinated" / "glosa" / "case-000.mcap"
+    log.write_bytes(log.read_bytes()[:100])
+    run(parse([*common, "--methods", "baseline"]), progress=False)
+    assert len(pd.read_parquet(tmp_path / "smoke" / "results.parquet")) == 5

@@ -1,0 +1,58 @@
+from __future__ import annotations
+
+from bench.regression.check import against_record
+
+
+def test_recorded_failures_are_known_and_strict():
+    rows = [("a", "FAIL", "x"), ("b", "PASS", "y"), ("c", "FAIL", "z"), ("d", "NOT CHECKED", "w")]
+    record = {"a": "FAIL", "b": "FAIL", "c": "PASS", "d": "NOT CHECKED"}
+    out = {name: status for name, status, _ in against_record(rows, record)}
+    assert out == {"a": "KNOWN FAIL", "b": "FAIL", "c": "FAIL", "d": "NOT CHECKED"}
+    assert [s for _, s, _ in against_record([("new", "FAIL", "")], {})] == ["FAIL"]  # unrecorded: a real failure
+
+
+def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_path):
+    import pandas as pd
+
+    from bench.harness.run import parse, resolve_methods
+    from bench.regression.check import claims
+
+    models = tmp_path / "models"
+    for m, s in (("prl", "coordinated"), ("prl", "uncoordinated"), ("ddpg", "coordinated")):
+        (models / f"{m}-{s}").mkdir(parents=True)
+        (models / f"{m}-{s}" / "manifest.json").write_text("{}")
+    opts = parse(["--logs", str(tmp_path / "logs")])
+    opts["models"] = models
+    pairs, skipped = resolve_methods(opts)
+    assert ("ddpg", "coordinated") in pairs and ("ddpg", "uncoordinated") not in pairs
+    assert "ddpg/uncoordinated" in skipped and "dqn/coordinated" in skipped and ("baseline", "uncoordinated") in pairs
+
+    rows = [{"method": m, "signals": s, "energy": e, "travel_time": 180.0, "collisions": 0}
+            for m, s, e in (("baseline", "coordinated", 230.0), ("baseline", "uncoordinated", 250.0),
+                            ("prl", "coordinated", 190.0), ("prl", "uncoordinated", 240.0),
+                            ("ddpg", "coordinated", 200.0))]
+    status = {name: st for name, st, _ in claims(pd.DataFrame(rows))}
+    assert status["PRL uses less energy than DDPG+LC2013 (coordinated)"] == "PASS"
+    assert status["PRL uses less energy than DDPG+LC2013 (uncoordinated)"] == "NOT CHECKED"
+    assert status["PRL saves energy vs baseline (uncoordinated)"] == "PASS"
+
+
+def test_ddpg_uncoordinated_travel_time_claim():
+    import pandas as pd
+
+    from bench.regression.check import claims
+
+    name = "DDPG+LC2013 slower than baseline uncoordinated, more than coordinated"
+
+    def status(ddpg_c: float, ddpg_u: float) -> str:
+        rows = [{"method": m, "signals": s, "energy": 200.0, "travel_time": t, "collisions": 0}
+                for m, s, t in (("baseline", "coordinated", 190.0), ("baseline", "uncoordinated", 250.0),
+                                ("ddpg", "coordinated", ddpg_c), ("ddpg", "uncoordinated", ddpg_u))]
+        return {n: st for n, st, _ in claims(pd.DataFrame(rows))}[name]
+
+    assert status(190.0, 300.0) == "PASS"  # 0% vs +20%
+    assert status(190.0, 240.0) == "FAIL"  # faster than the baseline uncoordinated
+    assert status(247.0, 300.0) == "FAIL"  # +30% coordinated, +20% uncoordinated
+    rows = [{"method": "baseline", "signals": s, "energy": 1.0, "travel_time": 1.0, "collisions": 0}
+            for s in ("coordinated", "uncoordinated")]
+    assert {n: st for n, st, _ in claims(pd.DataFrame(rows))}[name] == "NOT CHECKED"

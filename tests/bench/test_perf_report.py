@@ -1,0 +1,35 @@
+"""bench.perf's arithmetic on a pytest-benchmark JSON (no timing here)."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from bench.perf import STEPS_PER_EPISODE, main, ratios
+
+
+def _bench(name: str, median: float, mean: float | None = None, **extra) -> dict:
+    return {"name": name, "stats": {"median": median, "mean": mean or median}, "extra_info": extra}
+
+
+def test_flop_floor_and_projection(tmp_path, capsys):
+    data = {"benchmarks": [
+        _bench("test_learner_update[prl]", 0.020, flops=500_000_000),
+        _bench("test_training_env_step", 0.002),
+        _bench("test_matmul_rate", 0.001, flops=50_000_000),  # 50 GFLOP/s
+    ]}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    r = ratios(path)
+    assert r["matmul_gflops"] == pytest.approx(50.0)
+    assert r["update_over_floor"] == pytest.approx(0.020 / 0.010)  # 0.5 GFLOP at 50 GFLOP/s = 10 ms
+    assert r["prl_1000_episodes_floor_min"] == pytest.approx(0.010 * STEPS_PER_EPISODE * 1000 / 60)
+    assert r["prl_1000_episodes_min"] == pytest.approx(0.022 * STEPS_PER_EPISODE * 1000 / 60)
+    assert main([str(path)]) == 1  # the projected run misses 30 minutes
+    assert "FLOP floor" in capsys.readouterr().out
+
+
+def test_not_a_benchmark_file(tmp_path, capsys):
+    bad = tmp_path / "x.json"
+    bad.write_text("{}")
+    assert main([str(bad)]) == 2 and "not a pytest-benchmark JSON" in capsys.readouterr().err

@@ -1,0 +1,83 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.training.qcheck import calibration, main, returns_to_go
+
+
+def test_returns_to_go_discounts_and_bootstraps():
+    r = np.array([1.0, 2.0, 3.0])
+    assert returns_to_go(r, 0.5) == pytest.approx([2.75, 3.5, 3.0])
+    assert returns_to_go(r, 0.5, bootstrap=4.0) == pytest.approx([3.25, 4.5, 5.0])
+
+
+def test_calibration_of_a_shifted_estimate():
+    g = np.array([-3.0, -2.0, -1.0, -0.5])
+    c = calibration(g + 1.0, g)
+    assert c["bias"] == pytest.approx(1.0) and c["rmse"] == pytest.approx(1.0) and c["corr"] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="paired"):
+        calibration(g, g[:2])
+
+
+def test_rollout_earns_the_harness_return_on_a_real_episode():
+    """The Q check drives the shipped policy exactly as the harness does: same return, and G_0 is
+    the episode's discounted return in the agent's units."""
+    import torch
+
+    from agents.registry import make_agent
+    from bench.harness.episode import make_env, run_episode
+    from bench.harness.policies import load_policy, policy_dir
+    from bench.training.qcheck import rollout
+    from bench.training.train import validation_cases
+
+    torch.set_num_threads(1)
+    state, _ = load_policy(policy_dir("prl", "coordinated"), "prl")
+    env = make_env("prl", "coordinated")
+    agent = make_agent("prl", env.observation_space, env.action_space)
+    agent.load_state_dict(state)
+    case = validation_cases(env.cfg, 1)[0]
+    ep = rollout(env, agent, case)
+    row = run_episode(env, agent, case, "prl")
+    env.close()
+    assert len(ep["q"]) == row["steps"] and np.isfinite(ep["q"]).all()
+    assert ep["reward"].sum() / agent.cfg.reward_scale == pytest.approx(row["return_"], rel=1e-9)
+    disc = sum(agent.cfg.gamma ** t * r for t, r in enumerate(ep["reward"]))
+    assert ep["g"][0] == pytest.approx(disc)
+
+
+@pytest.mark.parametrize("argv, msg", [(["--method", "dqn"], "accepted: prl, mpdqn"),
+                                       (["--cases", "0"], "accepted: 1..100"),
+                                       (["--signals", "green"], "accepted")])
+def test_bad_flags_name_the_accepted_values(argv, msg, capsys):
+    with pytest.raises(SystemExit):
+        main(argv)
+    assert msg in capsys.readouterr().err
+
+
+def test_a_folder_without_a_checkpoint_is_a_clear_error(tmp_path, capsys):
+    assert main(["--run", str(tmp_path)]) == 2
+    assert "no checkpoint.pt" in capsys.readouterr().err
+
+
+def test_a_twin_q_run_folder_is_checked_with_its_own_agent_config(tmp_path):
+    from bench.training.qcheck import check
+    from bench.training.train import train
+
+    train("prl", "coordinated", 1, seed=0, out=tmp_path / "run", models=None, progress=False, validation_cases=0,
+          agent_config={"learning_starts": 64, "batch_size": 16, "twin_q": True}, scenario={"max_episode_time": 60.0})
+    res = check("prl", "coordinated", 1, run=tmp_path / "run")
+    assert "episode 1" in res["source"] and res["all"]["steps"] >= 1 and np.isfinite(res["all"]["bias"])
+
+
+def test_a_run_folder_needs_no_shipped_policy(tmp_path):
+    """MP-DQN has no shipped policy yet; its run folders can still be checked."""
+    from bench.training.qcheck import check
+    from bench.training.train import train
+
+    train("mpdqn", "coordinated", 1, seed=0, out=tmp_path / "run", models=None, progress=False, validation_cases=0,
+          agent_config={"learning_starts": 64, "batch_size": 16}, scenario={"max_episode_time": 30.0})
+    res = check("mpdqn", "coordinated", 1, run=tmp_path / "run", models=tmp_path / "no-models")
+    assert res["all"]["steps"] >= 1
+    with pytest.raises(Exception, match="a run of mpdqn/coordinated, not prl/coordinated"):
+        check("prl", "coordinated", 1, run=tmp_path / "run")

@@ -1,0 +1,85 @@
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.harness.run import parse, run
+from reports import metrics
+from reports.build import build
+
+
+def test_metric_functions():
+    assert metrics.iqm(np.array([0, 1, 2, 3, 4, 5, 6, 100.0])) == pytest.approx(3.5)
+    assert metrics.probability_of_improvement(np.array([1.0, 2.0]), np.array([3.0, 4.0])) == 1.0
+    assert metrics.probability_of_improvement(np.array([1.0]), np.array([1.0])) == 0.5
+    x = np.random.default_rng(0).normal(10, 1, 200)
+    lo, hi = metrics.bootstrap_ci(x)
+    assert lo < x.mean() < hi and hi - lo < 0.6
+    assert metrics.improvement(184.93, 253.79) == pytest.approx(0.2713, abs=1e-4)  # Table 4's 27.13%
+
+
+def test_table4_against_the_paper():
+    res = pd.DataFrame({"method": ["baseline"] * 2 + ["prl"] * 2, "signals": ["uncoordinated"] * 4,
+                        "energy": [250.0, 260.0, 180.0, 190.0], "travel_time": [250.0, 270.0, 280.0, 300.0]})
+    t4 = metrics.table4(res).set_index("method")
+    assert t4.loc["prl", "energy_imp"] == pytest.approx((255 - 185) / 255)
+    assert t4.loc["prl", "paper_energy_imp"] == pytest.approx(0.2713, abs=1e-4)
+    assert t4.loc["baseline", "energy_vs_paper"] == pytest.approx(255 / 253.79 - 1)
+
+
+def test_signal_bands():
+    states = [["G", "r"]] * 3 + [["r", "r"]] * 2 + [["G", "G"]] * 2
+    steps = pd.DataFrame({"time": np.arange(7.0) + 100, "x": np.arange(7.0) * 10 + 5, "tls_states": states})
+    bands = metrics.signal_bands(steps, {"J1": 105.0, "J2": 205.0}, {"J1": 0, "J2": 0})
+    j1 = bands[bands.tls == "J1"]
+    assert j1.green.tolist() == [True, False, True] and j1.t_start.tolist() == [0.0, 3.0, 5.0]
+    assert (bands.x.unique() == [100.0, 200.0]).all()
+
+
+def test_report_from_a_run(tmp_path):
+    run(parse(["--profile", "smoke", "--logs", str(tmp_path / "logs"), "--methods", "baseline", "glosa"]),
+        progress=False)
+    index, _ = build(tmp_path / "logs" / "smoke", tmp_path / "report")
+    text = index.read_text()
+    assert "## Table 4" in text and "231.13" in text and "253.79" in text  # published values beside ours
+    for name in ("table4.md", "table4.tex", "statistics.md", "index.html"):
+        assert (tmp_path / "report" / name).is_file()
+    figs = sorted(p.name for p in (tmp_path / "report" / "figures").iterdir())
+    assert "violin-coordinated.png" in figs and "violin-uncoordinated.pdf" in figs
+    assert sum(n.startswith("compare-") and n.endswith(".png") for n in figs) == 6  # 3 cases x 2 settings
+    assert "<img src='figures/violin-coordinated.png'" in (tmp_path / "report" / "index.html").read_text()
+    # the return by reward component: read from the step logs, adding up to the harness's return
+    assert "## Return by reward component" in text
+    parts = pd.read_csv(tmp_path / "report" / "return_parts.csv")
+    results = pd.read_parquet(tmp_path / "logs" / "smoke" / "results.parquet")
+    assert len(parts) == 4 and parts.episodes.tolist() == [3, 3, 3, 3]
+    comps = [c for c in parts.columns if c not in ("method", "signals", "episodes", "reward")]
+    assert {"speed", "energy", "time"} <= set(comps) and "distance" not in comps  # all-zero columns dropped
+    np.testing.assert_allclose(parts[comps].sum(axis=1), parts.reward, rtol=1e-9)
+    expect = results.groupby(["method", "signals"])["return"].mean()
+    for r in parts.itertuples():
+        assert r.reward == pytest.approx(expect[(r.method, r.signals)], rel=1e-9)
+        assert r.time < 0 and r.energy < 0
+
+
+def test_stratified_seed_bootstrap_and_across_seeds():
+    rng = np.random.default_rng(3)
+    # 4 seeds x 30 cases; the CI widens with the spread between seeds, and resampling seeds per
+    # case (each case a stratum) makes it narrower than the seed means' range
+    offsets = np.array([0.0, 10.0, 20.0, 30.0])
+    noise = rng.normal(0, 1, (4, 30))
+    scores = 200 + offsets[:, None] + noise
+    lo, hi = metrics.stratified_seed_bootstrap(scores)
+    assert lo < scores.mean() < hi and hi - lo < 30
+    lo2, hi2 = metrics.stratified_seed_bootstrap(200 + 2 * offsets[:, None] + noise)
+    assert hi2 - lo2 > 1.5 * (hi - lo)
+    assert np.isnan(metrics.stratified_seed_bootstrap(scores[:1])).all()  # one seed: no spread to sample
+    rows = [{"method": "prl", "signals": "coordinated", "train_seed": s, "case": c, "energy": scores[s, c],
+             "travel_time": 100.0 + s} for s in range(4) for c in range(30)]
+    rows.append({"method": "prl", "signals": "coordinated", "train_seed": 0, "case": 99, "energy": 1e6,
+                 "travel_time": 1e6})  # a case only one seed ran is left out
+    agg = metrics.across_seeds(pd.DataFrame(rows)).set_index("metric")
+    assert agg.loc["energy", "seeds"] == 4 and agg.loc["energy", "cases"] == 30
+    assert agg.loc["energy", "mean"] == pytest.approx(scores.mean())
+    assert agg.loc["travel_time", "seed_min"] == 100.0 and agg.loc["travel_time", "seed_max"] == 103.0

@@ -1,0 +1,50 @@
+"""The packages read bottom-up: no import runs back up a layer, and reports read from ``bench``
+only the logs, the paper's numbers and the shared helpers (io, args)."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+# a module may import from its own layer and those below it (lower number)
+LAYER = {"envs": 0, "agents": 0, "bench.paper": 1, "bench.io": 1, "bench.args": 1, "bench.logs": 2, "bench.harness": 3,
+         "bench.training": 4, "bench.experiments": 5, "bench.regression": 6, "bench.perf": 6, "reports": 7,
+         "bench.cli": 8}
+
+
+def layer_of(module: str) -> str | None:
+    return max((k for k in LAYER if module == k or module.startswith(k + ".")), key=len, default=None)
+
+
+def imports(path: Path) -> list[str]:
+    pkg = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(pkg.split(".")[: len(pkg.split(".")) - node.level + 1] + ([base] if base else []))
+            out += [base] + [f"{base}.{a.name}" for a in node.names]
+    return out
+
+
+def test_no_import_runs_back_up():
+    bad = []
+    for path in sorted(ROOT.glob("*/**/*.py")):
+        mod = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        own = layer_of(mod)
+        if own is None:
+            continue
+        for imp in imports(path):
+            other = layer_of(imp)
+            if other is not None and LAYER[other] > LAYER[own]:
+                bad.append(f"{mod} imports {imp}")
+    assert not bad, "\n".join(bad)
+
+
+def test_reports_read_only_logs_and_the_paper_from_bench():
+    bad = [f"{p.name}: {imp}" for p in sorted((ROOT / "reports").glob("*.py")) for imp in imports(p)
+           if imp.startswith("bench") and layer_of(imp) not in ("bench.logs", "bench.paper", "bench.io", "bench.args")]
+    assert not bad, "\n".join(bad)
