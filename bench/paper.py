@@ -1,7 +1,7 @@
 """The paper's published numbers and the tolerances they are checked with: their one home.
 
 Everything here is typed from the paper (Table 4, section 5.3 and 5.5) or is a tolerance this
-project chose (docs/tolerances.md says why). Outputs compare against these; they never copy
+project chose (docs/regression.md says why). Outputs compare against these; they never copy
 them in place of a measured number.
 """
 from __future__ import annotations

@@ -63,11 +63,12 @@ class RewardConfig:
     speed_threshold: float = field(default=1.5, metadata=_rng(0.0, 20.0))  # v_zeta [m/s]
     jerk_threshold: float = field(default=4.0, metadata=_rng(0.0, 100.0))  # j_zeta [m/s^3]
     # when form r pays -(E_f + phi T_f): "end" = once at t_f (the paper's eq. 11); "step" = as
-    # -(e_t + phi dt) every step, the same undiscounted sum (deviation, see docs/training.md)
+    # -(e_t + phi dt) every step, the same undiscounted sum (deviation, see docs/notebook.md)
     cost_timing: str = field(default="step", metadata={"choices": COST_TIMINGS})
     # when r_p^c is charged: "request" = in the step whose accepted request starts the change (the
     # agent's own decision; a change SUMO makes on its own is charged when the lane index changes);
-    # "lane" = when the lane index changes, mid-manoeuvre, one step after the request (before session 4)
+    # "lane" = when the lane index changes, mid-manoeuvre, one step after the request (the older charging; runs
+    # that started with it keep it)
     lane_change_charge: str = field(default="request", metadata={"choices": LANE_CHANGE_CHARGES})
 
     def __post_init__(self) -> None:

@@ -22,6 +22,7 @@ from . import experiments, figures, metrics, tables
 from .load import RunError, component_sums, load_run, load_steps, stop_lines
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn")
+LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 
 
@@ -53,15 +54,19 @@ def build(run_dir: Path, out: Path) -> Path:
 def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str], list]:
     """Table 4, statistics, violins and trajectories of a ``bench.harness.run`` folder."""
     results, manifest = load_run(run_dir)
+    if "train_seed" not in results.columns:  # a table from before training seeds: one policy each
+        results = results.assign(train_seed=[0 if m in LEARNED else -1 for m in results.method])
     methods = [m for m in METHOD_ORDER if m in set(results.method)]
     t4 = metrics.table4(results)
     t4 = t4.set_index("method").loc[[m for m in methods if m in set(t4.method)]].reset_index()
     st = metrics.statistics(results)
+    seeds = metrics.across_seeds(results)
     (out / "table4.md").write_text(tables.table4_markdown(t4))
     (out / "table4.tex").write_text(tables.table4_latex(t4))
     (out / "statistics.md").write_text(tables.stats_markdown(st))
     t4.to_csv(out / "table4.csv", index=False)
     st.to_csv(out / "statistics.csv", index=False)
+    seeds.to_csv(out / "seeds.csv", index=False)
     groups = metrics.group_means(results)
     md = [f"# Report: {run_dir.name}", "",
           f"Profile `{manifest.get('profile', '?')}`, git `{manifest.get('git_sha', '?')}`, "
@@ -71,7 +76,11 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
     md += ["## Table 4", "", tables.table4_markdown(t4), "## Statistics", "",
            f"Bootstrap (BCa, {metrics.BOOTSTRAP_RESAMPLES} resamples) {int(metrics.CI_LEVEL * 100)}% CIs; IQM = "
            "25% trimmed mean; P(improve) = chance an episode of the method uses less than one of the baseline.",
-           "", tables.stats_markdown(st)]
+           "", tables.stats_markdown(st), "## Across training seeds", "",
+           "Each learning method's shipped training seeds, evaluated on the same cases: the mean over seeds and "
+           f"cases with a {int(metrics.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
+           "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed has no CI.",
+           "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
     warnings = []
     parts, partial = _return_parts(results, run_dir, warnings)
     if partial:

@@ -104,7 +104,7 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
                "congests the arterial cannot look better by keeping its slow vehicles inside:", "",
                _table(effect.set_index(["signals", "mpr"])), ""]
         md += ["The paper's claims on these cells (the regression check's tolerances, "
-               "`docs/tolerances.md`):", "",
+               "`docs/regression.md`):", "",
                _table(metrics.mixed_claims(effect, SPEED_LOSS_TOL, HDV_TOL, PAPER_FLEET_SAVING).set_index(["signals", "claim"])), ""]
         if not spread.empty:
             md += ["The same changes within each finished repetition (every repetition drives the same "

@@ -173,8 +173,8 @@ def _check(cell: Cell, row: dict[str, Any]) -> None:
     if row["policy_sha256"] is not None and row["policy_sha256"] != _policy_sha(cell):
         bad.append(f"PRL policy sha256 {row['policy_sha256'][:12]} (asked {_policy_sha(cell)[:12]})")
     if cell.mpr > 0 and row["speed_mode"] != SPEED_MODE_SAFE:
-        # older cells do not record it; until commit c7dab69 their CVs ran under speed mode 31
-        got = "not recorded (31 until commit c7dab69)" if row["speed_mode"] is None else row["speed_mode"]
+        # cells that do not record it ran under an older safety layer (docs/notebook.md)
+        got = "not recorded" if row["speed_mode"] is None else row["speed_mode"]
         bad.append(f"CV speed mode {got} (asked {SPEED_MODE_SAFE})")
     if bad:
         raise CellMismatch(f"{cell.path}: finished with {', '.join(bad)}; use another --run-id, or move the "

@@ -75,7 +75,7 @@ def run_job(job: Job) -> dict[str, Any]:
     if job.max_episode_time is not None:
         scenario["max_episode_time"] = job.max_episode_time
     models = run_dir / "export"
-    folder = policy_dir("prl", job.signals, models)
+    folder = policy_dir("prl", job.signals, models, job.seed)
     t0 = time.perf_counter()
     if not (folder / "manifest.json").is_file():
         # epsilon decays over the job's own episodes (eq. 12 with N = the training length)

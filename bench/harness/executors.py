@@ -25,10 +25,13 @@ class Task:
     signals: str
     case: Case
     path: str  # MCAP to write
-    policy_dir: str  # models/<method>-<signals> for learning methods, "" otherwise
+    policy_dir: str  # models/<method>-<signals>/s<seed> for learning methods, "" otherwise
+    train_seed: int = -1  # the policy's training seed; -1 for rule-based methods
 
 
-_CACHE: dict[tuple[str, str], tuple[Any, Any, str]] = {}  # per worker process: env, agent, sha256
+# per worker process: one env per (method, signals); one agent per (method, signals, policy folder)
+_ENVS: dict[tuple[str, str], Any] = {}
+_AGENTS: dict[tuple[str, str, str], tuple[Any, str]] = {}  # agent, policy sha256
 
 
 def run_task(task: Task) -> dict[str, Any]:
@@ -40,21 +43,24 @@ def run_task(task: Task) -> dict[str, Any]:
     from bench.harness.policies import load_policy
 
     torch.set_num_threads(1)
-    key = (task.method, task.signals)
-    if key not in _CACHE:
-        env = make_env(task.method, task.signals)
+    if (task.method, task.signals) not in _ENVS:
+        _ENVS[(task.method, task.signals)] = make_env(task.method, task.signals)
+    env = _ENVS[(task.method, task.signals)]
+    key = (task.method, task.signals, task.policy_dir)
+    if key not in _AGENTS:
         agent = make_agent(task.method, env.observation_space, env.action_space)
         sha = ""
         if task.method in LEARNING:
             state, manifest = load_policy(Path(task.policy_dir), task.method, env.cfg.to_dict())
             agent.load_state_dict(state)
             sha = manifest["sha256"]
-        _CACHE[key] = (env, agent, sha)
-    env, agent, sha = _CACHE[key]
+        _AGENTS[key] = (agent, sha)
+    agent, sha = _AGENTS[key]
     t0 = time.perf_counter()
     row = run_episode(env, agent, task.case, task.method, log_path=Path(task.path), agent_sha256=sha)
     row["episode_wall_s"] = time.perf_counter() - t0
     row["mcap"] = task.path
+    row["train_seed"] = task.train_seed
     return row
 
 

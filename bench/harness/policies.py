@@ -1,4 +1,6 @@
-"""Shipped policies: ``models/<method>-<signals>/policy.pt`` plus ``manifest.json``.
+"""Shipped policies: ``models/<method>-<signals>/s<seed>/`` holds one training seed's
+``policy.pt``, ``manifest.json`` and per-episode ``metrics.parquet``; a method and setting ships
+every seed found there.
 
 Loading checks the file's sha256 against the manifest and the method and scenario config
 against what the caller expects; anything else is a ``CheckpointError`` naming the file.
@@ -35,8 +37,24 @@ def load_torch(path: Path) -> Any:
         raise CheckpointError(f"{path}: cannot be loaded ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})") from None
 
 
-def policy_dir(method: str, signals: str, root: Path = MODELS) -> Path:
+def family_dir(method: str, signals: str, root: Path = MODELS) -> Path:
+    """The folder of every shipped training seed of a method and setting."""
     return root / f"{method}-{signals}"
+
+
+def policy_dir(method: str, signals: str, root: Path = MODELS, seed: int = 0) -> Path:
+    """One training seed's policy folder (seed 0 by default: the one the single-policy experiments
+    drive, e.g. the CVs of mixed traffic)."""
+    return family_dir(method, signals, root) / f"s{seed}"
+
+
+def shipped_seeds(method: str, signals: str, root: Path = MODELS) -> list[int]:
+    """Training seeds with a policy (a manifest) for ``method`` and ``signals``, ascending."""
+    folder = family_dir(method, signals, root)
+    if not folder.is_dir():
+        return []
+    return sorted(int(d.name[1:]) for d in folder.iterdir()
+                  if d.name[:1] == "s" and d.name[1:].isdigit() and (d / "manifest.json").is_file())
 
 
 def save_policy(folder: Path, state: dict[str, Any], manifest: dict[str, Any]) -> Path:

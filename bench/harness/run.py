@@ -22,7 +22,7 @@ from agents.registry import LEARNING, METHODS
 from bench.args import Parser, fail, int_in, name
 from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
-from bench.harness.policies import MODELS, CheckpointError, policy_dir
+from bench.harness.policies import MODELS, CheckpointError, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import git_sha, package_versions
 from bench.io import atomic_json, atomic_parquet, sha256
 from bench.logs.mcaplog import episode_summary, resolve_log
@@ -33,7 +33,7 @@ PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, 
     "paper": 100,
     "full": 100,
 }
-KEEP = ("method", "signals", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
+KEEP = ("method", "signals", "train_seed", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
         "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",
         "lane_changes_applied", "clips", "jerk_exceedances", "collisions", "teleports", "battery_consumed",
         "battery_regenerated", "mcap")
@@ -58,6 +58,8 @@ def parser() -> Parser:
                     help="run folder under --logs: letters, digits, '.', '_', '-' (default: the profile)")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
     ap.add_argument("--models", type=Path, default=MODELS, help="shipped policies (default: models/)")
+    ap.add_argument("--train-seeds", nargs="+", type=int_in(0), default=None, metavar="SEED",
+                    help="training seeds of the learning methods to evaluate, each >= 0 (default: every shipped one)")
     return ap
 
 
@@ -68,23 +70,31 @@ def parse(argv: list[str]) -> dict[str, Any]:
     return opts
 
 
-def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str]], list[str]]:
-    """((method, signals) pairs to run, "method/signals" skipped for want of a shipped policy).
+def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str, int]], list[str]]:
+    """((method, signals, training seed) to run, "method/signals" skipped for want of a shipped
+    policy). Rule-based methods have the training seed -1.
 
-    Without ``--methods``, a learning method runs in each setting it has a policy for; named in
-    ``--methods``, a missing policy is an error."""
+    Without ``--methods``, a learning method runs in each setting it has a policy for, every
+    shipped seed (or those of ``--train-seeds``); named in ``--methods``, a missing policy is an
+    error."""
     explicit = opts["methods"] is not None
-    pairs, skipped = [], []
+    wanted = opts.get("train_seeds")
+    runs, skipped = [], []
     for m in (opts["methods"] if explicit else METHODS):
         for s in opts["signals"]:
-            if m in LEARNING and not (policy_dir(m, s, opts["models"]) / "manifest.json").is_file():
+            if m not in LEARNING:
+                runs.append((m, s, -1))
+                continue
+            seeds = [sd for sd in shipped_seeds(m, s, opts["models"]) if wanted is None or sd in wanted]
+            if not seeds:
                 if explicit:
-                    raise UsageError(f"no trained policy for {m} / {s} (expected {policy_dir(m, s, opts['models'])}); "
+                    raise UsageError(f"no trained policy for {m} / {s}"
+                                     f"{'' if wanted is None else ' with training seed ' + ' or '.join(map(str, wanted))}"
+                                     f" (expected {family_dir(m, s, opts['models'])}/s<seed>/); "
                                      f"train it: ecodrive train --method {m} --signals {s}")
                 skipped.append(f"{m}/{s}")
-            else:
-                pairs.append((m, s))
-    return pairs, skipped
+            runs.extend((m, s, sd) for sd in seeds)
+    return runs, skipped
 
 
 def check_writable(run_dir: Path) -> None:
@@ -98,25 +108,29 @@ def check_writable(run_dir: Path) -> None:
 
 
 def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
-    pairs, skipped = resolve_methods(opts)
-    methods = list(dict.fromkeys(m for m, _ in pairs))
+    runs, skipped = resolve_methods(opts)
+    methods = list(dict.fromkeys(m for m, _, _ in runs))
     if skipped:
         print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
     run_dir = opts["logs"] / opts["run_id"]
     check_writable(run_dir)
     cases = load()[: PROFILES[opts["profile"]]]
     rows, tasks = [], []
+    shas = {}
     for signals in opts["signals"]:
-        for method in [m for m, s in pairs if s == signals]:
-            pdir = str(policy_dir(method, signals, opts["models"])) if method in LEARNING else ""
+        for method, seed in [(m, sd) for m, s, sd in runs if s == signals]:
+            pdir = str(policy_dir(method, signals, opts["models"], seed)) if seed >= 0 else ""
             sha = sha256(Path(pdir) / "policy.pt") if pdir else ""  # a log of another policy is rerun
+            if sha:
+                shas[f"{method}-{signals}/s{seed}"] = sha
+            folder = run_dir / signals / method / (f"s{seed}" if seed >= 0 else "")
             for case in cases:
-                path = run_dir / signals / method / f"case-{case.index:03d}.mcap"
+                path = folder / f"case-{case.index:03d}.mcap"
                 done = episode_summary(path, agent_sha256=sha)
                 if done is not None:
-                    rows.append({**done, "mcap": str(path), "episode_wall_s": float("nan")})
+                    rows.append({**done, "mcap": str(path), "episode_wall_s": float("nan"), "train_seed": seed})
                 else:
-                    tasks.append(Task(method, signals, case, str(path), pdir))
+                    tasks.append(Task(method, signals, case, str(path), pdir, seed))
     t0 = time.perf_counter()
     it = (run_local(tasks, opts["workers"]) if opts["executor"] == "local"
           else run_ray(tasks, opts["address"], opts["workers"]))
@@ -129,11 +143,9 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     ran = df["episode_wall_s"].dropna()
     kept = earlier_rows(run_dir, df)
     df = pd.concat([df[list(KEEP)], kept], ignore_index=True) if len(kept) else df[list(KEEP)]
-    df = df.sort_values(["signals", "method", "case"], ignore_index=True)
+    df = df.sort_values(["signals", "method", "train_seed", "case"], ignore_index=True)
     df["mcap"] = [_relative(run_dir, m) for m in df.mcap]  # the run folder moves as a whole
     atomic_parquet(df, run_dir / "results.parquet")
-    shas = {f"{m}-{s}": sha256(policy_dir(m, s, opts["models"]) / "policy.pt")
-            for m, s in pairs if m in LEARNING}
     manifest = {
         "command": " ".join(["ecodrive", "run", *opts.get("argv", [])]), "profile": opts["profile"],
         "executor": opts["executor"], "workers": opts["workers"], "methods": methods, "skipped_methods": skipped,
@@ -166,8 +178,8 @@ def earlier_rows(run_dir: Path, df: pd.DataFrame) -> pd.DataFrame:
                          f"afresh, or use another --run-id") from None
     if not set(KEEP) <= set(old.columns):
         return pd.DataFrame(columns=list(KEEP))
-    now = set(zip(df.signals, df.method, df.case))
-    rows = [r for r in old.itertuples(index=False) if (r.signals, r.method, r.case) not in now]
+    now = set(zip(df.signals, df.method, df.train_seed, df.case))
+    rows = [r for r in old.itertuples(index=False) if (r.signals, r.method, r.train_seed, r.case) not in now]
     keep = [r._asdict() for r in rows if episode_summary(resolve_log(run_dir, r.mcap)) is not None]
     return pd.DataFrame(keep, columns=list(KEEP))
 

@@ -10,7 +10,7 @@ Runs every method with a shipped policy on the first ``CI_CASES`` fixed cases pe
    the published ones within a stated band;
 3. the project's own reference results (``bench/regression/reference/ci.csv``, written by
    ``--write-reference`` from the same command) with tight tolerances.
-Exits 1 on any failed check. Tolerances and their reasons: ``docs/tolerances.md``.
+Exits 1 on any failed check. Tolerances and their reasons: ``docs/regression.md``.
 """
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ import pandas as pd
 
 from bench.args import Parser
 from bench.harness.run import parse, run
+from bench.io import atomic_csv
 from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, improvement
 from bench.paper import TABLE4 as PAPER_TABLE4
 
@@ -30,7 +31,7 @@ CI_CASES = 20
 REFERENCE = Path(__file__).with_name("reference") / "ci.csv"
 REF_RTOL = 1e-9  # own reference: runs are deterministic, so only float noise is allowed
 CLAIMS_RECORD = REFERENCE.with_name("claims.csv")  # the claims' statuses when the reference was written
-REF_COLUMNS = ["method", "signals", "case", "energy", "travel_time", "steps", "stops", "lane_changes_applied",
+REF_COLUMNS = ["method", "signals", "train_seed", "case", "energy", "travel_time", "steps", "stops", "lane_changes_applied",
                "clips", "collisions"]
 
 
@@ -103,21 +104,24 @@ def reference(df: pd.DataFrame) -> list[tuple[str, str, str]]:
     if not REFERENCE.is_file():
         return [("own reference", "FAIL", f"{REFERENCE} missing: ecodrive regress --write-reference")]
     ref = pd.read_csv(REFERENCE)
-    ours = df[REF_COLUMNS].sort_values(["signals", "method", "case"], ignore_index=True)
-    ref = ref.sort_values(["signals", "method", "case"], ignore_index=True)
+    # a reference written before training seeds existed holds one policy per method: seed 0
+    keys = [c for c in ("method", "signals", "train_seed", "case") if c in ref.columns]
+    values = [c for c in REF_COLUMNS if c not in ("method", "signals", "train_seed", "case")]
+    ours = df[keys + values].sort_values(keys[:-1][::-1] + ["case"], ignore_index=True)
+    ref = ref.sort_values(keys[:-1][::-1] + ["case"], ignore_index=True)
     out = []
-    for (method, s), r in ref.groupby(["method", "signals"]):
-        o = ours[(ours.method == method) & (ours.signals == s)]
+    for group, r in ref.groupby(keys[:-1]):
+        name = "reference " + "/".join(map(str, group))
+        o = ours[(ours[keys[:-1]] == pd.Series(group, index=keys[:-1])).all(axis=1)]
         if len(o) != len(r):
-            out.append((f"reference {method}/{s}", "FAIL", f"{len(o)} episodes, reference has {len(r)}"))
+            out.append((name, "FAIL", f"{len(o)} episodes, reference has {len(r)}"))
             continue
-        bad = [c for c in REF_COLUMNS[3:] if not np.allclose(o[c].to_numpy(float), r[c].to_numpy(float),
-                                                               rtol=REF_RTOL, atol=1e-9)]
-        out.append((f"reference {method}/{s}", "FAIL" if bad else "PASS",
-                    f"differs in {', '.join(bad)}" if bad else f"{len(r)} episodes identical"))
-    new = sorted(set(map(tuple, ours[["method", "signals"]].values)) - set(map(tuple, ref[["method", "signals"]].values)))
-    for method, s in new:
-        out.append((f"reference {method}/{s}", "FAIL", "not in the reference: regenerate it in its own commit"))
+        bad = [c for c in values if not np.allclose(o[c].to_numpy(float), r[c].to_numpy(float),
+                                                    rtol=REF_RTOL, atol=1e-9)]
+        out.append((name, "FAIL" if bad else "PASS", f"differs in {', '.join(bad)}" if bad else f"{len(r)} episodes identical"))
+    new = sorted(set(map(tuple, ours[keys[:-1]].values)) - set(map(tuple, ref[keys[:-1]].values)))
+    for group in new:
+        out.append(("reference " + "/".join(map(str, group)), "FAIL", "not in the reference: regenerate it in its own commit"))
     return out
 
 
@@ -129,7 +133,7 @@ def against_record(rows: list[tuple[str, str, str]], record: dict[str, str]) -> 
     for name, status, detail in rows:
         was = record.get(name)
         if was == "FAIL" and status == "FAIL":
-            status, detail = "KNOWN FAIL", f"{detail} (failed when the reference was written; see README)"
+            status, detail = "KNOWN FAIL", f"{detail} (failed when the reference was written; see docs/results.md)"
         elif was == "FAIL" and status == "PASS":
             status, detail = "FAIL", f"{detail} (now passes: rewrite the reference in its own commit)"
         out.append((name, status, detail))
@@ -149,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     df = run(parse(["--profile", "regression", "--logs", logs]), progress=False)
     if args.write_reference:
         REFERENCE.parent.mkdir(exist_ok=True)
-        df[REF_COLUMNS].to_csv(REFERENCE, index=False, float_format="%.10g")
+        atomic_csv(df[REF_COLUMNS], REFERENCE, float_format="%.10g")
         print(f"wrote {REFERENCE} ({len(df)} episodes)")
     from bench.regression import mixed as regression_mixed
 

@@ -2,7 +2,7 @@
 
 Cells: both signal settings x MPR {0, 0.5, 1} at one demand, one repetition, ``CI_DURATION`` s
 each, every CV driven by the shipped PRL policy of its setting. Claims (tolerances and reasons in
-``docs/tolerances.md``), all over every vehicle inserted, finished or not (the paper's means over
+``docs/regression.md``), all over every vehicle inserted, finished or not (the paper's means over
 the vehicles that finished would favour a run that congests the arterial):
 - fleet energy per km is lower at MPR = 1 than at MPR = 0 (the paper: about 13.8% lower, per vehicle);
 - the fleet's space-mean speed at MPR = 1 is at most ``SPEED_LOSS_TOL`` below MPR = 0;

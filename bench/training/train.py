@@ -7,9 +7,11 @@ Every ``--checkpoint-every`` episodes the run folder (``$ECODRIVE_RUNS`` or
 gets a checkpoint: networks, optimizers, epsilon, OU state, episode counter, every RNG state and
 the replay buffer, so a killed run that is started again with the same command continues
 exactly as if it had never stopped. Per-episode metrics go to ``metrics.parquet`` and a
-``/train`` MCAP channel (``train.mcap``). At the end the greedy policy is exported to
-``models/<method>-<signals>/`` with a manifest (command, seed, git SHA, sha256, wall time,
-final metrics).
+``/train`` MCAP channel (``train.mcap``). At every checkpoint the greedy policy is scored on
+validation cases (never the test cases); at the end the best one by ``--select`` (default: the
+least E_f + phi T_f, the cost part of eq. 11) is exported to ``models/<method>-<signals>/s<seed>/``
+with a manifest (command, seed, git SHA, sha256, wall time, selection, validation and final
+metrics) and the run's per-episode ``metrics.parquet``.
 
 ``--set FIELD=VALUE`` (repeatable) overrides a field of the method's agent config for an
 experiment (e.g. ``--set twin_q=true`` for PRL). Such a run gets its own folder
@@ -195,7 +197,9 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
             "validation": {"cases": validation_cases, "master_seed": VALIDATION_SEED, **chosen.get("score", {})},
         }
         policy = chosen["agent"] if chosen else agent.state_dict(with_training=False)
-        save_policy(policy_dir(method, signals, models), policy, manifest)
+        folder = policy_dir(method, signals, models, seed)
+        save_policy(folder, policy, manifest)
+        atomic_parquet(df, folder / "metrics.parquet")  # per-episode training metrics ship with the policy
     return df
 
 

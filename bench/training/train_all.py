@@ -1,10 +1,13 @@
-"""Train every learning method on both signal settings, two at a time, resumably.
+"""Train every learning method on both signal settings for several training seeds, two runs at a
+time, resumably; finished seeds are skipped, so seeds accumulate across sessions.
 
-    ecodrive train-all [--episodes 1000] [--seed 0] [--parallel 2] [--methods prl mpdqn dqn ddpg]
+    ecodrive train-all [--seeds 0 1 2 3 4] [--episodes 1000] [--parallel 2] [--methods prl mpdqn dqn ddpg]
 
-Each run is ``ecodrive train`` with its own log next to its run folder; finished runs
-(a policy already in models/ from the same seed and episode count, trained under today's
-scenario: see ``stale``) are skipped, unfinished ones resume from their last checkpoint.
+Each run is ``ecodrive train`` with its own log next to its run folder. A (method, setting,
+seed) is finished when ``models/<method>-<signals>/s<seed>/`` holds a policy from that seed and
+episode count, trained under today's scenario (see ``stale``); an unfinished one resumes from its
+last checkpoint. Started runs go first, then the lowest seeds, so that every method reaches a
+seed before any gets the next one.
 """
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ import time
 from pathlib import Path
 
 from agents.registry import LEARNING
-from bench.args import Parser
+from bench.args import Parser, int_in
 from bench.harness.policies import MODELS, policy_dir
 from bench.training.train import RUNS
 from envs.config import SIGNALS
@@ -33,7 +36,7 @@ def stale(trained: dict, method: str, signals: str) -> list[str]:
 
 def _finished(method: str, signals: str, seed: int, episodes: int, models: Path = MODELS) -> bool:
     """A policy in ``models`` from this seed and episode count, trained under today's scenario."""
-    man = policy_dir(method, signals, models) / "manifest.json"
+    man = policy_dir(method, signals, models, seed) / "manifest.json"
     if not man.is_file():
         return False
     m = json.loads(man.read_text())
@@ -41,41 +44,42 @@ def _finished(method: str, signals: str, seed: int, episodes: int, models: Path 
             and not stale(m.get("scenario", {}), method, signals))
 
 
-def plan(methods: list[str], seed: int, episodes: int, runs: Path = RUNS, models: Path = MODELS) -> list[tuple[str, str]]:
-    """(method, signals) still to train (no policy from this seed and episode count in ``models``);
-    runs with a checkpoint (started in an earlier session) come before new ones, otherwise in the
-    given method order."""
-    todo = [(m, s) for m in methods for s in SIGNALS if not _finished(m, s, seed, episodes, models)]
-    return sorted(todo, key=lambda ms: not (runs / f"{ms[0]}-{ms[1]}-s{seed}" / "checkpoint.pt").is_file())
+def plan(methods: list[str], seeds: list[int], episodes: int, runs: Path = RUNS,
+         models: Path = MODELS) -> list[tuple[str, str, int]]:
+    """(method, signals, seed) still to train; runs with a checkpoint (started in an earlier
+    session) come first, then by seed, then in the given method order."""
+    todo = [(m, s, sd) for sd in seeds for m in methods for s in SIGNALS
+            if not _finished(m, s, sd, episodes, models)]
+    return sorted(todo, key=lambda t: not (runs / f"{t[0]}-{t[1]}-s{t[2]}" / "checkpoint.pt").is_file())
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
-    ap.add_argument("--episodes", type=int, default=1000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--parallel", type=int, default=2, help="concurrent trainings (one core each)")
-    ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING))
+    ap.add_argument("--episodes", type=int_in(1, 100_000), default=1000, help="training episodes per run (1-100000)")
+    ap.add_argument("--seeds", nargs="+", type=int_in(0), default=[0], help="training seeds, each >= 0 (default: 0)")
+    ap.add_argument("--parallel", type=int_in(1), default=2, help="concurrent trainings, one core each (>= 1)")
+    ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING), help="learning methods")
     args = ap.parse_args(argv)
-    todo = plan(args.methods, args.seed, args.episodes)
-    for m, s in todo:
-        man, diff = policy_dir(m, s) / "manifest.json", []
+    todo = plan(args.methods, args.seeds, args.episodes)
+    for m, s, sd in todo:
+        man, diff = policy_dir(m, s, MODELS, sd) / "manifest.json", []
         if man.is_file():
             diff = stale(json.loads(man.read_text()).get("scenario", {}), m, s)
         if diff:  # a policy from another seed or episode count is not "older"
             print(f"note: {man.parent} was trained under an older scenario (differs in {', '.join(diff)}); "
-                  f"retraining. If {RUNS / f'{m}-{s}-s{args.seed}'} holds that finished run, move it away "
+                  f"retraining. If {RUNS / f'{m}-{s}-s{sd}'} holds that finished run, move it away "
                   f"first, or it is exported again", flush=True)
     running: list[tuple[subprocess.Popen, str]] = []
     RUNS.mkdir(parents=True, exist_ok=True)
     failed = []
     while todo or running:
         while todo and len(running) < args.parallel:
-            m, s = todo.pop(0)
-            log = open(RUNS / f"{m}-{s}-s{args.seed}.log", "a")
+            m, s, sd = todo.pop(0)
+            log = open(RUNS / f"{m}-{s}-s{sd}.log", "a")
             cmd = [sys.executable, "-m", "bench.training.train", "--method", m, "--signals", s, "--episodes",
-                   str(args.episodes), "--seed", str(args.seed)]
-            running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}"))
-            print(f"started {m}/{s}", flush=True)
+                   str(args.episodes), "--seed", str(sd)]
+            running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}/s{sd}"))
+            print(f"started {m}/{s}/s{sd}", flush=True)
         for p, name in list(running):
             if p.poll() is not None:
                 running.remove((p, name))

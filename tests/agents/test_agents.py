@@ -170,6 +170,7 @@ def test_training_smoke_and_checkpoint_round_trip(method, tmp_path):
     manifest = json.loads((folder / "manifest.json").read_text())
     assert manifest["seed"] == 0 and len(manifest["sha256"]) == 64 and manifest["training_wall_time_s"] > 0
     assert manifest["selected_episode"] in (1, 2) and "energy" in manifest["validation"]  # best on validation
+    assert len(pd.read_parquet(folder / "metrics.parquet")) == 2  # the training curve ships with the policy
     state, _ = load_policy(folder, method)
     env = gym.make("EcoDrive-v0", action=_interface(method), config=FAST_SCENARIO).unwrapped
     a1 = make_agent(method, env.observation_space, env.action_space, seed=5, **FAST_AGENT)
@@ -280,26 +281,31 @@ def test_policy_snapshot_is_a_copy():
     assert not all(torch.equal(before[k], v) for k, v in agent.q.state_dict().items())
 
 
-def test_train_all_resumes_started_runs_first(tmp_path):
+def test_train_all_resumes_started_runs_first_then_fills_seeds_in_order(tmp_path):
     from bench.training.train_all import plan, stale
 
     runs, models = tmp_path / "runs", tmp_path / "models"
-    (runs / "ddpg-uncoordinated-s0").mkdir(parents=True)
-    (runs / "ddpg-uncoordinated-s0" / "checkpoint.pt").write_bytes(b"x")
-    todo = plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
-    assert todo[0] == ("ddpg", "uncoordinated") and todo[1:] == [("mpdqn", "coordinated"), ("mpdqn", "uncoordinated"),
-                                                                   ("ddpg", "coordinated")]
+    (runs / "ddpg-uncoordinated-s1").mkdir(parents=True)
+    (runs / "ddpg-uncoordinated-s1" / "checkpoint.pt").write_bytes(b"x")
+    todo = plan(["mpdqn", "ddpg"], seeds=[0, 1], episodes=1000, runs=runs, models=models)
+    assert todo[0] == ("ddpg", "uncoordinated", 1)
+    assert todo[1:5] == [("mpdqn", "coordinated", 0), ("mpdqn", "uncoordinated", 0), ("ddpg", "coordinated", 0),
+                         ("ddpg", "uncoordinated", 0)]  # every method gets seed 0 before any gets seed 1
+    assert len(todo) == 8
     today = ScenarioConfig(signals="coordinated").to_dict()
-    (models / "mpdqn-coordinated").mkdir(parents=True)  # shipped from this seed, episode count, scenario: done
-    (models / "mpdqn-coordinated" / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": today}))
-    assert ("mpdqn", "coordinated") not in plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
+    done = models / "mpdqn-coordinated" / "s0"
+    done.mkdir(parents=True)  # shipped from this seed, episode count, scenario: done
+    (done / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": today}))
+    todo = plan(["mpdqn", "ddpg"], seeds=[0, 1], episodes=1000, runs=runs, models=models)
+    assert ("mpdqn", "coordinated", 0) not in todo and ("mpdqn", "coordinated", 1) in todo
+    assert ("mpdqn", "coordinated", 0) in plan(["mpdqn"], seeds=[0], episodes=300, runs=runs, models=models)
     # trained before the lane-change charging fix: stale for a method with r_p^c, not for DDPG (no r_p^c)
     old = {**today, "reward": {k: v for k, v in today["reward"].items() if k != "lane_change_charge"}}
     assert stale(old, "mpdqn", "coordinated") == ["reward.lane_change_charge"]
     assert stale({**old, "reward": {**old["reward"], "lane_change_penalty": 0.0}}, "ddpg", "coordinated") == []
     assert stale({**today, "spacing": 500.0}, "mpdqn", "coordinated") == ["spacing"]
-    (models / "mpdqn-coordinated" / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": old}))
-    assert ("mpdqn", "coordinated") in plan(["mpdqn", "ddpg"], seed=0, episodes=1000, runs=runs, models=models)
+    (done / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": old}))
+    assert ("mpdqn", "coordinated", 0) in plan(["mpdqn", "ddpg"], seeds=[0], episodes=1000, runs=runs, models=models)
 
 
 def test_validation_cases_are_not_test_cases():
@@ -392,7 +398,7 @@ def test_replay_round_trip_and_files_from_before_n_step(tmp_path):
 def test_export_picks_the_best_checkpoint_by_the_chosen_criterion(select, tmp_path):
     df = train("prl", "uncoordinated", 3, seed=1, out=tmp_path / "run", checkpoint_every=1, models=tmp_path / "m",
                agent_config=FAST_AGENT, scenario=FAST_SCENARIO, progress=False, validation_cases=1, select=select)
-    man = json.loads((tmp_path / "m" / "prl-uncoordinated" / "manifest.json").read_text())
+    man = json.loads((tmp_path / "m" / "prl-uncoordinated" / "s1" / "manifest.json").read_text())
     scored = df.dropna(subset=["val_objective"])
     assert np.allclose(scored.val_objective, scored.val_energy + scored.val_travel_time)  # phi = 1
     col = scored[f"val_{select}"]

@@ -48,9 +48,8 @@ def test_lateral_command_logs_resumes_and_reports(tmp_path, capsys):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "known failure (README, lateral scenarios): the uncoordinated PRL shipped in session 5 never changes "
-    "lanes in A or B; it brakes behind HDV1 and queues behind the platoon in lane 0. The policy it "
-    "replaced (lane-change penalty credited one step late) passed both, changing lanes 36-42 times"))
+    "known failure (docs/results.md, lateral scenarios): the shipped uncoordinated PRL never changes "
+    "lanes in A or B; it brakes behind HDV1 and queues behind the platoon in lane 0"))
 def test_shipped_prl_shows_the_papers_lateral_behaviour():
     """A: PRL leaves HDV1's lane; B: it ends in a lane with the fewest queued vehicles (the paper's
     section 5.4). Strict: when a shipped policy starts to behave so, this fails until the mark goes."""
