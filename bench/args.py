@@ -59,6 +59,13 @@ def float_in(lo: float, hi: float, lo_open: bool = False) -> Callable[[str], flo
     return parse
 
 
+def prog_name() -> str:
+    """The program name argparse would use (``ecodrive COMMAND`` under the CLI)."""
+    import os
+
+    return os.path.basename(sys.argv[0])
+
+
 def fail(prog: str, message: str) -> int:
     """Print one error line for a bad input found after parsing; the exit code to return."""
     print(f"{prog}: error: {message}", file=sys.stderr)

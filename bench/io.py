@@ -11,6 +11,23 @@ from pathlib import Path
 from typing import Any
 
 
+class Unwritable(OSError):
+    """A folder that cannot be created or written; its message is one line naming it."""
+
+
+def writable_dir(path: Path) -> Path:
+    """Create ``path`` (with its parents) and prove it writable with a probe file, so that a run
+    fails before any work, with one line, rather than in the middle of it."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".write-test-{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as e:
+        raise Unwritable(f"folder {path} is not writable ({e.strerror or e})") from None
+    return path
+
+
 def sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 

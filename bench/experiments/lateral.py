@@ -18,10 +18,10 @@ import numpy as np
 import pandas as pd
 
 from agents.base import Agent
-from bench.args import Parser, int_in, name
+from bench.args import Parser, fail, int_in, name
 from bench.harness.cases import Case
 from bench.harness.episode import make_env, run_episode
-from bench.io import atomic_parquet
+from bench.io import Unwritable, atomic_parquet, writable_dir
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0, "max_episode_time": 300.0}
 HDV1_BRAKE = -2.0  # [m/s^2] (paper)
@@ -214,6 +214,10 @@ def main(argv: list[str] | None = None) -> int:
     if missing:
         print(f"note: no shipped uncoordinated policy for {', '.join(missing)}; skipped", file=sys.stderr)
     root = args.logs / args.run_id / "lateral"
+    try:
+        writable_dir(root)
+    except Unwritable as e:
+        return fail(ap.prog, str(e))
     tasks = [LateralTask(name, m, str(policy_dir(m, "uncoordinated", args.models)) if m in LEARNING else "",
                          str(root / name / f"{m}.mcap"))
              for name in SCENARIO_NAMES for m in args.methods if m not in missing]

@@ -27,11 +27,11 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from bench.args import Parser, int_in, name
+from bench.args import Parser, fail, int_in, name, prog_name
 from bench.harness.executors import EXECUTORS, run_local, run_ray
 from bench.harness.policies import MODELS, CheckpointError, policy_dir
 from bench.harness.provenance import git_sha
-from bench.io import atomic_parquet
+from bench.io import Unwritable, atomic_parquet, writable_dir
 from bench.logs.mcaplog import read_log, write_records
 from envs.config import SIGNALS
 from envs.sumo import SPEED_MODE_SAFE  # the safety layer every CV drives under, recorded per cell
@@ -253,6 +253,10 @@ def main(argv: list[str] | None = None) -> int:
                   f"train it: ecodrive train --method prl --signals {s}", file=sys.stderr)
             return 2
     root = args.logs / args.run_id / "mixed"
+    try:
+        writable_dir(root)
+    except Unwritable as e:
+        return fail(prog_name(), str(e))
     suffix = "" if args.cv_lateral == "policy" else f"-{args.cv_lateral}"
     cells = plan(args, root, suffix)
     table = root / f"mixed{suffix}.parquet"  # the report reads mixed.parquet: an ablation never lands there

@@ -19,9 +19,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.args import Parser
+from bench.args import Parser, fail
 from bench.experiments.mixed import CI_DEMAND, CI_DURATION, MASTER_SEED, cell_scenario
 from bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
+from bench.io import Unwritable, writable_dir
 from envs.action import LATERAL
 from envs.config import SIGNALS
 
@@ -121,6 +122,11 @@ def main(argv: list[str] | None = None) -> int:
                  f"rep >= 0, at >= 1")
     if args.out is not None and args.out.exists():
         ap.error(f"--out {args.out} exists; not overwriting it")
+    if args.out is not None:
+        try:
+            writable_dir(args.out.parent)
+        except Unwritable as e:
+            return fail(ap.prog, f"--out: {e}")
     try:
         rows, summary = trace(args.signals, args.mpr, args.demand, args.duration, tuple(args.at), args.rep)
     except CheckpointError as e:

@@ -24,7 +24,7 @@ from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
 from bench.harness.policies import MODELS, CheckpointError, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import git_sha, package_versions
-from bench.io import atomic_json, atomic_parquet, sha256
+from bench.io import Unwritable, atomic_json, atomic_parquet, sha256, writable_dir
 from bench.logs.mcaplog import episode_summary, resolve_log
 from envs.config import SIGNALS
 
@@ -99,12 +99,9 @@ def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str, int]], l
 
 def check_writable(run_dir: Path) -> None:
     try:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        probe = run_dir / f".write-test-{os.getpid()}"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as e:
-        raise UsageError(f"log folder {run_dir} is not writable ({e.strerror})") from None
+        writable_dir(run_dir)
+    except Unwritable as e:
+        raise UsageError(f"log {e}") from None
 
 
 def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from bench.logs.mcaplog import LogError, read_log
-from bench.args import Parser
+from bench.args import Parser, fail
+from bench.io import Unwritable, writable_dir
 
 GREEN, RED, YELLOW = (40, 180, 60), (220, 40, 40), (230, 190, 30)
 TRAIL_S = 60  # [s] of ego trail
@@ -123,6 +124,12 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     import rerun as rr
 
+    try:
+        read_log(args.mcap)  # a file that is not a step log is refused before a viewer starts
+        if args.save:
+            writable_dir(args.save.parent)
+    except (LogError, Unwritable) as e:
+        return fail(ap.prog, str(e))
     rec = rr.RecordingStream("ecodrive")
     try:
         if args.save:

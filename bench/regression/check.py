@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.args import Parser
-from bench.harness.run import parse, run
+from bench.args import Parser, fail
+from bench.harness.run import UsageError, parse, run
 from bench.io import atomic_csv
 from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, improvement
 from bench.paper import TABLE4 as PAPER_TABLE4
@@ -150,7 +150,10 @@ def main(argv: list[str] | None = None) -> int:
 
     br.PROFILES["regression"] = CI_CASES
     logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
-    df = run(parse(["--profile", "regression", "--logs", logs]), progress=False)
+    try:
+        df = run(parse(["--profile", "regression", "--logs", logs]), progress=False)
+    except UsageError as e:
+        return fail(ap.prog, str(e))
     if args.write_reference:
         REFERENCE.parent.mkdir(exist_ok=True)
         atomic_csv(df[REF_COLUMNS], REFERENCE, float_format="%.10g")

@@ -34,12 +34,12 @@ import torch
 from tqdm import tqdm
 
 from agents.registry import LEARNING, make_agent
-from bench.args import Parser
+from bench.args import Parser, fail
 from bench.harness.cases import Case
 from bench.harness.episode import deep_merge, make_env, run_episode
 from bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from bench.harness.provenance import git_sha, package_versions
-from bench.io import atomic_parquet, atomic_torch_save
+from bench.io import Unwritable, atomic_parquet, atomic_torch_save, writable_dir
 from bench.logs.mcaplog import write_train_log
 from envs.config import SIGNALS, added_values, backfill, flat
 
@@ -271,6 +271,10 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
     if overrides and not args.no_export:
         print(f"note: an experiment ({suffix[1:]}); it is not exported to models/", file=sys.stderr)
+    try:
+        writable_dir(out)
+    except Unwritable as e:
+        return fail(ap.prog, str(e))
     try:
         df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
                    models=None if args.no_export or overrides else args.models,

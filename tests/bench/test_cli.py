@@ -52,3 +52,24 @@ def test_a_run_id_that_is_a_path_is_refused(command, args, tmp_path):
     out = run(command, "--logs", str(tmp_path / "logs"), *args)
     assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1 and "--run-id" in out.stderr
     assert not (tmp_path / "logs").exists()
+
+
+@pytest.mark.parametrize("command, args", [
+    ("mixed", ["--logs", "{blk}", "--mpr", "0", "--demand", "200", "--reps", "1"]),
+    ("lateral", ["--logs", "{blk}", "--methods", "baseline"]),
+    ("train", ["--method", "prl", "--signals", "coordinated", "--episodes", "1", "--out", "{blk}/run"]),
+    ("run", ["--logs", "{blk}", "--methods", "baseline", "--profile", "smoke"]),
+    ("regress", ["--logs", "{blk}", "--no-mixed"]),
+    ("stalls", ["--out", "{blk}/x.parquet"]),
+    ("sweep", ["reward", "--logs", "{blk}", "--seeds", "0", "--episodes", "1"]),
+    ("view", ["{blk}"]),
+    ("report", ["{blk}"]),
+])
+def test_an_unwritable_or_wrong_folder_is_one_line(command, args, tmp_path, monkeypatch, capsys):
+    blocker = tmp_path / "blocker"  # a file where a folder is expected
+    blocker.write_bytes(b"keep")
+    monkeypatch.setattr(sys, "argv", ["ecodrive"])
+    rc = main([command, *[a.format(blk=blocker) for a in args]])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "error" in err[0] and str(blocker) in err[0]
+    assert blocker.read_bytes() == b"keep"
