@@ -1,0 +1,41 @@
+"""The README's headline block is generated from a run's results."""
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from reports.headline import END, START, rewrite, table
+
+
+def results() -> pd.DataFrame:
+    rows = []
+    for s in ("coordinated", "uncoordinated"):
+        rows += [{"method": "baseline", "signals": s, "train_seed": -1, "case": c, "energy": 250.0, "travel_time": 200.0}
+                 for c in range(2)]
+        rows += [{"method": "prl", "signals": s, "train_seed": sd, "case": c, "energy": 200.0 + 10 * sd,
+                  "travel_time": 210.0} for sd in (0, 1) for c in range(2)]
+    return pd.DataFrame(rows)
+
+
+def test_table_takes_means_over_seeds_and_improvements_against_the_run_baseline():
+    md = table(results())
+    prl = next(line for line in md.splitlines() if line.startswith("| PRL |"))
+    cells = [c.strip() for c in prl.strip("|").split("|")]
+    assert cells[1] == "2"  # training seeds
+    assert cells[2] == "205.0" and cells[3] == "+18.0%"  # (250 - 205) / 250
+    assert cells[4] == "210.0" and cells[5] == "-5.0%"
+    assert "| paper: PRL (Table 4) |  | 221.8 | +4.1% |" in md  # from bench.paper, beside ours
+
+
+def test_rewrite_replaces_only_the_block(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# title\n\nbefore\n{START}\nold\n{END}\nafter\n")
+    rewrite(readme, results(), "paper", {"profile": "paper", "git_sha": "abc123"})
+    text = readme.read_text()
+    assert text.startswith("# title\n\nbefore\n") and text.endswith("after\n") and "old" not in text
+    assert "git abc123" in text and "| PRL | 2 |" in text
+    bare = tmp_path / "BARE.md"
+    bare.write_text("no markers\n")
+    with pytest.raises(ValueError, match="no '<!-- headline:start -->'"):
+        rewrite(bare, results(), "paper", {})
+    assert bare.read_text() == "no markers\n"
