@@ -27,6 +27,7 @@ class Task:
     path: str  # MCAP to write
     policy_dir: str  # models/<method>-<signals>/s<seed> for learning methods, "" otherwise
     train_seed: int = -1  # the policy's training seed; -1 for rule-based methods
+    factory: str = ""  # a user agent's package.module:factory (bench.harness.external), "" otherwise
 
 
 # per worker process: one env per (method, signals); one agent per (method, signals, policy folder)
@@ -43,10 +44,15 @@ def run_task(task: Task) -> dict[str, Any]:
     from bench.harness.policies import load_policy
 
     torch.set_num_threads(1)
+    key = (task.method, task.signals, task.policy_dir)
+    if task.factory and key not in _AGENTS:
+        from bench.harness.external import make
+
+        _ENVS[(task.method, task.signals)], agent = make(task.factory, task.signals)
+        _AGENTS[key] = (agent, "")
     if (task.method, task.signals) not in _ENVS:
         _ENVS[(task.method, task.signals)] = make_env(task.method, task.signals)
     env = _ENVS[(task.method, task.signals)]
-    key = (task.method, task.signals, task.policy_dir)
     if key not in _AGENTS:
         agent = make_agent(task.method, env.observation_space, env.action_space)
         sha = ""

@@ -20,8 +20,10 @@ from tqdm import tqdm
 
 from agents.registry import LEARNING, METHODS
 from bench.args import Parser, fail, int_in, name
+from bench.harness import external
 from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
+from bench.harness.external import GROUP, AgentError, registered
 from bench.harness.policies import MODELS, CheckpointError, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import git_sha, package_versions
 from bench.io import Unwritable, atomic_json, atomic_parquet, sha256, writable_dir
@@ -48,8 +50,14 @@ def parser() -> Parser:
     ap.add_argument("--profile", default="paper", choices=list(PROFILES),
                     help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
                          "experiments (in `nox -s benchmark`)")
-    ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=list(METHODS),
-                    help=f"among {', '.join(METHODS)} (default: every method with a shipped policy)")
+    users = registered()
+    ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, *users],
+                    help=f"among {', '.join([*METHODS, *users])} (default: every method with a shipped policy; "
+                         f"installed agents of the entry-point group {GROUP} run when named)")
+    ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
+                    help="also evaluate your own agent: factory(observation_space, action_space) -> agents.base.Agent")
+    ap.add_argument("--name", type=name, default=None,
+                    help="the --agent's method name in results and reports (default: the factory's name)")
     ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS), help="signal settings")
     ap.add_argument("--executor", default="local", choices=list(EXECUTORS), help="local process pool, or Ray")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray; default: a local Ray)")
@@ -65,8 +73,18 @@ def parser() -> Parser:
 
 def parse(argv: list[str]) -> dict[str, Any]:
     """The options as a dict; bad input exits 2 with one line (``bench.args.Parser``)."""
-    opts = vars(parser().parse_args(argv))
+    ap = parser()
+    opts = vars(ap.parse_args(argv))
     opts["run_id"] = opts["run_id"] or opts["profile"]
+    users = registered()
+    opts["factories"] = {m: users[m] for m in opts["methods"] or [] if m in users}
+    if opts["agent"]:
+        label = opts["name"] or opts["agent"].split(":")[-1]
+        if label in METHODS or label in opts["factories"]:
+            ap.error(f"--name {label!r} is taken by a built-in or installed method; choose another")
+        opts["factories"][label] = opts["agent"]
+    elif opts["name"]:
+        ap.error("--name names an --agent; give --agent package.module:factory too")
     return opts
 
 
@@ -80,7 +98,9 @@ def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str, int]], l
     explicit = opts["methods"] is not None
     wanted = opts.get("train_seeds")
     runs, skipped = [], []
-    for m in (opts["methods"] if explicit else METHODS):
+    factories = opts.get("factories", {})
+    named = [m for m in (opts["methods"] if explicit else METHODS) if m not in factories]
+    for m in [*named, *factories]:
         for s in opts["signals"]:
             if m not in LEARNING:
                 runs.append((m, s, -1))
@@ -106,6 +126,13 @@ def check_writable(run_dir: Path) -> None:
 
 def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     runs, skipped = resolve_methods(opts)
+    factories = opts.get("factories", {})
+    for spec in factories.values():  # a factory that cannot build its agent fails before any episode
+        try:
+            env, _ = external.make(spec, opts["signals"][0])
+            env.close()
+        except AgentError as e:
+            raise UsageError(str(e)) from None
     methods = list(dict.fromkeys(m for m, _, _ in runs))
     if skipped:
         print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
@@ -127,7 +154,7 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
                 if done is not None:
                     rows.append({**done, "mcap": str(path), "episode_wall_s": float("nan"), "train_seed": seed})
                 else:
-                    tasks.append(Task(method, signals, case, str(path), pdir, seed))
+                    tasks.append(Task(method, signals, case, str(path), pdir, seed, factories.get(method, "")))
     t0 = time.perf_counter()
     it = (run_local(tasks, opts["workers"]) if opts["executor"] == "local"
           else run_ray(tasks, opts["address"], opts["workers"]))
@@ -192,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     opts["argv"] = argv
     try:
         df = run(opts)
-    except (UsageError, CheckpointError) as e:
+    except (UsageError, CheckpointError, AgentError) as e:
         return fail(parser().prog, str(e))
     except KeyboardInterrupt:
         print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)

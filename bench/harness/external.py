@@ -1,0 +1,127 @@
+"""Your own agent in the benchmark, without editing the package.
+
+Two ways in, both giving a *factory*: a callable ``factory(observation_space, action_space)``
+that returns an object satisfying ``agents.base.Agent``:
+
+- ``ecodrive run --agent package.module:factory [--name NAME]`` imports it by path;
+- an installed package registers it under the entry-point group ``ecodrive_bench.agents``
+  (``[project.entry-points."ecodrive_bench.agents"] theirs = "theirpkg.agent:make"``), and
+  ``ecodrive run --methods theirs`` finds it.
+
+The factory's ``action_interface`` attribute (or the agent class's) picks the env's action type
+(``parameterized``, ``discrete27``, ``longitudinal``; default ``parameterized``) before the
+spaces exist. Every action the agent returns is checked against the env's action space; an
+action outside it stops the run with one line naming the value and the space.
+"""
+from __future__ import annotations
+
+import importlib
+import re
+from collections.abc import Callable
+from importlib import metadata
+from typing import Any
+
+from agents.base import Agent
+
+GROUP = "ecodrive_bench.agents"
+INTERFACES = ("parameterized", "discrete27", "longitudinal")
+SPEC = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
+
+
+class AgentError(ValueError):
+    """A user agent that cannot be loaded or acts outside its space; one line."""
+
+
+def registered() -> dict[str, str]:
+    """Agent name -> ``module:factory`` of every installed entry point in ``GROUP``."""
+    return {ep.name: ep.value for ep in metadata.entry_points(group=GROUP)}
+
+
+def load_factory(spec: str) -> Callable[..., Any]:
+    """The factory named by ``package.module:factory``."""
+    if not SPEC.match(spec):
+        raise AgentError(f"--agent {spec!r} is not accepted; expected package.module:factory")
+    module, attr = spec.split(":")
+    try:
+        mod = importlib.import_module(module)
+    except Exception as e:  # the user's module: any error while importing it
+        raise AgentError(f"--agent {spec!r}: cannot import {module} ({type(e).__name__}: {e})") from None
+    factory = getattr(mod, attr, None)
+    if not callable(factory):
+        raise AgentError(f"--agent {spec!r}: {module} has no callable {attr!r}")
+    return factory
+
+
+def interface_of(factory: Callable[..., Any]) -> str:
+    interface = getattr(factory, "action_interface", "parameterized")
+    if interface not in INTERFACES:
+        raise AgentError(f"agent factory {getattr(factory, '__name__', factory)!r}: action_interface {interface!r} "
+                         f"is not accepted; choose one of {', '.join(INTERFACES)}")
+    return interface
+
+
+def make(spec: str, signals: str, config: dict[str, Any] | None = None) -> tuple[Any, Agent]:
+    """(env, agent) for the user's factory ``spec`` on ``signals``: the env has the factory's
+    action type, and the agent's own ``env_overrides`` when it has any."""
+    from bench.harness.episode import make_env
+
+    factory = load_factory(spec)
+    probe = make_env(_Interface(interface_of(factory)), signals, config)
+    agent = build(spec, probe.observation_space, probe.action_space)
+    if not agent.env_overrides:
+        return probe, agent
+    probe.close()
+    return make_env(agent, signals, config), agent
+
+
+class _Interface:
+    """Just enough of an agent for ``make_env`` before the real one exists."""
+
+    def __init__(self, interface: str) -> None:
+        self.action_interface, self.env_overrides = interface, {}
+
+
+def build(spec: str, observation_space, action_space) -> Agent:
+    """The user's agent, checked against the ``Agent`` protocol and wrapped so that every action
+    is checked against ``action_space``."""
+    factory = load_factory(spec)
+    try:
+        agent = factory(observation_space, action_space)
+    except Exception as e:
+        raise AgentError(f"agent factory {spec!r} failed ({type(e).__name__}: {e})") from None
+    missing = [a for a in ("name", "action_interface", "env_overrides", "act", "observe", "state_dict",
+                           "load_state_dict") if not hasattr(agent, a)]
+    if missing:
+        raise AgentError(f"agent from {spec!r} does not satisfy agents.base.Agent: missing {', '.join(missing)}")
+    if agent.action_interface != interface_of(factory):
+        raise AgentError(f"agent from {spec!r}: its action_interface {agent.action_interface!r} differs from the "
+                         f"factory's {interface_of(factory)!r}")
+    return Checked(agent, action_space, spec)
+
+
+class Checked:
+    """An agent whose every action must lie in the action space."""
+
+    def __init__(self, agent: Agent, action_space, spec: str) -> None:
+        self.agent, self.space, self.spec = agent, action_space, spec
+        self.name, self.action_interface = agent.name, agent.action_interface
+        self.env_overrides = dict(agent.env_overrides)
+
+    def act(self, obs, info, explore: bool = False):
+        action = self.agent.act(obs, info, explore=explore)
+        try:
+            ok = self.space.contains(action)
+        except Exception:
+            ok = False
+        if not ok:
+            raise AgentError(f"agent from {self.spec!r} returned {action!r}, outside the action space {self.space}")
+        return action
+
+    def observe(self, *args, **kw):
+        return self.agent.observe(*args, **kw)
+
+    def state_dict(self) -> dict[str, Any]:
+        return self.agent.state_dict()
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.agent.load_state_dict(state)

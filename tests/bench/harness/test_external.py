@@ -1,0 +1,117 @@
+"""Your own agent in the table: a factory given on the command line (or registered as an entry
+point) is evaluated like the built-in methods, and a bad one is one line with exit code 2."""
+from __future__ import annotations
+
+import sys
+import textwrap
+
+import pandas as pd
+import pytest
+
+from bench.harness.external import AgentError, build, load_factory
+from bench.harness.run import main, parse, run
+
+AGENT = textwrap.dedent('''
+    import numpy as np
+
+    class Cruise:
+        """Keeps the lane and holds a gentle acceleration: a user's 20-line agent."""
+        name = "cruise"
+        action_interface = "parameterized"
+        env_overrides = {}
+
+        def __init__(self, observation_space, action_space, accel=0.5):
+            self.accel = accel
+
+        def act(self, obs, info, explore=False):
+            return 1, np.full(3, self.accel, dtype=np.float32)
+
+        def observe(self, *args):
+            return {}
+
+        def state_dict(self):
+            return {}
+
+        def load_state_dict(self, state):
+            pass
+
+    def make(observation_space, action_space):
+        return Cruise(observation_space, action_space)
+
+    def too_fast(observation_space, action_space):
+        return Cruise(observation_space, action_space, accel=9.0)
+
+    def not_an_agent(observation_space, action_space):
+        return object()
+''')
+
+
+@pytest.fixture
+def user_module(tmp_path, monkeypatch):
+    (tmp_path / "myagents.py").write_text(AGENT)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))  # the pool's workers import it too
+    sys.modules.pop("myagents", None)
+    return tmp_path
+
+
+def test_a_user_agent_lands_in_the_results_beside_the_baseline(user_module, tmp_path):
+    logs = tmp_path / "logs"
+    df = run(parse(["--profile", "smoke", "--logs", str(logs), "--methods", "baseline", "--signals", "coordinated",
+                    "--agent", "myagents:make", "--name", "cruise", "--workers", "2"]), progress=False)
+    table = pd.read_parquet(logs / "smoke" / "results.parquet")
+    assert sorted(set(table.method)) == ["baseline", "cruise"] and len(table) == 6
+    mine = table[table.method == "cruise"]
+    assert (mine.train_seed == -1).all() and (mine.lane_changes_requested == 0).all()
+    assert all((logs / "smoke" / p).is_file() for p in mine.mcap)
+    assert not mine.energy.equals(table[table.method == "baseline"].energy.reset_index(drop=True))
+    assert len(df) == 6
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("myagents:nothing", "has no callable 'nothing'"),
+    ("no_such_module:make", "cannot import no_such_module"),
+    ("not a spec", "expected package.module:factory"),
+    ("myagents:not_an_agent", "does not satisfy agents.base.Agent"),
+])
+def test_a_bad_factory_is_one_line_and_runs_nothing(spec, words, user_module, tmp_path, capsys):
+    rc = main(["--profile", "smoke", "--logs", str(tmp_path / "logs"), "--agent", spec, "--methods", "baseline"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and words in err[0]
+    assert not list((tmp_path / "logs").rglob("*.mcap"))
+
+
+def test_an_action_outside_the_space_stops_the_run_with_one_line(user_module, tmp_path, capsys):
+    rc = main(["--profile", "smoke", "--logs", str(tmp_path / "logs"), "--agent", "myagents:too_fast",
+               "--methods", "baseline", "--signals", "coordinated", "--workers", "1"])
+    err = [ln for ln in capsys.readouterr().err.strip().splitlines() if not ln.startswith("episodes:")]  # progress bar
+    assert rc == 2 and len(err) == 1 and "outside the action space" in err[0] and "9." in err[0]
+
+
+def test_a_name_taken_by_a_built_in_method_is_refused(user_module, capsys):
+    with pytest.raises(SystemExit) as e:
+        parse(["--agent", "myagents:make", "--name", "prl"])
+    assert e.value.code == 2 and "taken" in capsys.readouterr().err
+
+
+def test_build_checks_the_protocol(user_module):
+    from gymnasium import spaces
+
+    obs, act = spaces.Dict({}), spaces.Discrete(3)
+    with pytest.raises(AgentError, match="missing name"):
+        build("myagents:not_an_agent", obs, act)
+    assert callable(load_factory("myagents:make"))
+
+
+def test_an_installed_entry_point_runs_by_name(user_module, tmp_path):
+    """A package that declares ``[project.entry-points."ecodrive_bench.agents"] cruise2 = ...`` is
+    found by importlib.metadata; here its installed metadata is written by hand."""
+    info = user_module / "theirpkg-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: theirpkg\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[ecodrive_bench.agents]\ncruise2 = myagents:make\n")
+    logs = tmp_path / "logs"
+    run(parse(["--profile", "smoke", "--logs", str(logs), "--methods", "cruise2", "--signals", "uncoordinated",
+               "--workers", "2"]), progress=False)
+    table = pd.read_parquet(logs / "smoke" / "results.parquet")
+    assert set(table.method) == {"cruise2"} and len(table) == 3
