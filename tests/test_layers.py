@@ -7,7 +7,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 # a module may import from its own layer and those below it (lower number)
-LAYER = {"envs": 0, "agents": 0, "bench.paper": 1, "bench.io": 1, "bench.args": 1, "bench.logs": 2, "bench.harness": 3,
+LAYER = {"envs": 0, "agents": 0, "bench.paper": 1, "bench.io": 1, "bench.args": 1, "bench.logs": 2, "bench.oracle": 2, "bench.harness": 3,
          "bench.training": 4, "bench.experiments": 5, "bench.regression": 6, "bench.perf": 6, "reports": 7,
          "bench.cli": 8}
 

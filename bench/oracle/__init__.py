@@ -1,0 +1,1 @@
+"""Energy-optimal bound: SUMO's EV energy model in numpy and a dynamic-programming oracle."""

@@ -1,0 +1,396 @@
+"""The energy-optimal bound: backward dynamic programming for the ego alone on the corridor.
+
+Problem (what ``bound`` solves). The ego drives the arterial in free flow, from where the env
+inserts it (front bumper at ``vehicle_length + POSITION_EPS`` on the first edge, SUMO's
+``departPos="base"``, at ``departSpeed="max"`` = the speed limit) at ``depart_time`` (the env's
+``t_depart``) until its front bumper reaches the exit edge, i.e. leaves the last junction (where
+``EcoDriveEnv`` terminates). Steps of ``dt = cfg.step_length`` with SUMO's Euler update
+``v' = v + a dt``, ``x' = x + v' dt``; ``a`` in [a_min, a_max], ``0 <= v <= speed_limit``; a
+stop line may only be crossed in a step during which its arterial signal is green (yellow
+counts as red: SUMO's licence to run a yellow it cannot stop for is not used). Energy per step
+is SUMO's model (``bench.oracle.energy``, straight road). Objective ``"cost"``: min E + phi T
+(phi = ``cfg.reward.phi``); ``"energy"``: min E subject to T <= ``time_limit``. The end speed is
+free, as in the env: the optimum recuperates its kinetic energy in the last metres.
+
+Signal timing is SUMO's: a program with offset ``o`` is at cycle position ``(t - o) mod C``, and
+a switch due at ``s`` rules the whole step ``[t, t + dt)`` containing ``s`` (SUMO runs the events
+due before ``t + dt`` at the start of that step). So the step from ``t`` is green iff
+``0 < (t + dt - o) mod C <= main_green``. Positions are SUMO x coordinates (the arterial runs
+along +x; the W->E route distance is x minus the start).
+
+Method. Speeds live on ``v = j dv``, ``dv = speed_limit / n`` (the start speed is a grid point),
+positions on ``x = x0 + i dx``, ``dx = dv dt``: the Euler update maps grid states onto grid
+states exactly, so a plan is exactly feasible in SUMO's kinematics and its energy is exact; the
+grid only restricts accelerations to multiples of ``da = dv / dt``. Value iteration runs
+backwards over the time steps, vectorised: for all states at once, the value after each next
+speed is one strided view of the next value array, one array operation per acceleration
+choice. (1) A global pass on ``n = Grid.n_v`` evaluates every state in the forward-reachable
+and backward-feasible band: it picks the green windows. (2) Local passes on the ``Grid.fine``
+times finer lattice evaluate only a tube (``tube_x``, ``tube_v``) around the current plan,
+re-centred until the cost stops falling. The coarse plan lies on the fine lattice, so a local
+pass never does worse. It matters: coasting (drag alone, about -0.14 m/s^2 at 50 km/h) is the
+cheap way to slow down, and at da = 0.5 m/s^2 a plan must mix braking (recuperated at 70 %)
+with driving (drawn at 1/0.9) instead. ``"cost"`` certifies the global horizon ``K``: every plan
+has ``E >= P_aux T/3600 - eta_rec KE0/3600`` (drag only dissipates; at most the starting kinetic
+energy comes back), so no plan slower than ``K`` steps beats the one found when
+``J <= (phi + P_aux/3600) (K+1) dt - eta_rec KE0/3600``; otherwise ``K`` grows and it re-solves.
+
+Resolution (default ``Grid()``, 50 km/h, dt = 1 s): global dv = dx = da = 0.496 (m/s, m,
+m/s^2), final 0.124. A plan is feasible, so its cost bounds the continuous-control optimum of
+the problem from above; refining lowers it. ``Grid().refine()`` (final 0.062) lowered the cost
+by 0.013-0.026 % on the 5-intersection corridor (departures 200, 231, 260 s) and by 0.15-0.17 %
+on the 450 m one-intersection corridor, where the end manoeuvre weighs more; the tests assert
+< 0.2 %. The local passes matched a global pass on their final lattice to 0.01 % (one-
+intersection corridor); where the cost is flat in the cruise speed they may stop a coarse cell
+from the best one (phi = 0.3: 12.3 instead of 11.9 m/s, about 0.08 % of cost). One case took
+1.5-3.5 s on one core of this 2-core machine while it ran two trainings (``Plan.grid["wall_s"]``,
+``python -m bench.oracle.dp``); dt = 0.5 s takes about 4 times as long. Not timed in tests.
+
+Not a constraint here, but one in SUMO: while a light is red, SUMO caps the speed so that the
+car can still stop at the line (Krauss). A plan that reaches the line at speed just as green
+starts is therefore not drivable in the env: the bound is optimistic there. Plans that never
+lean on a red (e.g. departure 260 s) replay in SUMO step for step (tests/bench/oracle).
+"""
+from __future__ import annotations
+
+import math
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.lib.stride_tricks import as_strided
+
+from envs.config import ScenarioConfig
+from envs.scenario import build
+
+from .energy import energy_wh
+
+POSITION_EPS = 0.1  # [m] SUMO's POSITION_EPS: departPos "base" = vehicle length + this
+MS = 1000  # [ms/s] SUMO's time unit
+OBJECTIVES = ("cost", "energy")
+HORIZON_MARGIN = 10  # [steps] added to the first guess of the "cost" horizon
+LATE_STEPS = 5  # [steps] a local pass may arrive this much later than the plan it refines
+STALL = 1e-4  # [-] local passes stop when the cost falls by less than this fraction
+GRID_EPS = 1e-9  # [-] slack for float rounding in grid index arithmetic
+MAX_HORIZON = 86400.0  # [s] the "cost" horizon stops growing here
+
+Window = tuple[int, int, int, int]  # rows lo..hi, speeds jlo..jhi evaluated at one step
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Resolution of the DP. Work grows ~ n_v^3 (global) and ~ fine^3 (local passes)."""
+
+    n_v: int = 28  # [-] speed cells of the global pass between 0 and the speed limit
+    # local levels: (cells per global cell, tube half-width [m] in position, [m/s] in speed);
+    # each level's factor must divide the next one's
+    levels: tuple[tuple[int, float, float], ...] = ((4, 25.0, 3.0),)
+    passes: int = 8  # [-] at most this many local passes per level
+
+    def __post_init__(self) -> None:
+        factors = [1] + [lv[0] for lv in self.levels]
+        if not (isinstance(self.n_v, int) and self.n_v >= 2 and all(isinstance(f, int) for f in factors)
+                and all(b % a == 0 and b >= a for a, b in zip(factors, factors[1:]))):
+            raise ValueError(f"n_v={self.n_v!r} must be an integer >= 2 and the level factors "
+                             f"{factors[1:]} integers, each dividing the next")
+
+    @property
+    def fine(self) -> int:
+        """Cells of the final lattice per global cell."""
+        return self.levels[-1][0] if self.levels else 1
+
+    def refine(self, factor: int = 2) -> Grid:
+        """A grid ``factor`` times finer: one more local level at ``factor`` times the final
+        resolution, in a tube half as wide, seeded with the plan of this grid, so the refined
+        plan never costs more."""
+        f, tube_x, tube_v = self.levels[-1] if self.levels else (1, 25.0, 3.0)
+        return replace(self, levels=self.levels + ((f * int(factor), tube_x / 2, tube_v / 2),))
+
+    def spacing(self, cfg: ScenarioConfig, fine: bool = True) -> tuple[float, float, float]:
+        """(dv [m/s], dx [m], da [m/s^2]) of the final (or, ``fine=False``, the global) lattice."""
+        dv = cfg.speed_limit / (self.n_v * (self.fine if fine else 1))
+        return dv, dv * cfg.step_length, dv / cfg.step_length
+
+
+@dataclass(frozen=True)
+class Corridor:
+    """What the DP needs of the built scenario: start, end, stop lines and signal timing."""
+
+    x0: float  # [m] the ego's front bumper at insertion
+    v0: float  # [m/s] its insertion speed
+    x_end: float  # [m] start of the exit edge: reaching it ends the episode
+    stop_lines: tuple[float, ...]  # [m] W->E stop lines
+    offsets_ms: tuple[int, ...]  # [ms] signal offsets as SUMO reads them
+    cycle_ms: int  # [ms]
+    green_ms: int  # [ms] arterial green at the start of each cycle
+
+    @classmethod
+    def from_config(cls, cfg: ScenarioConfig) -> Corridor:
+        files = build(cfg)
+        net = ET.parse(files.net).getroot()
+
+        def lane_start(edge: str) -> float:
+            lane = net.find(f"./edge[@id='{edge}']/lane")
+            if lane is None:
+                raise RuntimeError(f"edge {edge} not found in {files.net}")
+            return float(lane.get("shape").split()[0].split(",")[0])
+
+        def sumo_ms(seconds: float) -> int:  # the .add.xml writes "%g"; SUMO keeps milliseconds
+            return int(round(float(f"{seconds:g}") * MS))
+
+        side = cfg.cycle - cfg.main_green - 2 * cfg.yellow
+        return cls(
+            x0=lane_start(files.arterial_edges[0]) + cfg.vehicle_length + POSITION_EPS,
+            v0=cfg.speed_limit, x_end=lane_start(files.exit_edge), stop_lines=tuple(files.stop_lines),
+            offsets_ms=tuple(sumo_ms(o) for o in cfg.offsets),
+            cycle_ms=sumo_ms(cfg.main_green) + 2 * sumo_ms(cfg.yellow) + sumo_ms(side),
+            green_ms=sumo_ms(cfg.main_green),
+        )
+
+    def green(self, t_start: np.ndarray, dt: float) -> np.ndarray:
+        """(len(t_start), n stop lines) bool: the arterial is green in the step from ``t``."""
+        t_ms = np.rint(np.asarray(t_start, dtype=float) * MS).astype(np.int64)
+        end = t_ms[:, None] + int(round(dt * MS)) - np.asarray(self.offsets_ms, dtype=np.int64)[None, :]
+        pos = np.mod(end, self.cycle_ms)
+        return (pos > 0) & (pos <= self.green_ms)
+
+
+@dataclass
+class Plan:
+    """An optimal trajectory. ``t, x, v`` have one entry per time step from the departure to
+    the arrival (N + 1 entries); ``a[k]`` is the acceleration of the step from ``t[k]`` (N)."""
+
+    t: np.ndarray  # [s] simulation time
+    x: np.ndarray  # [m] front bumper x
+    v: np.ndarray  # [m/s]
+    a: np.ndarray  # [m/s^2]
+    energy: float  # [Wh]
+    travel_time: float  # [s]
+    cost: float  # [Wh] energy + phi * travel_time
+    objective: str
+    crossings: np.ndarray  # [s] start of the step in which each stop line is crossed
+    grid: dict[str, Any] = field(default_factory=dict)  # resolution, horizon, states, wall_s, ...
+
+
+def bound(cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
+          time_limit: float | None = None, grid: Grid | None = None) -> Plan:
+    """The optimal plan for ``cfg``'s corridor and signals, departing at ``depart_time`` [s]
+    (the env's ``t_depart``). ``objective="energy"`` needs ``time_limit`` [s]."""
+    return solve(Corridor.from_config(cfg), cfg, depart_time, objective, time_limit, grid)
+
+
+def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
+          time_limit: float | None = None, grid: Grid | None = None) -> Plan:
+    """``bound`` on a given ``Corridor`` (tests drop or move its signals)."""
+    if objective not in OBJECTIVES:
+        raise ValueError(f"objective={objective!r} is not accepted; choose one of {', '.join(OBJECTIVES)}")
+    if objective == "energy" and time_limit is None:
+        raise ValueError("objective='energy' needs a time_limit [s]")
+    grid = grid or Grid()
+    started = time.perf_counter()
+    run = _Run(cor, cfg, depart_time, cfg.reward.phi if objective == "cost" else 0.0)
+    lat = _Lattice(cor, cfg, grid.n_v)
+    if objective == "energy":
+        horizon = int(math.floor(float(time_limit) / cfg.step_length + GRID_EPS))
+        sol = run.backward(lat, lat.windows(horizon))
+    else:
+        horizon, sol = run.certified(lat)
+    if not np.isfinite(sol.value):
+        raise ValueError(f"no plan arrives within {horizon * cfg.step_length:g} s (time_limit={time_limit})")
+    rows, speeds = lat.extract(sol)
+    value = coarse = run.objective(speeds, lat)
+    passes = 0
+    for factor, tube_x, tube_v in grid.levels:  # local passes, each seeded with the plan in hand
+        fine = _Lattice(cor, cfg, grid.n_v * factor)
+        rows, speeds = rows * (fine.nv // lat.nv), speeds * (fine.nv // lat.nv)
+        tube = (math.ceil(tube_x / fine.dx), math.ceil(tube_v / fine.dv))
+        for _ in range(grid.passes):
+            late = min(len(rows) - 1 + LATE_STEPS, horizon)
+            f_rows, f_speeds = fine.extract(run.backward(fine, fine.windows(late, (rows, speeds) + tube)))
+            f_value = run.objective(f_speeds, fine)
+            passes += 1
+            if f_value > value:  # float32 ties: keep the plan in hand
+                break
+            gain, rows, speeds, value = value - f_value, f_rows, f_speeds, f_value
+            if gain <= STALL * abs(value):
+                break
+        lat = fine
+    dt = cfg.step_length
+    x, v = cor.x0 + rows * lat.dx, speeds * lat.dv
+    n = len(rows) - 1
+    t = depart_time + np.arange(n + 1) * dt
+    energy = float(energy_wh(v[:-1], v[1:], dt, cfg.ev).sum())
+    crossings = np.array([t[np.nonzero((x[:-1] < s) & (x[1:] >= s))[0][0]] for s in cor.stop_lines])
+    return Plan(
+        t=t, x=x, v=v, a=np.diff(v) / dt, energy=energy, travel_time=n * dt,
+        cost=energy + cfg.reward.phi * n * dt, objective=objective, crossings=crossings,
+        grid={"n_v": grid.n_v, "fine": grid.fine, "dv": lat.dv, "dx": lat.dx, "da": lat.dv / dt,
+              "horizon": horizon, "passes": passes, "states": run.states, "coarse_objective": coarse,
+              "objective": value, "wall_s": time.perf_counter() - started},
+    )
+
+
+class _Run:
+    """One solve: the signals seen from ``depart_time`` and the time weight ``phi`` [Wh/s]."""
+
+    def __init__(self, cor: Corridor, cfg: ScenarioConfig, depart_time: float, phi: float) -> None:
+        self.cor, self.cfg, self.depart_time, self.phi = cor, cfg, depart_time, phi
+        self.states = 0  # evaluated, all passes
+
+    def backward(self, lat: _Lattice, windows: list[Window]) -> _Solution:
+        dt = self.cfg.step_length
+        green = self.cor.green(self.depart_time + np.arange(len(windows)) * dt, dt) if self.cor.stop_lines else None
+        out = _backward(lat, green, windows, self.phi * dt)
+        self.states += out.states
+        return out
+
+    def certified(self, lat: _Lattice) -> tuple[int, _Solution]:
+        """Global pass of the "cost" objective on a horizon that provably does not bind."""
+        cfg, cor, dt = self.cfg, self.cor, self.cfg.step_length
+        rate = (self.phi + cfg.ev.constant_power_intake / 3600.0) * dt  # [Wh/step] least cost of a step
+        if rate <= 0:
+            raise ValueError("phi = 0 and no constant power intake: no horizon; use objective='energy'")
+        ke_back = cfg.ev.recuperation_efficiency * 0.5 * (cfg.ev.mass + cfg.ev.rotating_mass) * cor.v0 ** 2 / 3600.0
+        n_red = math.ceil((cor.cycle_ms - cor.green_ms) / (dt * MS))
+        horizon = math.ceil((cor.x_end - cor.x0) / (cor.v0 * dt)) + len(cor.stop_lines) * n_red + HORIZON_MARGIN
+        while horizon * dt <= MAX_HORIZON:
+            sol = self.backward(lat, lat.windows(horizon))
+            if not np.isfinite(sol.value):
+                horizon *= 2
+            elif sol.value <= rate * (horizon + 1) - ke_back:
+                return horizon, sol  # no plan slower than the horizon can cost less (module docstring)
+            else:
+                horizon = max(horizon + 1, math.ceil((sol.value + ke_back) / rate))
+        raise ValueError(f"no plan certified within {MAX_HORIZON:g} s")
+
+    def objective(self, speeds: np.ndarray, lat: _Lattice) -> float:
+        """E + phi T [Wh] of a path of speed indices, in float64."""
+        v = speeds * lat.dv
+        dt = self.cfg.step_length
+        return float(energy_wh(v[:-1], v[1:], dt, self.cfg.ev).sum()) + self.phi * (len(v) - 1) * dt
+
+
+@dataclass
+class _Solution:
+    value: float  # [Wh] optimal value of the start state (float32 sums)
+    policy: list[tuple[int, int, np.ndarray] | None]  # per step: first row, first speed, best choice
+    states: int  # states evaluated
+
+
+class _Lattice:
+    """Index arithmetic of one (position, speed) grid and its per-step energy table."""
+
+    def __init__(self, cor: Corridor, cfg: ScenarioConfig, n_v: int) -> None:
+        dt = cfg.step_length
+        self.nv = n_v
+        self.dv = cfg.speed_limit / n_v  # [m/s]
+        self.dx = self.dv * dt  # [m]
+        self.d_min = math.ceil(cfg.a_min * dt / self.dv - GRID_EPS)  # [speed cells per step]
+        self.d_max = math.floor(cfg.a_max * dt / self.dv + GRID_EPS)
+        self.n_d = self.d_max - self.d_min + 1
+        self.i_end = math.ceil((cor.x_end - cor.x0) / self.dx - GRID_EPS)  # first row that has arrived
+        j = np.arange(n_v + 1)
+        j_next = j[:, None] + np.arange(self.d_min, self.d_max + 1)[None, :]
+        ok = (j_next >= 0) & (j_next <= n_v)
+        step = energy_wh(j[:, None] * self.dv, np.clip(j_next, 0, n_v) * self.dv, dt, cfg.ev)
+        self.energy = np.where(ok, step, np.inf)  # [Wh] (speed, acceleration choice)
+        # (row, next speed) pairs whose step crosses stop line m: x_i < s <= x_i + j' dx
+        self.crossing: list[tuple[np.ndarray, np.ndarray]] = []
+        for s in cor.stop_lines:
+            q = (s - cor.x0) / self.dx
+            top = math.ceil(q - GRID_EPS) - 1
+            rows = [np.arange(math.ceil(q - jn - GRID_EPS), top + 1) for jn in range(n_v + 1)]
+            self.crossing.append((np.concatenate(rows), np.repeat(j, [len(r) for r in rows])))
+
+    def windows(self, horizon: int, tube: tuple[np.ndarray, np.ndarray, int, int] | None = None) -> list[Window]:
+        """States worth evaluating at each step: rows forward-reachable from the start (full
+        speed ahead / full braking), not arrived, able to arrive by ``horizon``; within
+        ``tube = (rows, speeds, half-width rows, half-width speeds)`` of a plan if given."""
+        out, lo, j = [], 0, self.nv
+        for k in range(horizon):
+            w = [max(lo, self.i_end - (horizon - k) * self.nv), min(k * self.nv, self.i_end - 1), 0, self.nv]
+            if tube is not None:
+                rows, speeds, wr, wv = tube
+                c = min(k, len(rows) - 1)
+                r = min(int(rows[c]), self.i_end - 1)
+                js = int(speeds[c])
+                w = [max(w[0], r - wr), min(w[1], r + wr), max(0, js - wv), min(self.nv, js + wv)]
+            out.append((w[0], w[1], w[2], w[3]))
+            j = max(0, j + self.d_min)
+            lo += j
+        return out
+
+    def extract(self, sol: _Solution) -> tuple[np.ndarray, np.ndarray]:
+        """Row and speed indices of the optimal plan, forwards from the start."""
+        i, j, rows, speeds = 0, self.nv, [0], [self.nv]
+        for entry in sol.policy:
+            assert entry is not None, "the optimal plan left the evaluated states"
+            lo, jlo, arg = entry
+            j += int(arg[i - lo, j - jlo]) + self.d_min
+            i += j
+            rows.append(i)
+            speeds.append(j)
+            if i >= self.i_end:
+                break
+        return np.array(rows), np.array(speeds)
+
+
+def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float) -> _Solution:
+    """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start."""
+    nv, n_d, d_min, i_end = lat.nv, lat.n_d, lat.d_min, lat.i_end
+    n_rows = i_end + nv + 1  # rows >= i_end: arrived, value 0
+    nxt = np.full((n_rows, nv + 1), np.inf, dtype=np.float32)
+    nxt[i_end:] = 0.0
+    cur = nxt.copy()
+    reg_nxt: Window | None = None  # region of each buffer written by the last step stored there
+    reg_cur: Window | None = None
+    step_cost = (lat.energy + time_cost).astype(np.float32)
+    arg_type = np.int8 if n_d < 127 else np.int16
+    policy: list[tuple[int, int, np.ndarray] | None] = [None] * len(windows)
+    states = 0
+    for k in range(len(windows) - 1, -1, -1):
+        if reg_cur is not None:
+            cur[reg_cur[0]:reg_cur[1] + 1, reg_cur[2]:reg_cur[3] + 1] = np.inf
+            reg_cur = None
+        lo, hi, jlo, jhi = windows[k]
+        if lo <= hi and jlo <= jhi:
+            n, m = hi - lo + 1, jhi - jlo + 1
+            states += n * m
+            base = nxt[lo:]
+            # after[r, j'] = value of landing at row lo + r + j' with speed j' (x' = x + v' dt)
+            after = as_strided(base, shape=(n, nv + 1), strides=(base.strides[0], base.strides[0] + base.strides[1]))
+            first = jlo + d_min  # next speed of padded column 0
+            a, b = max(0, first), min(nv, jhi + lat.d_max)
+            padded = np.full((n, m - 1 + n_d), np.inf, dtype=np.float32)
+            padded[:, a - first:b - first + 1] = after[:, a:b + 1]
+            if green is not None:
+                for s in np.nonzero(~green[k])[0]:  # red / yellow: no crossing in this step
+                    rows, js = lat.crossing[s]
+                    keep = (rows >= lo) & (rows <= hi) & (js >= a) & (js <= b)
+                    padded[rows[keep] - lo, js[keep] - first] = np.inf
+            best = np.full((n, m), np.inf, dtype=np.float32)
+            arg = np.zeros((n, m), dtype=arg_type)
+            cand = np.empty_like(best)
+            better = np.empty(best.shape, dtype=bool)
+            for c in range(n_d):  # next speed j + d_min + c
+                np.add(padded[:, c:c + m], step_cost[jlo:jhi + 1, c], out=cand)
+                np.less(cand, best, out=better)
+                np.copyto(best, cand, where=better)
+                np.copyto(arg, c, where=better)
+            cur[lo:hi + 1, jlo:jhi + 1] = best
+            reg_cur = (lo, hi, jlo, jhi)
+            policy[k] = (lo, jlo, arg)
+        nxt, cur, reg_nxt, reg_cur = cur, nxt, reg_cur, reg_nxt
+    value = float(nxt[0, nv]) if i_end > 0 else 0.0
+    return _Solution(value=value, policy=policy, states=states)
+
+
+if __name__ == "__main__":  # timing note: python -m bench.oracle.dp [depart_time ...]
+    import sys
+
+    for depart in [float(a) for a in sys.argv[1:]] or [200.0, 231.0, 260.0]:
+        p = bound(ScenarioConfig(), depart)
+        print(f"depart {depart:g} s: cost {p.cost:.3f} Wh = E {p.energy:.3f} Wh + T {p.travel_time:g} s, "
+              f"{p.grid['states']:.3g} states, {p.grid['passes']} local passes, {p.grid['wall_s']:.2f} s")
