@@ -21,7 +21,7 @@ def benchmark(session: nox.Session) -> None:
     """The main job: every available method over the fixed cases, MCAP logs, results, report."""
     from bench.harness.run import parse
 
-    session.run("ecodrive", "run", *session.posargs)
+    session.run("ecodrive", "run", "--bounds", *session.posargs)
     opts = parse(list(session.posargs))
     if opts["profile"] == "full":  # section 5's further experiments, into the same run folder
         common = ["--executor", opts["executor"], "--workers", str(opts["workers"]),

@@ -8,7 +8,7 @@ Reads only ``results.parquet``, ``manifest.json`` and the step logs; writes ``in
 """
 from __future__ import annotations
 
-import html
+import json
 import shutil
 import sys
 from pathlib import Path
@@ -17,8 +17,10 @@ import pandas as pd
 
 from bench.args import Parser, fail
 from bench.logs.mcaplog import LogError, resolve_log
+from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
 from . import experiments, figures, metrics, tables
+from .html import Figure, Page, esc, experiment_caption, label, render
 from .load import RunError, component_sums, load_run, load_steps, stop_lines
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn")
@@ -33,30 +35,74 @@ def build(run_dir: Path, out: Path) -> Path:
         raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
                        f"`ecodrive run`?)")
     out.mkdir(parents=True, exist_ok=True)
+    page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
-        md, images, warnings, html_tables = _single_vehicle(run_dir, out)
+        md, warnings = _single_vehicle(run_dir, out, page)
     else:
-        md, images, warnings, html_tables = [f"# Report: {run_dir.name}", ""], [], [], []
+        md, warnings = [f"# Report: {run_dir.name}", ""], []
+        page.manifest = _manifest(run_dir)
     emd, eimages, ewarnings = experiments.sections(run_dir, out)
-    md, images, warnings = md + emd, images + eimages, warnings + ewarnings
+    md, warnings = md + emd, warnings + ewarnings
     if warnings:
         md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
     (out / "index.md").write_text("\n".join(md))
-    body = "".join(f"<h3>{html.escape(t)}</h3><img src='figures/{p.name}' style='max-width:100%'>" for t, p in images)
-    tables_html = "".join(f"<h2>{h}</h2>{df.to_html(index=False, float_format=lambda v: f'{v:.3f}')}"
-                          for h, df in html_tables)
-    (out / "index.html").write_text(f"<html><head><meta charset='utf-8'><title>{html.escape(run_dir.name)}</title>"
-                                    f"</head><body><h1>Report: {html.escape(run_dir.name)}</h1>{tables_html}{body}"
-                                    "</body></html>")
+    page.experiments_md = page.experiments_md + emd
+    page.experiment_figures = [Figure(p, experiment_caption(t), t) for t, p in eimages]
+    page.mixed_claims = _mixed_claims(run_dir)
+    page.warnings = warnings
+    (out / "index.html").write_text(render(page))
     return out / "index.md", warnings
 
 
-def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str], list]:
-    """Table 4, statistics, violins and trajectories of a ``bench.harness.run`` folder."""
+def _gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
+    """The distance to the energy-optimal bound, when the run has it (``ecodrive run --bounds``)."""
+    if "cost_bound" not in results.columns or results.cost_bound.isna().all():
+        return []
+    phis = {s: manifest.get("scenario", {}).get(s, {}).get("reward", {}).get("phi", 1.0) for s in set(results.signals)}
+    gaps = pd.concat([metrics.optimality_gaps(results[results.signals == s], phi) for s, phi in phis.items()],
+                     ignore_index=True)
+    gaps.to_csv(out / "optimality_gaps.csv", index=False)
+    learned = gaps[gaps.method.isin(["prl", "mpdqn", "ddpg", "dqn"])]
+    lines = ["## Distance to the energy-optimal bound", "",
+             "The bound is the least cost E + phi T of the ego alone on the corridor through the known signal plans "
+             "(`bench.oracle`, dynamic programming; other vehicles ignored, so it can only be lower than what is "
+             "reachable in traffic). cost_gap = mean over cases of (cost - bound) / bound, with its bootstrap CI; "
+             "energy_gap_equal_time compares energy with the least energy that arrives no later than SUMO's driver; "
+             "share_closed = the part of the baseline-to-bound cost gap a method closes.", ""]
+    for s, g in learned.groupby("signals"):
+        best = g.loc[g.share_closed.idxmax()]
+        lines += [f"{s}: the best learned method, {best.method}, closes {100 * best.share_closed:.0f}% of the gap "
+                  f"between SUMO's driver and the bound and stays {100 * best.cost_gap:.0f}% above the bound.", ""]
+    lines += [tables.frame_markdown(gaps.set_index(["method", "signals"]), digits=3), ""]
+    return lines
+
+
+def _manifest(run_dir: Path) -> dict:
+    """The manifest of an experiments-only folder, if one is there, for the page's provenance ({} if
+    none or unreadable: the page then says so; nothing else reads it)."""
+    try:
+        manifest = json.loads((run_dir / "manifest.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return manifest if isinstance(manifest, dict) else {}
+
+
+def _mixed_claims(run_dir: Path) -> pd.DataFrame | None:
+    """The mixed-traffic claims as ``reports.experiments`` computes them for its section, for the headline."""
+    path = run_dir / "mixed" / "mixed.parquet"
+    if not path.is_file():
+        return None
+    effect = metrics.mpr_effect(metrics.mixed_cells(metrics.common_runs(pd.read_parquet(path))))
+    return metrics.mixed_claims(effect, SPEED_LOSS_TOL, HDV_TOL, FLEET_SAVING)
+
+
+def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], list[str]]:
+    """Table 4, statistics, violins and trajectories of a ``bench.harness.run`` folder: the markdown
+    lines and warnings; what the HTML page shows goes into ``page``."""
     results, manifest = load_run(run_dir)
     if "train_seed" not in results.columns:  # a table from before training seeds: one policy each
         results = results.assign(train_seed=[0 if m in LEARNED else -1 for m in results.method])
-    methods = [m for m in METHOD_ORDER if m in set(results.method)]
+    methods = [m for m in METHOD_ORDER if m in set(results.method)] + sorted(set(results.method) - set(METHOD_ORDER))
     t4 = metrics.table4(results)
     t4 = t4.set_index("method").loc[[m for m in methods if m in set(t4.method)]].reset_index()
     st = metrics.statistics(results)
@@ -81,6 +127,8 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
            f"cases with a {int(metrics.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
            "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed has no CI.",
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
+    page.experiments_md = _gaps(results, manifest, out)
+    md += page.experiments_md
     warnings = []
     parts, partial = _return_parts(results, run_dir, warnings)
     if partial:
@@ -97,12 +145,17 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
                "Each method is scored with its own reward (DDPG+LC2013's has no lane-change penalty).",
                "", tables.frame_markdown(parts.set_index(["method", "signals"]), digits=1)]
     md += ["## Distributions over seed groups (fig:rwd_bar)", ""]
-    images = []
+    page.manifest, page.results, page.table4, page.statistics, page.seeds = manifest, results, t4, st, seeds
+    page.methods = methods
+    page.claims, page.parts, page.partial_logs = tables.paper_claims(results), parts, partial
+    page.bootstrap = (f"Per-episode bootstrap (BCa, {metrics.BOOTSTRAP_RESAMPLES} resamples) "
+                      f"{int(metrics.CI_LEVEL * 100)}% confidence intervals of the mean and of the IQM.")
     for signals in sorted(set(results.signals)):
         p = figures.violins(groups, methods, signals, out / "figures")
-        images.append((f"violin, {signals}", p[0]))
+        page.violins.append(Figure(p[0], _violin_caption(groups, results, methods, signals), f"violin, {signals}"))
         md += [f"![violin {signals}](figures/{p[0].name})", ""]
     compare = next((m for m in ("prl", "mpdqn", "ddpg", "glosa") if m in methods), None)
+    page.compare = compare
     if compare is not None and "baseline" in methods:
         md += [f"## Trajectories: baseline against {compare} (fig:compare1/2)", ""]
         if compare != "prl":
@@ -128,10 +181,27 @@ def _single_vehicle(run_dir: Path, out: Path) -> tuple[list[str], list, list[str
                 if trajs and bands is not None:
                     name = f"compare-{signals}-case{case:03d}"
                     p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
-                    images.append((f"{signals} case {case}", p[0]))
+                    page.trajectories.append(Figure(p[0], _trajectory_caption(list(trajs), signals, case),
+                                                    f"{signals} case {case}"))
                     md += [f"![{name}](figures/{p[0].name})", ""]
-    return md, images, warnings, [("Table 4", t4), ("Statistics", st)] + ([("Return by reward component", parts)]
-                                                                          if parts is not None else [])
+    return md, warnings
+
+
+def _violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[str], signals: str) -> str:
+    g = groups[groups.signals == signals]
+    cases = results[results.signals == signals].groupby("method").size()
+    n = f"{cases.min()}" if cases.min() == cases.max() else f"{cases.min()}\u2013{cases.max()}"
+    return (f"<b>fig:rwd_bar, {esc(signals)} signals.</b> Energy consumption [Wh] (left) and travel time [s] (right) "
+            f"per method: each violin is the distribution of the seed-group means ({g.group.nunique()} groups: the "
+            f"test cases grouped by case index mod 10, {n} cases per method in all); the middle bar is the median, "
+            f"the whiskers the extremes. Methods: {esc(', '.join(label(m) for m in methods))}.")
+
+
+def _trajectory_caption(drawn: list[str], signals: str, case: int) -> str:
+    who = esc(" and ".join(label(m) for m in drawn))
+    return (f"<b>fig:compare, {esc(signals)} signals, test case {case}</b> ({who}). Left: distance travelled [m] against "
+            "time since entry [s], with the signal state at each stop line as green and red bars at its position; "
+            "middle: speed [m/s]; right: cumulative battery energy [Wh] (it falls where braking recovers energy).")
 
 
 def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str]) -> tuple[pd.DataFrame | None, int]:
@@ -153,7 +223,7 @@ def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str]) -> 
     if not rows:
         return None, partial
     parts = metrics.return_parts(pd.DataFrame(rows))
-    order = {m: i for i, m in enumerate(METHOD_ORDER)}
+    order = {m: i for i, m in enumerate([*METHOD_ORDER, *sorted(set(parts.method) - set(METHOD_ORDER))])}
     parts = parts.sort_values(["signals", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
     keep = [c for c in parts.columns if c in ("method", "signals", "episodes") or (parts[c] != 0).any()]
     return parts[keep].reset_index(drop=True), partial

@@ -115,6 +115,30 @@ def across_seeds(results: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def optimality_gaps(results: pd.DataFrame, phi: float) -> pd.DataFrame:
+    """Distance to the energy-optimal bound (``cost_bound``, ``energy_bound`` columns), per
+    (method, signals): the mean over cases of (cost - cost_bound) / cost_bound with cost =
+    energy + phi travel_time, its bootstrap CI, the same for energy against the equal-time
+    ``energy_bound``, and the share of the baseline-to-bound cost gap the method closes,
+    (C_baseline - C_method) / (C_baseline - C_bound) on the mean costs of the cases both ran."""
+    df = results.dropna(subset=["cost_bound"]).assign(cost=lambda d: d.energy + phi * d.travel_time)
+    rows = []
+    for (method, signals), g in df.groupby(["method", "signals"]):
+        gap = ((g.cost - g.cost_bound) / g.cost_bound).to_numpy()
+        egap = ((g.energy - g.energy_bound) / g.energy_bound).dropna().to_numpy()
+        lo, hi = bootstrap_ci(gap)
+        base = df[(df.method == "baseline") & (df.signals == signals)]
+        both = g[g.case.isin(set(base.case))]
+        b = base[base.case.isin(set(both.case))]
+        closed = ((b.cost.mean() - both.cost.mean()) / (b.cost.mean() - b.cost_bound.mean())
+                  if len(b) and b.cost.mean() > b.cost_bound.mean() else np.nan)
+        rows.append({"method": method, "signals": signals, "cases": len(g), "cost_gap": float(gap.mean()),
+                     "cost_gap_ci_low": lo, "cost_gap_ci_high": hi,
+                     "energy_gap_equal_time": float(egap.mean()) if len(egap) else np.nan,
+                     "share_closed": float(closed)})
+    return pd.DataFrame(rows)
+
+
 def group_means(results: pd.DataFrame, groups: int = 10) -> pd.DataFrame:
     """Mean energy and travel time per seed group (case index mod ``groups``): the violin data."""
     df = results.assign(group=results["case"] % groups)

@@ -21,6 +21,7 @@ from tqdm import tqdm
 from agents.registry import LEARNING, METHODS
 from bench.args import Parser, fail, int_in, name
 from bench.harness import external
+from bench.harness.bounds import attach
 from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
 from bench.harness.external import GROUP, AgentError, registered
@@ -66,6 +67,9 @@ def parser() -> Parser:
                     help="run folder under --logs: letters, digits, '.', '_', '-' (default: the profile)")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
     ap.add_argument("--models", type=Path, default=MODELS, help="shipped policies (default: models/)")
+    ap.add_argument("--bounds", action="store_true",
+                    help="add each case's energy-optimal bound (bench.oracle DP; a few s per case, kept in "
+                         "<run>/bounds.parquet): columns cost_bound and energy_bound")
     ap.add_argument("--train-seeds", nargs="+", type=int_in(0), default=None, metavar="SEED",
                     help="training seeds of the learning methods to evaluate, each >= 0 (default: every shipped one)")
     return ap
@@ -169,6 +173,11 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     df = pd.concat([df[list(KEEP)], kept], ignore_index=True) if len(kept) else df[list(KEEP)]
     df = df.sort_values(["signals", "method", "train_seed", "case"], ignore_index=True)
     df["mcap"] = [_relative(run_dir, m) for m in df.mcap]  # the run folder moves as a whole
+    if opts.get("bounds"):
+        def runner(tasks, workers, fn):
+            return (run_local(tasks, workers, fn) if opts["executor"] == "local"
+                    else run_ray(tasks, opts["address"], workers, fn))
+        df = attach(run_dir, df, opts["workers"], runner)
     atomic_parquet(df, run_dir / "results.parquet")
     manifest = {
         "command": " ".join(["ecodrive", "run", *opts.get("argv", [])]), "profile": opts["profile"],
@@ -184,6 +193,8 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     from envs.config import ScenarioConfig
 
     manifest["scenario"] = {s: ScenarioConfig(signals=s).to_dict() for s in opts["signals"]}
+    if opts.get("bounds"):  # the DP's per-case time, as measured in this run's workers
+        manifest["bound_wall_s_median"] = round(float(pd.read_parquet(run_dir / "bounds.parquet").bound_wall_s.median()), 3)
     atomic_json(manifest, run_dir / "manifest.json")
     return df
 

@@ -83,3 +83,18 @@ def test_stratified_seed_bootstrap_and_across_seeds():
     assert agg.loc["energy", "seeds"] == 4 and agg.loc["energy", "cases"] == 30
     assert agg.loc["energy", "mean"] == pytest.approx(scores.mean())
     assert agg.loc["travel_time", "seed_min"] == 100.0 and agg.loc["travel_time", "seed_max"] == 103.0
+
+
+def test_optimality_gaps_by_hand():
+    rows = []
+    for c, (eb, tb, e0, t0, em, tm) in enumerate([(100.0, 200.0, 250.0, 250.0, 200.0, 240.0),
+                                                   (110.0, 190.0, 260.0, 240.0, 210.0, 250.0)]):
+        bound = {"cost_bound": eb + tb, "energy_bound": 90.0}
+        rows.append({"method": "baseline", "signals": "uncoordinated", "case": c, "energy": e0, "travel_time": t0, **bound})
+        rows.append({"method": "prl", "signals": "uncoordinated", "case": c, "energy": em, "travel_time": tm, **bound})
+    g = metrics.optimality_gaps(pd.DataFrame(rows), phi=1.0).set_index("method")
+    assert g.loc["baseline", "cost_gap"] == pytest.approx(np.mean([500 / 300 - 1, 500 / 300 - 1]))
+    assert g.loc["prl", "cost_gap"] == pytest.approx(np.mean([440 / 300 - 1, 460 / 300 - 1]))
+    assert g.loc["prl", "share_closed"] == pytest.approx((500 - 450) / (500 - 300))
+    assert g.loc["baseline", "share_closed"] == pytest.approx(0.0)
+    assert g.loc["prl", "energy_gap_equal_time"] == pytest.approx(np.mean([200 / 90 - 1, 210 / 90 - 1]))

@@ -1,0 +1,78 @@
+"""The energy-optimal bound of every case of a run (``bench.oracle``), joined to its results.
+
+For each (signal setting, case) the ego's own departure time fixes the problem; two bounds are
+solved: ``cost_bound``, the least E + phi T through the signals (phi of the scenario's reward),
+and ``energy_bound``, the least energy that arrives no later than SUMO's driver (``baseline``)
+did on that case, an equal-time comparison. Solutions are kept in ``<run>/bounds.parquet`` and
+reused by a rerun (the DP takes a few seconds per case).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from bench.io import atomic_parquet
+
+NO_LIMIT = -1.0  # no baseline row, or it did not finish: no equal-time bound
+KEY = ["signals", "case", "depart_time", "time_limit"]
+COLUMNS = KEY + ["cost_bound", "bound_energy", "bound_travel_time", "energy_bound", "energy_bound_travel_time",
+                 "bound_wall_s"]
+
+
+@dataclass(frozen=True)
+class BoundTask:
+    signals: str
+    case: int
+    depart_time: float  # [s] the ego's entry step on this case
+    time_limit: float  # [s] the baseline's travel time on this case (NO_LIMIT: no equal-time bound)
+
+
+def solve(task: BoundTask) -> dict[str, Any]:
+    """Both bounds of one case (runs in a worker)."""
+    from bench.oracle.dp import bound
+    from envs.config import ScenarioConfig
+
+    cfg = ScenarioConfig(signals=task.signals)
+    t0 = time.perf_counter()
+    cost = bound(cfg, task.depart_time, "cost")
+    row = {"signals": task.signals, "case": task.case, "depart_time": task.depart_time, "time_limit": task.time_limit,
+           "cost_bound": cost.cost, "bound_energy": cost.energy, "bound_travel_time": cost.travel_time,
+           "energy_bound": np.nan, "energy_bound_travel_time": np.nan}
+    if task.time_limit != NO_LIMIT:
+        eq = bound(cfg, task.depart_time, "energy", time_limit=task.time_limit)
+        row.update(energy_bound=eq.energy, energy_bound_travel_time=eq.travel_time)
+    row["bound_wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def tasks_for(results: pd.DataFrame) -> list[BoundTask]:
+    """One task per (signals, case) of ``results``: the departure every method shared on that case
+    (they share the traffic until the ego's insertion), the baseline's travel time as the limit."""
+    out = []
+    for (s, c), g in results.groupby(["signals", "case"]):
+        base = g[g.method == "baseline"]
+        limit = float(base.travel_time.iloc[0]) if len(base) and bool(base.terminated.iloc[0]) else NO_LIMIT
+        out.append(BoundTask(str(s), int(c), float(g.depart_time.iloc[0]), limit))
+    return out
+
+
+def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner) -> pd.DataFrame:
+    """``results`` with the bound columns of its case, solving (with ``runner(tasks, workers,
+    fn)``, an executor of ``bench.harness.executors``) only what ``bounds.parquet`` lacks."""
+    path = run_dir / "bounds.parquet"
+    done = pd.read_parquet(path) if path.is_file() else pd.DataFrame(columns=COLUMNS)
+    have = set(map(tuple, done[KEY].astype(object).values)) if len(done) else set()
+    todo = [t for t in tasks_for(results) if (t.signals, t.case, t.depart_time, t.time_limit) not in have]
+    if todo:
+        new = pd.DataFrame(list(runner(todo, workers, solve)), columns=COLUMNS)
+        done = pd.concat([done, new], ignore_index=True) if len(done) else new
+        atomic_parquet(done, path)
+    cols = ["signals", "case", "cost_bound", "energy_bound"]
+    latest = done.drop_duplicates(["signals", "case"], keep="last")[cols]
+    return results.drop(columns=[c for c in cols[2:] if c in results.columns]).merge(latest, on=["signals", "case"],
+                                                                                      how="left")

@@ -1,0 +1,298 @@
+"""The HTML report is a page a researcher can read: every figure exists and has a caption, no cell
+reads NaN, Table 4 is laid out as the paper's with signed percents, units and the published values
+beside ours, the claims are checked, and the provenance is the manifest's. Parsed with the standard
+library's ``html.parser``; the checks are functions, and a bad page is shown to fail them."""
+from __future__ import annotations
+
+import json
+import re
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.harness.run import parse, run
+from bench.paper import TABLE4, improvement
+from reports import html as page_html
+from reports.build import build
+from reports.tables import NOT_IN_RUN, paper_claims
+
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
+BAD_CELL = re.compile(r"^(nan|none|null|inf|-inf|<na>|nat)$|\bnan\b|\bNone\b", re.IGNORECASE)
+
+
+class Doc(HTMLParser):
+    """The parts of a page the tests look at: images and the figures around them, table cells with
+    their table's id and row, the text of each section, every link and source, and scripts."""
+
+    def __init__(self, text: str):
+        super().__init__(convert_charrefs=True)
+        self.stack: list[tuple[str, dict]] = []
+        self.images: list[dict] = []
+        self.figures: list[dict] = []
+        self.cells: list[dict] = []  # {"table": id, "row": n, "tag": th/td, "text": ...}
+        self.rows: dict[str, list[list[str]]] = {}
+        self.sections: dict[str, str] = {}
+        self.urls: list[str] = []
+        self.tags: list[str] = []
+        self._cell: dict | None = None
+        self._caption: dict | None = None
+        self.feed(text)
+        self.close()
+
+    def _open(self, tag: str) -> list[dict]:
+        return [a for t, a in self.stack if t == tag]
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.append(tag)
+        self.urls += [v for k, v in attrs if k in ("src", "href") and v is not None]
+        if tag == "img":
+            figs = self._open("figure")
+            self.images.append({"src": a.get("src", ""), "figure": figs[-1].get("_n") if figs else None})
+        if tag in VOID:
+            return
+        if tag == "figure":
+            a["_n"] = len(self.figures)
+            self.figures.append({"caption": None})
+        if tag == "figcaption":
+            figs = self._open("figure")
+            self._caption = self.figures[figs[-1]["_n"]] if figs else None
+            if self._caption is not None:
+                self._caption["caption"] = ""
+        if tag == "tr":
+            tables = self._open("table")
+            tid = tables[-1].get("id", "") if tables else ""
+            self.rows.setdefault(tid, []).append([])
+        if tag in ("td", "th"):
+            tables = self._open("table")
+            tid = tables[-1].get("id", "") if tables else ""
+            self._cell = {"table": tid, "row": len(self.rows.get(tid, [])) - 1, "tag": tag, "text": ""}
+        self.stack.append((tag, a))
+
+    def handle_endtag(self, tag):
+        if tag in VOID:
+            return
+        while self.stack:
+            t, _ = self.stack.pop()
+            if t == tag:
+                break
+        if tag in ("td", "th") and self._cell is not None:
+            self._cell["text"] = " ".join(self._cell["text"].split())
+            self.cells.append(self._cell)
+            if self._cell["table"] in self.rows and self.rows[self._cell["table"]]:
+                self.rows[self._cell["table"]][-1].append(self._cell["text"])
+            self._cell = None
+        if tag == "figcaption":
+            self._caption = None
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell["text"] += data
+        if self._caption is not None:
+            self._caption["caption"] += data
+        for tag, a in self.stack:
+            if tag == "section" and "id" in a:
+                self.sections[a["id"]] = self.sections.get(a["id"], "") + data
+
+
+# ---------------------------------------------------------------- the checks
+def image_problems(doc: Doc, root: Path) -> list[str]:
+    bad = []
+    for img in doc.images:
+        if not img["src"] or not (root / img["src"]).is_file():
+            bad.append(f"{img['src']!r}: no such file under {root}")
+        if img["figure"] is None:
+            bad.append(f"{img['src']!r}: not inside a <figure>")
+        elif not (doc.figures[img["figure"]]["caption"] or "").strip():
+            bad.append(f"{img['src']!r}: its <figure> has no (or an empty) <figcaption>")
+    return bad
+
+
+def cell_problems(doc: Doc) -> list[str]:
+    return [f"table {c['table']!r} row {c['row']}: {c['text']!r}" for c in doc.cells if BAD_CELL.search(c["text"])]
+
+
+def self_contained_problems(doc: Doc) -> list[str]:
+    bad = [f"<{t}> on the page" for t in ("script", "iframe", "object", "link") if t in doc.tags]
+    bad += [f"external reference {u!r}" for u in doc.urls if re.match(r"^([a-z]+:)?//", u, re.IGNORECASE)]
+    return bad + ([] if "style" in doc.tags else ["no inline <style>"])
+
+
+BAD_PAGE = """<html><body><table id='t'><tr><td>nan</td><td>None</td><td>1.00</td></tr></table>
+<img src='figures/missing.png'><figure><img src='figures/here.png'><figcaption> </figcaption></figure>
+<script src='https://cdn.example.org/x.js'></script></body></html>"""
+
+
+def test_the_checks_catch_a_bad_page(tmp_path):
+    (tmp_path / "figures").mkdir()
+    (tmp_path / "figures" / "here.png").write_bytes(b"png")
+    doc = Doc(BAD_PAGE)
+    imgs = image_problems(doc, tmp_path)
+    assert any("missing.png" in p and "no such file" in p for p in imgs)
+    assert any("missing.png" in p and "not inside" in p for p in imgs)
+    assert any("here.png" in p and "figcaption" in p for p in imgs) and not any("here.png" in p and "no such" in p
+                                                                                  for p in imgs)
+    assert [p.split(": ")[1] for p in cell_problems(doc)] == ["'nan'", "'None'"]
+    assert {"<script> on the page", "external reference 'https://cdn.example.org/x.js'"} <= set(
+        self_contained_problems(doc))
+    good = Doc("<html><head><style>p{}</style></head><body><figure><img src='figures/here.png'>"
+               "<figcaption>energy [Wh]</figcaption></figure><table><tr><td>\u2013</td></tr></table></body></html>")
+    assert image_problems(good, tmp_path) == cell_problems(good) == self_contained_problems(good) == []
+
+
+# ---------------------------------------------------------------- the page of a smoke run
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("html")
+    run(parse(["--profile", "smoke", "--logs", str(tmp), "--methods", "baseline", "glosa", "--workers", "2"]),
+        progress=False)
+    index, warnings = build(tmp / "smoke", tmp / "report")
+    text = (tmp / "report" / "index.html").read_text()
+    return {"dir": tmp / "report", "run": tmp / "smoke", "doc": Doc(text), "text": text, "md": index.read_text(),
+            "results": pd.read_parquet(tmp / "smoke" / "results.parquet"),
+            "manifest": json.loads((tmp / "smoke" / "manifest.json").read_text())}
+
+
+def test_every_image_exists_and_sits_in_a_captioned_figure(report):
+    doc = report["doc"]
+    assert len(doc.images) == 2 + 6  # a violin per setting, 3 trajectory cases per setting
+    assert image_problems(doc, report["dir"]) == []
+    captions = [f["caption"] for f in doc.figures]
+    assert all("[Wh]" in c and "[s]" in c for c in captions)  # units in every caption
+    assert sum("fig:compare" in c for c in captions) == 6 and sum("fig:rwd_bar" in c for c in captions) == 2
+
+
+def test_no_cell_reads_nan_or_none_and_the_page_is_self_contained(report):
+    doc = report["doc"]
+    assert len(doc.cells) > 100
+    assert cell_problems(doc) == []
+    assert self_contained_problems(doc) == []
+    assert not re.search(r"\bNaN\b|>\s*nan\s*<", report["text"])
+
+
+def test_table4_is_the_papers_with_signed_percents_units_and_published_values(report):
+    doc, res = report["doc"], report["results"]
+    means = res.groupby(["method", "signals"])[["energy", "travel_time"]].mean()
+    for signals in ("coordinated", "uncoordinated"):
+        rows = doc.rows[f"table4-{signals}"]
+        head = " ".join(rows[0] + rows[1])
+        assert "[Wh]" in head and "[s]" in head and "Imp." in head and "Paper" in head
+        body = {r[0].split()[0]: r for r in rows[2:]}  # "Baseline (SUMO ...) baseline" -> "Baseline"
+        base, glosa = body["Baseline"], body["GLOSA"]
+        paper_e, paper_t = TABLE4[("baseline", signals)]
+        # ours, then the published value beside it
+        i = base.index(f"{means.loc[('baseline', signals), 'energy']:.2f}")
+        assert base[i + 1] == f"{paper_e:.2f}"
+        assert f"{paper_t:.2f}" in base
+        # improvement as a signed percent: + = less than the baseline
+        imp = improvement(means.loc[("glosa", signals), "energy"], means.loc[("baseline", signals), "energy"])
+        want = f"{100 * imp:+.2f}%".replace("-", page_html.MINUS)
+        assert want in glosa
+        assert glosa[3] == glosa[4] == page_html.DASH  # no published GLOSA energy: an en dash, not NaN
+    assert "231.13" in doc.sections["table4"] and "253.79" in doc.sections["table4"]
+    caption = doc.sections["table4"]
+    assert "+ means the method uses less energy" in caption and "\u2212 means more" in caption
+
+
+def test_the_claims_headline(report):
+    doc, res = report["doc"], report["results"]
+    claims = {}
+    for rows in doc.rows.values():
+        for r in rows:
+            if len(r) == 6 and r[4] in ("PASS", "FAIL", NOT_IN_RUN):
+                claims[(r[0], r[1])] = r
+    for signals in ("coordinated", "uncoordinated"):
+        ours = res[(res.method == "baseline") & (res.signals == signals)].energy.mean()
+        dev = ours / TABLE4[("baseline", signals)][0] - 1
+        row = claims[(signals, "baseline energy within \u00b110% of Table 4")]
+        assert row[4] == ("PASS" if abs(dev) <= 0.10 else "FAIL") and f"{ours:.2f}" in row[3]
+        assert claims[(signals, "PRL saves energy against the baseline")][4] == NOT_IN_RUN  # no PRL in this run
+        assert "needs prl/" + signals in claims[(signals, "PRL saves energy against the baseline")][5]
+    assert claims[("both settings", "no collisions")][4] == "PASS"
+    assert "NOT IN THIS RUN" in doc.sections["claims"] and "PASS" in doc.sections["claims"]
+
+
+def test_statistics_show_cis_with_units_and_one_seed(report):
+    doc = report["doc"]
+    stats = doc.sections["statistics"]
+    assert "Energy [Wh]" in stats and "Travel time [s]" in stats and "95% CI" in stats
+    rows = doc.rows["stats-coordinated"]
+    base = next(r for r in rows if r[0].startswith("Baseline"))
+    assert re.search(r"\d+\.\d\d \[\d+\.\d\d, \d+\.\d\d\]", base[2])  # mean [CI]
+    assert base[4] == page_html.DASH  # P(improve) of the baseline against itself does not exist
+    seeds = doc.rows["seeds-coordinated"]
+    assert all("one seed" in r[3] for r in seeds[2:])  # rule-based methods: one "seed", no CI
+
+
+def test_provenance_is_the_manifests(report):
+    prov, man = report["doc"].sections["provenance"], report["manifest"]
+    assert man["git_sha"] and man["git_sha"] in prov
+    assert f"eclipse-sumo{man['packages']['eclipse-sumo']}" in prov.replace(" ", "")
+    assert "smoke" in prov and "speed_limit" in prov  # the profile and the scenario
+    assert "No learned policy" in prov  # baseline and glosa have no checkpoint
+
+
+def test_the_markdown_is_unchanged(report):
+    md = report["md"]
+    assert md.startswith("# Report: smoke") and "## Table 4" in md and "| method | signals | energy (Wh) |" in md
+    assert "<figure" not in md and "<table" not in md
+
+
+# ---------------------------------------------------------------- pure helpers
+def test_formatting():
+    assert page_html.pct(0.237) == "+23.70%" and page_html.pct(-0.0793) == "\u22127.93%"
+    assert page_html.pct(float("nan")) == page_html.num(None) == page_html.ci(1.0, np.nan) == page_html.DASH
+    assert page_html.pct(-1e-9) == "0.00%" and page_html.num(-3.14159) == "\u22123.14"
+    assert page_html.md_cell("nan", "x") == (page_html.DASH, "num")
+    assert page_html.md_cell("-0.14", "all_energy_change")[0] == "\u221214%"
+
+
+def test_paper_claims_on_made_up_results():
+    rows = []
+    for s, (be, bt), save in (("coordinated", (231.0, 189.0), 0.2), ("uncoordinated", (380.0, 260.0), 0.15)):
+        rows += [{"method": "baseline", "signals": s, "energy": be, "travel_time": bt, "collisions": 0},  # unc.: +50%
+                 {"method": "prl", "signals": s, "energy": (1 - save) * be, "travel_time": 1.05 * bt, "collisions": 0}]
+    c = paper_claims(pd.DataFrame(rows)).set_index(["signals", "claim"]).status
+    assert c[("coordinated", "baseline energy within \u00b110% of Table 4")] == "PASS"
+    assert c[("uncoordinated", "baseline energy within \u00b110% of Table 4")] == "FAIL"
+    assert c[("coordinated", "PRL saves energy against the baseline")] == "PASS"
+    assert c[("coordinated", "PRL's energy saving within \u00b115 points of the paper's")] == "FAIL"  # 20 vs 4.06
+    assert c[("uncoordinated", "PRL's energy saving within \u00b115 points of the paper's")] == "PASS"  # 15 vs 27.13
+    assert c[("coordinated", "PRL travel-time penalty < 15%")] == "PASS"
+    assert c[("both", "PRL saves more energy uncoordinated than coordinated")] == "FAIL"  # 15% < 20%
+    assert c[("coordinated", "PRL uses less energy than DDPG+LC2013")] == NOT_IN_RUN
+    assert c[("both", "no collisions")] == "PASS"
+
+
+# ---------------------------------------------------------------- an experiments-only folder
+def test_an_experiments_only_folder_shows_the_mixed_claims_and_tables(tmp_path):
+    run_dir = tmp_path / "logs" / "m"
+    (run_dir / "mixed").mkdir(parents=True)
+    rows = []
+    for s in ("coordinated", "uncoordinated"):
+        for mpr in (0.0, 0.5, 1.0):
+            for d in (200.0, 700.0):
+                row = {"signals": s, "mpr": mpr, "demand": d, "rep": 0, "seed": 0, "duration": 900.0,
+                       "collisions": 0, "teleports": 0, "cv_stall_steps": 0, "cv_longest_stall_s": 0.0}
+                for k in ("all", "cv", "hdv"):
+                    f = 1 - 0.15 * mpr if k != "hdv" else 1.0
+                    nan = k == "cv" and mpr == 0  # no CVs at MPR 0: their metrics do not exist
+                    row.update({f"{k}_{m}": np.nan if nan else v for m, v in (
+                        ("energy", 250 * f), ("travel_time", 220.0), ("speed", 9 - mpr), ("energy_per_km", 120 * f),
+                        ("space_mean_speed", 9 - 0.3 * mpr), ("unfinished", 2.0), ("pending", 0.0))})
+                rows.append(row)
+    pd.DataFrame(rows).to_parquet(run_dir / "mixed" / "mixed.parquet")
+    build(run_dir, tmp_path / "report")
+    doc = Doc((tmp_path / "report" / "index.html").read_text())
+    assert image_problems(doc, tmp_path / "report") == [] and cell_problems(doc) == []
+    assert [Path(i["src"]).name for i in doc.images] == ["mixed-traffic.png"]
+    assert "MPR" in doc.figures[0]["caption"] and "[Wh/km]" in doc.figures[0]["caption"]
+    claims = doc.sections["claims"]
+    assert "fleet energy per km falls from MPR 0 to 1" in claims and "PASS" in claims
+    assert "no single-vehicle results" in claims
+    assert "|---" not in doc.sections["x-mixed-traffic"]  # the markdown tables became tables
+    assert "\u221215%" in doc.sections["x-mixed-traffic"]  # changes as signed percents
+    assert "No manifest.json" in doc.sections["provenance"]
