@@ -13,7 +13,7 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
     train("prl", "uncoordinated", 1, seed=0, out=tmp_path / "run", models=tmp_path / "models",
           agent_config={"learning_starts": 64, "batch_size": 16}, progress=False, validation_cases=1)
     cell = Cell("uncoordinated", 0.5, 300, 0, 400.0, str(tmp_path / "cell.mcap"),
-                str(tmp_path / "models" / "prl-uncoordinated"))
+                str(tmp_path / "models" / "prl-uncoordinated" / "s0"))
     assert _done(cell) is None
     row = run_cell(cell)
     assert row["hdv_vehicles"] > 0 and row["collisions"] == 0
@@ -41,7 +41,7 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
 
     from bench.experiments.mixed import CellMismatch
 
-    man = tmp_path / "models" / "prl-uncoordinated" / "manifest.json"
+    man = tmp_path / "models" / "prl-uncoordinated" / "s0" / "manifest.json"
     shipped = man.read_text()
     man.write_text(json.dumps({**json.loads(shipped), "sha256": "0" * 64}))
     with pytest.raises(CellMismatch, match="PRL policy sha256"):

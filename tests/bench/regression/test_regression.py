@@ -19,13 +19,17 @@ def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_pat
 
     models = tmp_path / "models"
     for m, s in (("prl", "coordinated"), ("prl", "uncoordinated"), ("ddpg", "coordinated")):
-        (models / f"{m}-{s}").mkdir(parents=True)
-        (models / f"{m}-{s}" / "manifest.json").write_text("{}")
+        (models / f"{m}-{s}" / "s0").mkdir(parents=True)
+        (models / f"{m}-{s}" / "s0" / "manifest.json").write_text("{}")
+    (models / "prl-coordinated" / "s3").mkdir()
+    (models / "prl-coordinated" / "s3" / "manifest.json").write_text("{}")
     opts = parse(["--logs", str(tmp_path / "logs")])
     opts["models"] = models
-    pairs, skipped = resolve_methods(opts)
-    assert ("ddpg", "coordinated") in pairs and ("ddpg", "uncoordinated") not in pairs
-    assert "ddpg/uncoordinated" in skipped and "dqn/coordinated" in skipped and ("baseline", "uncoordinated") in pairs
+    runs, skipped = resolve_methods(opts)
+    assert ("ddpg", "coordinated", 0) in runs and not any(r[:2] == ("ddpg", "uncoordinated") for r in runs)
+    assert ("prl", "coordinated", 0) in runs and ("prl", "coordinated", 3) in runs  # every shipped seed
+    assert "ddpg/uncoordinated" in skipped and "dqn/coordinated" in skipped
+    assert ("baseline", "uncoordinated", -1) in runs
 
     rows = [{"method": m, "signals": s, "energy": e, "travel_time": 180.0, "collisions": 0}
             for m, s, e in (("baseline", "coordinated", 230.0), ("baseline", "uncoordinated", 250.0),
