@@ -20,8 +20,7 @@ class Command:
     """What the agent asks for this step; None means 'leave it to SUMO'."""
 
     accel: float | None  # [m/s^2] requested longitudinal acceleration
-    lateral: int | None  # requested k in {-1, 0, 1}
-    lc2013: bool  # whether LC2013 decides lane changes
+    lateral: int | None  # requested k in {-1, 0, 1}; None: LC2013 decides
 
 
 class ActionType:
@@ -50,7 +49,7 @@ class ParameterizedAction(ActionType):
     def decode(self, action) -> Command:
         k_idx, params = action
         k_idx = int(k_idx)
-        return Command(float(np.clip(params[k_idx], self.cfg.a_min, self.cfg.a_max)), LATERAL[k_idx], False)
+        return Command(float(np.clip(params[k_idx], self.cfg.a_min, self.cfg.a_max)), LATERAL[k_idx])
 
 
 def dqn_table(a_min: float, a_max: float) -> list[tuple[float, int]]:
@@ -69,7 +68,7 @@ class Discrete27Action(ActionType):
 
     def decode(self, action) -> Command:
         a, k = self.table[int(action)]
-        return Command(a, k, False)
+        return Command(a, k)
 
 
 class LongitudinalAction(ActionType):
@@ -82,7 +81,7 @@ class LongitudinalAction(ActionType):
         self.space = spaces.Box(cfg.a_min, cfg.a_max, shape=(1,), dtype=np.float32)
 
     def decode(self, action) -> Command:
-        return Command(float(np.clip(np.asarray(action).reshape(-1)[0], self.cfg.a_min, self.cfg.a_max)), None, True)
+        return Command(float(np.clip(np.asarray(action).reshape(-1)[0], self.cfg.a_min, self.cfg.a_max)), None)
 
 
 class SumoAction(ActionType):
@@ -95,7 +94,7 @@ class SumoAction(ActionType):
         self.space = spaces.Discrete(1)
 
     def decode(self, action) -> Command:
-        return Command(None, None, True)
+        return Command(None, None)
 
 
 ACTION_TYPES: dict[str, type[ActionType]] = {

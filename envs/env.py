@@ -144,7 +144,7 @@ class EcoDriveEnv(gym.Env):
             terminated = True
         else:
             m = ego.measure()
-            terminated = ego.kin[6] == self.files.exit_edge
+            terminated = ego.kin.edge == self.files.exit_edge
         travel_time = s.time() - self.t_depart
         truncated = not terminated and travel_time >= self.cfg.max_episode_time
         r, comps = rewards.reward(

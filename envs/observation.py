@@ -14,7 +14,7 @@ from gymnasium import spaces
 
 from .config import ScenarioConfig
 from .scenario import LANE_WIDTH, ScenarioFiles
-from .sumo import VAR_ANGLE, VAR_LENGTH, VAR_POSITION, SumoSession
+from .sumo import VAR_ANGLE, VAR_LENGTH, VAR_POSITION, Kinematics, SumoSession
 
 NO_V2I = -1.0  # red flag and time to green outside V2I range (paper)
 HEADING_EAST = 90.0  # [deg] SUMO angle of W->E travel
@@ -106,7 +106,7 @@ class GridLogicObservation:
         return SignalView(tls, link, dist, state, True, red, ttg)
 
     def observe(
-        self, session: SumoSession, vid: str, kin: tuple, neighbours: dict
+        self, session: SumoSession, vid: str, kin: Kinematics, neighbours: dict
     ) -> tuple[dict[str, np.ndarray], SignalView | None, list[tuple[float, float, float, float]]]:
         """Observation of ``vid``; also returns its signal view and the others' [x, y, angle, length]."""
         x, _, _, speed, _, lane, _ = kin

@@ -1,8 +1,10 @@
 """Safety layer (section 3.2): Krauss clip of the acceleration and LC2013 mask of lane changes.
 
 The pure functions hold the arithmetic; SUMO applies the Krauss bound itself when the vehicle
-runs with speed mode 31, so the applied acceleration is min(Krauss safe, requested) by
-construction, and is read back after the step.
+runs with speed mode ``envs.sumo.SPEED_MODE_SAFE`` (27: every check but the maximum deceleration,
+so that the vehicle may brake harder than a_min when Krauss' safe speed asks for it), so the
+applied acceleration is min(Krauss safe, requested) by construction, and is read back after the
+step.
 """
 from __future__ import annotations
 

@@ -7,6 +7,7 @@ first.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import libsumo as ls
 from libsumo import constants as tc
@@ -33,6 +34,18 @@ LC_MODE_DEFAULT = 1621  # SUMO's default (LC2013 decides)
 def sumo_version() -> str:
     """SUMO's version number, e.g. '1.28.0'."""
     return str(ls.getVersion()[1]).removeprefix("SUMO ").strip()
+
+
+class Kinematics(NamedTuple):
+    """One vehicle's state after a step, as SUMO reports it."""
+
+    x: float  # [m] front bumper
+    y: float  # [m]
+    angle: float  # [deg] SUMO heading
+    speed: float  # [m/s]
+    accel: float  # [m/s^2]
+    lane: int  # lane index, 0 = rightmost
+    edge: str  # road id (":..." inside a junction)
 
 
 @dataclass
@@ -160,11 +173,11 @@ class SumoSession:
         ls.vehicle.setLaneChangeMode(vid, LC_MODE_DEFAULT if lc2013 else LC_MODE_EXTERNAL)
 
     @staticmethod
-    def kinematics(vid: str) -> tuple[float, float, float, float, float, int, str]:
-        """(x [m], y [m], angle [deg], speed [m/s], accel [m/s^2], lane index, edge id)."""
+    def kinematics(vid: str) -> Kinematics:
         v = ls.vehicle
         x, y = v.getPosition(vid)
-        return (x, y, v.getAngle(vid), v.getSpeed(vid), v.getAcceleration(vid), v.getLaneIndex(vid), v.getRoadID(vid))
+        return Kinematics(x, y, v.getAngle(vid), v.getSpeed(vid), v.getAcceleration(vid), v.getLaneIndex(vid),
+                          v.getRoadID(vid))
 
     @staticmethod
     def neighbours(vid: str) -> dict[str, dict[int, object]]:

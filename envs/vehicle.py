@@ -57,14 +57,14 @@ class ControlledVehicle:
         s = self.session
         self.kin = s.kinematics(self.vid)
         obs, self.signal, self.others = self.obs_type.observe(s, self.vid, self.kin, s.neighbours(self.vid))
-        lane = self.kin[5]
+        lane = self.kin.lane
         self.mask = safety.lane_mask(lane, self.cfg.lanes, s.could_change(self.vid, 1), s.could_change(self.vid, -1))
         return obs
 
     def apply(self, cmd: Command) -> None:
         """Send ``cmd`` to SUMO for the coming step (call ``observe`` first)."""
         s, cfg = self.session, self.cfg
-        speed = self.kin[3]
+        speed = self.kin.speed
         lateral = 0
         if cmd.lateral is not None:
             lateral = safety.mask_lateral(cmd.lateral, self.mask)
@@ -72,7 +72,7 @@ class ControlledVehicle:
                 s.change_lane(self.vid, safety.paper_to_sumo(lateral))
         if cmd.accel is not None:
             s.set_speed(self.vid, safety.target_speed(speed, cmd.accel, cfg.step_length, cfg.speed_limit))
-        self._pending = (cmd, lateral, speed, self.kin[5], self.kin[0], self.kin[1])
+        self._pending = (cmd, lateral, speed, self.kin.lane, self.kin.x, self.kin.y)
 
     def measure(self) -> StepMeasure:
         """Read back the step just simulated (call after ``session.step``)."""
@@ -80,13 +80,13 @@ class ControlledVehicle:
         cmd, sent, v0, lane0, x0, y0 = self._pending
         kin = s.kinematics(self.vid)
         dt = cfg.step_length
-        applied = safety.applied_acceleration(v0, kin[3], dt)
+        applied = safety.applied_acceleration(v0, kin.speed, dt)
         clipped = cmd.accel is not None and safety.was_clipped(cmd.accel, applied, v0, dt, cfg.speed_limit)
-        lane_changed = kin[5] != lane0 and kin[6][:1] != ":" and kin[6] != ""
+        lane_changed = kin.lane != lane0 and kin.edge[:1] != ":" and kin.edge != ""
         # what happened, not what was asked: SUMO re-checks safety when it executes a change
-        lateral = -int(np.sign(kin[5] - lane0)) if lane_changed else 0  # SUMO index grows to the left
+        lateral = -int(np.sign(kin.lane - lane0)) if lane_changed else 0  # SUMO index grows to the left
         if cfg.reward.lane_change_charge == "request":
-            charged = self._charge(safety.paper_to_sumo(sent) if sent else 0, -lateral, kin[1] - y0)
+            charged = self._charge(safety.paper_to_sumo(sent) if sent else 0, -lateral, kin.y - y0)
         else:
             charged = lane_changed
         energy = s.energy_rate(self.vid) * dt
@@ -100,8 +100,8 @@ class ControlledVehicle:
             requested_accel=float("nan") if cmd.accel is None else cmd.accel,
             requested_lateral=0 if cmd.lateral is None else cmd.lateral,
             applied_accel=applied, applied_lateral=lateral, clipped=bool(clipped),
-            lane_changed=lane_changed, distance=max(0.0, kin[0] - x0),
-            energy=energy, jerk=jerk, speed=kin[3], lane_change_charged=charged,
+            lane_changed=lane_changed, distance=max(0.0, kin.x - x0),
+            energy=energy, jerk=jerk, speed=kin.speed, lane_change_charged=charged,
         )
 
     def _charge(self, sent: int, direction: int, dy: float) -> bool:

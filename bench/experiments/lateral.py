@@ -67,7 +67,7 @@ class Script:
     def before(self, env, step: int) -> None:
         s = env.session
         if self.name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in s.vehicle_ids():
-            v1 = s.kinematics("hdv1")[3]
+            v1 = s.kinematics("hdv1").speed
             s.set_speed("hdv1", max(0.0, v1 + HDV1_BRAKE * env.cfg.step_length))
         if step == BRAKE_AT + BRAKE_STEPS:  # the event is over: the HDVs drive by Krauss (and signals) again
             for v in self.vehicles:

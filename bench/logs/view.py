@@ -24,7 +24,6 @@ from bench.io import Unwritable, writable_dir
 
 GREEN, RED, YELLOW = (40, 180, 60), (220, 40, 40), (230, 190, 30)
 TRAIL_S = 60  # [s] of ego trail
-SERIES = ("speed", "requested_accel", "applied_accel", "energy_step", "energy_total", "reward")
 COMPONENTS = ("speed", "jerk", "lane_change", "distance", "energy", "time", "terminal")
 
 
