@@ -1,0 +1,1 @@
+"""Step logs: the MCAP schema, writer and reader, and the Rerun viewer."""
