@@ -85,3 +85,13 @@ def test_a_payload_in_a_training_checkpoint_is_refused(entry, run_folder, tmp_pa
     assert len(err.splitlines()) == 1 and "refused" in err and "checkpoint.pt" in err
     assert not marker.exists()
     assert (run / "checkpoint.pt").read_bytes() == before
+
+
+@pytest.mark.parametrize("text, words", [("[1, 2, 3]", "a JSON list, expected an object"), ("{oops", "not valid JSON")])
+def test_a_manifest_that_is_not_a_json_object_is_one_clear_error(text, words, tmp_path):
+    folder = tmp_path / "prl-uncoordinated"
+    shutil.copytree(policy_dir("prl", "uncoordinated"), folder)
+    (folder / "manifest.json").write_text(text)
+    with pytest.raises(CheckpointError, match=words) as e:
+        load_policy(folder, "prl")
+    assert "\n" not in str(e.value)
