@@ -20,10 +20,26 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from gymnasium import spaces
-from torch.func import functional_call
 
 from .base import check_config
-from .nets import Head, ObsScaler, OUNoise, features, soft_update
+from .nets import (
+    ConvPass,
+    Dense,
+    Head,
+    ObsScaler,
+    OUNoise,
+    Workspace,
+    adam,
+    clipped_adam_step,
+    first_layer_backward,
+    load_adam_state,
+    mlp_tail,
+    mlp_tail_backward,
+    set_conv_grads,
+    soft_update_,
+    trunk_dim,
+    zero_grads,
+)
 from .replay import Replay
 
 
@@ -68,8 +84,17 @@ class DDPGAgent:
             self.critic_target = Head(grid_shape, logic.shape[0], 1, (256, 64), 1)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
-        self.opt_actor = torch.optim.Adam(self.actor.parameters(), lr=cfg.lr_actor)
-        self.opt_critic = torch.optim.Adam(self.critic.parameters(), lr=cfg.lr_critic)
+        self.opt_actor = adam(self.actor.parameters(), lr=cfg.lr_actor)
+        self.opt_critic = adam(self.critic.parameters(), lr=cfg.lr_critic)
+        zero_grads(self.actor, self.critic)
+        self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
+        nfl = self._nf + self._nl
+        self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in (
+            "actor", "critic", "actor_target", "critic_target")}
+        self._soft = [([*t.parameters()], [*s.parameters()], tau) for t, s, tau in (
+            (self.critic_target, self.critic, cfg.tau_critic), (self.actor_target, self.actor, cfg.tau_actor))]
+        self._ws = Workspace()  # buffers of the target pass, then of the online pass (done after it)
+        self._critic_params, self._actor_params = [[*self.critic.parameters()]], [[*self.actor.parameters()]]
         self.rng = np.random.default_rng(cfg.seed)
         self.noise = OUNoise(1, cfg.ou_theta, cfg.ou_sigma, self.rng)
         self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1)
@@ -101,40 +126,67 @@ class DDPGAgent:
         return self.update()
 
     def update(self) -> dict[str, float]:
+        """One step for critic (0.5 MSE of Q(s, a) against r + gamma (1 - done) Q'(s', actor'(s')))
+        and actor (-Q(s, actor(s)) through the critic's layers as constants; with ``bound =
+        "invert"``, the inverted gradient of the module docstring), then the soft target updates.
+        The gradients are computed by hand, as in ``PDQNAgent.update``
+        (tests/agents/test_update_equivalence.py holds them to autograd's)."""
         c = self.cfg
-        b = self.replay.sample(self.rng, c.batch_size)
-        g, l = torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"])
         with torch.no_grad():
-            fc2, fa2 = features(torch.as_tensor(b["next_grid"], dtype=torch.float32),
-                                torch.as_tensor(b["next_logic"]), [self.critic_target, self.actor_target])
-            a2 = self._bounded(self.actor_target.from_features(fa2))
-            y = torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * \
-                self.critic_target.from_features(fc2, a2).squeeze(1)
-        fc, fa = features(g, l, [self.critic, self.actor])
-        loss_c = 0.5 * F.mse_loss(self.critic.from_features(fc, torch.as_tensor(b["action"])).squeeze(1), y)
-        frozen = {n: p.detach() for n, p in self.critic.mlp.named_parameters()}
-        out = self.actor.from_features(fa)
-        if c.bound == "tanh":
-            q = functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), torch.tanh(out)], 1),))
-            loss_a = -q.mean()
-        else:
-            a = out.detach().requires_grad_(True)
-            q = functional_call(self.critic.mlp, frozen, (torch.cat([fc.detach(), a], 1),))
-            dq = torch.autograd.grad(q.sum(), a)[0]
-            x = out.detach()
-            dq = torch.where(dq > 0, dq * (1.0 - x) / 2.0, dq * (x + 1.0) / 2.0)
-            loss_a = -(out * dq).sum() / out.shape[0]  # its gradient is the inverted -dQ/da, batch mean
-        self.opt_critic.zero_grad(set_to_none=True)
-        self.opt_actor.zero_grad(set_to_none=True)
-        (loss_c + loss_a).backward()  # each loss reaches only its own network
-        torch.nn.utils.clip_grad_norm_(self.critic.parameters(), c.grad_clip)
-        torch.nn.utils.clip_grad_norm_(self.actor.parameters(), c.grad_clip)
-        self.opt_critic.step()
-        self.opt_actor.step()
-        soft_update(self.critic_target, self.critic, c.tau_critic)
-        soft_update(self.actor_target, self.actor, c.tau_actor)
+            loss_c, q_mean = self._gradients(self.replay.sample_torch(self.rng, c.batch_size))
+            clipped_adam_step(self.opt_critic, self._critic_params, c.grad_clip)
+            clipped_adam_step(self.opt_actor, self._actor_params, c.grad_clip)
+            for targets, sources, tau in self._soft:
+                soft_update_(targets, sources, tau)
         self.updates += 1
-        return {"loss_q": loss_c.item(), "loss_param": -q.detach().mean().item()}  # -Q(s, actor(s)), as eq. 8
+        return {"loss_q": loss_c, "loss_param": -q_mean}  # -Q(s, actor(s)), as eq. 8
+
+    def _gradients(self, b: dict[str, torch.Tensor]) -> tuple[float, float]:
+        """The gradients into critic's and actor's ``.grad``; returns (critic loss, mean Q(s, actor(s)))."""
+        c = self.cfg
+        nf, nfl = self._nf, self._nf + self._nl
+        bsz = b["reward"].shape[0]
+        dn = self._dense
+        z2 = self._ws("z", (2, bsz, nfl + 1))
+        ConvPass(b["next_grid"], [self.critic_target.conv, self.actor_target.conv], z2, grad=False, ws=self._ws)
+        z2[:, :, nf:nfl] = b["next_logic"]
+        at, ct = dn["actor_target"], dn["critic_target"]
+        z2[0, :, nfl:] = self._bounded(mlp_tail(at, torch.addmm(at.b1, z2[1, :, :nfl], at.w1t))[2])
+        y = b["reward"] + c.gamma * (1.0 - b["done"]) * mlp_tail(ct, torch.addmm(ct.b1, z2[0], ct.w1t))[2].squeeze(1)
+
+        z = self._ws("z", (2, bsz, nfl + 1))
+        conv = ConvPass(b["grid"], [self.critic.conv, self.actor.conv], z, grad=True, ws=self._ws)
+        z[:, :, nf:nfl] = b["logic"]
+        dfeats = self._ws("dfeats", (2, bsz, nf))
+        cd, ad = dn["critic"], dn["actor"]
+        # the actor's action, then one pass of the critic's layers over Q(s, a_b) (rows :B, the
+        # critic's loss) and Q(s, actor(s)) (rows B:, the actor's, through the layers as constants);
+        # the first layer's part without the action is shared
+        hp1, hp2, out = mlp_tail(ad, torch.addmm(ad.b1, z[1, :, :nfl], ad.w1t))
+        a = torch.tanh(out) if c.bound == "tanh" else out
+        z[0, :, nfl:] = b["action"]
+        hc = torch.addmm(cd.b1, z[0, :, :nfl], cd.w1t_fl)
+        pre = self._ws("pre", (2 * bsz, hc.shape[1]))
+        torch.addmm(hc, b["action"], cd.w1t_x, out=pre[:bsz])
+        torch.addmm(hc, a, cd.w1t_x, out=pre[bsz:])
+        h1, h2, qs = mlp_tail(cd, pre)
+        q_b, q = qs[:bsz].squeeze(1), qs[bsz:]
+        loss_c = 0.5 * F.mse_loss(q_b, y)
+        dout = self._ws("dout", (2 * bsz, 1))
+        torch.div(q_b - y, bsz, out=dout[:bsz, 0])
+        dout[bsz:].fill_(-1.0 / bsz if c.bound == "tanh" else 1.0)  # d(-mean Q)/dQ, or dQ/dQ for dQ/da
+        dpre1 = mlp_tail_backward(cd, h1, h2, dout, rows=bsz)
+        first_layer_backward(cd, z[0], dpre1[:bsz], dfeats[0])
+        dq = torch.mm(dpre1[bsz:], cd.w1_x)
+        if c.bound == "tanh":
+            dout = torch.ops.aten.tanh_backward(dq, a)
+        else:  # dQ/da, inverted at the bounds, batch mean
+            dq = torch.where(dq > 0, dq * (1.0 - out) / 2.0, dq * (out + 1.0) / 2.0)
+            dout = -dq / bsz
+        dpre1 = mlp_tail_backward(ad, hp1, hp2, dout, rows=bsz)
+        first_layer_backward(ad, z[1, :, :nfl], dpre1, dfeats[1])
+        set_conv_grads([self.critic.conv, self.actor.conv], conv.backward(dfeats))
+        return float(loss_c), float(q.mean())
 
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:
         state = {"name": self.name, "config": asdict(self.cfg), "actor": self.actor.state_dict(),
@@ -155,8 +207,8 @@ class DDPGAgent:
         self.actor_target.load_state_dict(state.get("actor_target", state["actor"]))
         self.critic_target.load_state_dict(state.get("critic_target", state["critic"]))
         if "opt_actor" in state:
-            self.opt_actor.load_state_dict(state["opt_actor"])
-            self.opt_critic.load_state_dict(state["opt_critic"])
+            load_adam_state(self.opt_actor, state["opt_actor"])
+            load_adam_state(self.opt_critic, state["opt_critic"])
             self.rng.bit_generator.state = state["rng"]
             self.noise.state[:] = np.asarray(state["ou"])
             self.updates = state["updates"]

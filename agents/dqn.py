@@ -14,7 +14,24 @@ import torch.nn.functional as F
 from gymnasium import spaces
 
 from .base import check_config
-from .nets import Head, ObsScaler, features, linear_epsilon, soft_update
+from .nets import (
+    ConvPass,
+    Dense,
+    Head,
+    ObsScaler,
+    Workspace,
+    adam,
+    clipped_adam_step,
+    first_layer_backward,
+    linear_epsilon,
+    load_adam_state,
+    mlp_tail,
+    mlp_tail_backward,
+    set_conv_grads,
+    soft_update_,
+    trunk_dim,
+    zero_grads,
+)
 from .replay import Replay
 
 N_LAT = 3  # action index = lon * 3 + lat, lat index i is k = (-1, 0, +1)[i]
@@ -54,7 +71,13 @@ class DQNAgent:
             self.q = Head(grid_shape, logic.shape[0], 0, (256, 64), self.n)
             self.q_target = Head(grid_shape, logic.shape[0], 0, (256, 64), self.n)
         self.q_target.load_state_dict(self.q.state_dict())
-        self.opt = torch.optim.Adam(self.q.parameters(), lr=cfg.lr)
+        self.opt = adam(self.q.parameters(), lr=cfg.lr)
+        zero_grads(self.q)
+        self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
+        self._dense = Dense(self.q, self._nf, self._nf + self._nl)
+        self._dense_target = Dense(self.q_target, self._nf, self._nf + self._nl)
+        self._params, self._target_params = [*self.q.parameters()], [*self.q_target.parameters()]
+        self._ws = Workspace()  # buffers of the target pass, then of the online pass (done after it)
         self.rng = np.random.default_rng(cfg.seed)
         self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1)
         self.epsilon = cfg.eps_init
@@ -87,25 +110,44 @@ class DQNAgent:
         return self.update()
 
     def update(self) -> dict[str, float]:
+        """One step on 0.5 MSE of Q(s, a) against r + gamma (1 - done) max_a' Q'(s', a') over the
+        allowed a', then the soft target update. The gradients are computed by hand, as in
+        ``PDQNAgent.update`` (tests/agents/test_update_equivalence.py holds them to autograd's)."""
         c = self.cfg
-        b = self.replay.sample(self.rng, c.batch_size)
-        a = torch.as_tensor(b["action"][:, 0]).long()
         with torch.no_grad():
-            (f2,) = features(torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"]),
-                             [self.q_target])
-            mask2 = torch.as_tensor(b["next_mask"]).repeat(1, self.n // N_LAT)
-            q2 = self.q_target.from_features(f2).masked_fill(~mask2, -torch.inf).max(1).values
-            y = torch.as_tensor(b["reward"]) + c.gamma * (1.0 - torch.as_tensor(b["done"])) * q2
-        (f,) = features(torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"]), [self.q])
-        q = self.q.from_features(f).gather(1, a[:, None]).squeeze(1)
-        loss = 0.5 * F.mse_loss(q, y)
-        self.opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(self.q.parameters(), c.grad_clip)
-        self.opt.step()
-        soft_update(self.q_target, self.q, c.tau)
+            loss = self._gradients(self.replay.sample_torch(self.rng, c.batch_size))
+            clipped_adam_step(self.opt, [self._params], c.grad_clip)
+            soft_update_(self._target_params, self._params, c.tau)
         self.updates += 1
-        return {"loss_q": loss.item()}
+        return {"loss_q": loss}
+
+    def _gradients(self, b: dict[str, torch.Tensor]) -> float:
+        """The loss's gradient into ``self.q``'s ``.grad``; returns the loss."""
+        c = self.cfg
+        nf, nfl = self._nf, self._nf + self._nl
+        bsz = b["reward"].shape[0]
+        z2 = self._ws("z", (1, bsz, nfl))
+        ConvPass(b["next_grid"], [self.q_target.conv], z2, grad=False, ws=self._ws)
+        z2[:, :, nf:] = b["next_logic"]
+        dt = self._dense_target
+        q2 = mlp_tail(dt, torch.addmm(dt.b1, z2[0], dt.w1t))[2]
+        mask2 = b["next_mask"].repeat(1, self.n // N_LAT)
+        q2 = q2.masked_fill(~mask2, -torch.inf).max(1).values
+        y = b["reward"] + c.gamma * (1.0 - b["done"]) * q2
+
+        z = self._ws("z", (1, bsz, nfl))
+        conv = ConvPass(b["grid"], [self.q.conv], z, grad=True, ws=self._ws)
+        z[:, :, nf:] = b["logic"]
+        d = self._dense
+        h1, h2, out = mlp_tail(d, torch.addmm(d.b1, z[0], d.w1t))
+        a = b["action"][:, 0].long()[:, None]
+        q = out.gather(1, a).squeeze(1)
+        loss = 0.5 * F.mse_loss(q, y)
+        dpre1 = mlp_tail_backward(d, h1, h2, torch.zeros_like(out).scatter_(1, a, ((q - y) / bsz)[:, None]), rows=bsz)
+        dfeats = self._ws("dfeats", (1, bsz, nf))
+        first_layer_backward(d, z[0], dpre1, dfeats[0])
+        set_conv_grads([self.q.conv], conv.backward(dfeats))
+        return float(loss)
 
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:
         state = {"name": self.name, "config": asdict(self.cfg), "q": self.q.state_dict()}
@@ -120,6 +162,6 @@ class DQNAgent:
         self.q.load_state_dict(state["q"])
         self.q_target.load_state_dict(state.get("q_target", state["q"]))
         if "opt" in state:
-            self.opt.load_state_dict(state["opt"])
+            load_adam_state(self.opt, state["opt"])
             self.rng.bit_generator.state = state["rng"]
             self.epsilon, self.updates = state["epsilon"], state["updates"]

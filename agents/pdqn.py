@@ -20,7 +20,26 @@ from gymnasium import spaces
 from torch.func import functional_call
 
 from .base import check_config
-from .nets import Head, ObsScaler, OUNoise, features, linear_epsilon, soft_update
+from .nets import (
+    ConvPass,
+    Dense,
+    Head,
+    ObsScaler,
+    OUNoise,
+    Workspace,
+    adam,
+    clipped_adam_step,
+    features,
+    first_layer_backward,
+    linear_epsilon,
+    load_adam_state,
+    mlp_tail,
+    mlp_tail_backward,
+    set_conv_grads,
+    soft_update_,
+    trunk_dim,
+    zero_grads,
+)
 from .replay import NStepWindow, Replay
 
 K = 3  # lateral choices: k = -1, 0, +1
@@ -80,8 +99,21 @@ class PDQNAgent:
         critics = [self.q] + ([self.q2] if cfg.twin_q else [])
         if cfg.twin_q:
             self.q2_target.load_state_dict(self.q2.state_dict())
-        self.opt_q = torch.optim.Adam([p for c in critics for p in c.parameters()], lr=cfg.lr_q)
-        self.opt_param = torch.optim.Adam(self.param.parameters(), lr=cfg.lr_param)
+        self.opt_q = adam([p for c in critics for p in c.parameters()], lr=cfg.lr_q)
+        self.opt_param = adam(self.param.parameters(), lr=cfg.lr_param)
+        zero_grads(*critics, self.param)
+        self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
+        self._eye = torch.eye(K)
+        self._ws = Workspace()  # buffers of the target pass, then of the online pass (done after it)
+        nfl = self._nf + self._nl
+        self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in (
+            "q", "param", "q_target", "param_target", "q2", "q2_target") if getattr(self, name) is not None}
+        pairs = [(self.q_target, self.q), (self.param_target, self.param)] + (
+            [(self.q2_target, self.q2)] if cfg.twin_q else [])
+        self._soft = [([*t.parameters()], [*s.parameters()], tau) for (t, s), tau in zip(
+            pairs, (cfg.tau_q, cfg.tau_param, cfg.tau_q))]
+        self._q_lists = [[*n.parameters()] for n in critics]
+        self._p_lists = [[*self.param.parameters()]]
         self.rng = np.random.default_rng(cfg.seed)
         self.noise = OUNoise(K, cfg.ou_theta, cfg.ou_sigma, self.rng)
         self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1 + K)
@@ -204,23 +236,120 @@ class PDQNAgent:
         return loss_q, loss_p
 
     def update(self) -> dict[str, float]:
+        """One gradient step on ``losses`` (eq. 7 and eq. 8), then the soft target updates.
+
+        The gradients are computed by hand (``_gradients``), not by autograd through ``losses``:
+        the same math, in fewer and larger ops (tests/agents/test_update_equivalence.py)."""
         c = self.cfg
-        loss_q, loss_p = self.losses(self.replay.sample(self.rng, c.batch_size))
-        self.opt_q.zero_grad(set_to_none=True)
-        self.opt_param.zero_grad(set_to_none=True)
-        (loss_q + loss_p).backward()  # one pass through the shared grouped conv
-        torch.nn.utils.clip_grad_norm_(self.q.parameters(), c.grad_clip)
-        torch.nn.utils.clip_grad_norm_(self.param.parameters(), c.grad_clip)
-        if c.twin_q:
-            torch.nn.utils.clip_grad_norm_(self.q2.parameters(), c.grad_clip)
-        self.opt_q.step()
-        self.opt_param.step()
-        soft_update(self.q_target, self.q, c.tau_q)
-        soft_update(self.param_target, self.param, c.tau_param)
-        if c.twin_q:
-            soft_update(self.q2_target, self.q2, c.tau_q)
+        with torch.no_grad():
+            loss_q, loss_p = self._gradients(self.replay.sample_torch(self.rng, c.batch_size))
+            clipped_adam_step(self.opt_q, self._q_lists, c.grad_clip)
+            clipped_adam_step(self.opt_param, self._p_lists, c.grad_clip)
+            for targets, sources, tau in self._soft:
+                soft_update_(targets, sources, tau)
         self.updates += 1
-        return {"loss_q": loss_q.item(), "loss_param": loss_p.item()}
+        return {"loss_q": loss_q, "loss_param": loss_p}
+
+    def _q_every_k(self, d: Dense, z: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+        """``q_values`` (B, K) for the Q network ``d`` on inputs ``z`` = [features, logic, room for
+        x] (B, nf + nl + K) at parameters ``x``. Multi-pass: the first layer's part without x is
+        computed once; pass k adds x_k times x_k's weight column."""
+        nfl = self._nf + self._nl
+        if not self.cfg.multipass:
+            z[:, nfl:] = x
+            return mlp_tail(d, torch.addmm(d.b1, z, d.w1t))[2]
+        b = z.shape[0]
+        h = torch.addmm(d.b1, z[:, :nfl], d.w1t_fl)
+        pre = h.new_empty(K, *h.shape)
+        torch.addcmul(h, x.t()[:, :, None], d.w1t_x[:, None, :], out=pre)
+        return mlp_tail(d, pre.view(K * b, -1))[2].view(K, b, K).diagonal(dim1=0, dim2=2)
+
+    def _critic(self, d: Dense, z: torch.Tensor, k: torch.Tensor, onehot: torch.Tensor, x_q: torch.Tensor,
+                y: torch.Tensor, dfeats: torch.Tensor, x: torch.Tensor | None = None):
+        """Eq. 7 for the critic ``d`` (inputs ``z``, taken k and parameters ``x_q``, target ``y``):
+        its gradients into ``.grad`` and its features' into ``dfeats``. With ``x`` (the parameter
+        network's output), eq. 8 too, in the same pass of the critic's layers (rows B: after eq. 7's
+        :B; multi-pass K B of them), through the layers as constants: its gradient goes to x only.
+        Returns (eq. 7 loss, eq. 8 loss or None, d eq. 8 / dx or None)."""
+        nfl, bsz, mp = self._nf + self._nl, k.shape[0], self.cfg.multipass
+        z[:, nfl:] = x_q
+        h = torch.addmm(d.b1, z[:, :nfl], d.w1t_fl)  # the first layer's part without x: shared
+        rows = bsz if x is None else bsz + (K * bsz if mp else bsz)
+        pre = self._ws(f"pre{rows}", (rows, h.shape[1]))
+        torch.addmm(h, x_q, d.w1t_x, out=pre[:bsz])
+        if x is not None and mp:  # pass k adds x_k times x_k's weight column
+            torch.addcmul(h, x.t()[:, :, None], d.w1t_x[:, None, :], out=pre[bsz:].view(K, bsz, -1))
+        elif x is not None:
+            torch.addmm(h, x, d.w1t_x, out=pre[bsz:])
+        h1, h2, out = mlp_tail(d, pre)
+        q_sa = out[:bsz].gather(1, k[:, None]).squeeze(1)
+        loss_q = 0.5 * F.mse_loss(q_sa, y)
+        dout = self._ws(f"dout{rows}", (rows, K))
+        torch.mul(onehot, ((q_sa - y) / bsz)[:, None], out=dout[:bsz])
+        loss_p = None
+        if x is not None:  # -sum_k Q(s, k, x(s)), batch mean
+            qx = out[bsz:].view(K, bsz, K).diagonal(dim1=0, dim2=2) if mp else out[bsz:]
+            loss_p = -qx.sum(1).mean()
+            if mp:
+                dout[bsz:].zero_()
+                dout[bsz:].view(K, bsz, K).diagonal(dim1=0, dim2=2).fill_(-1.0 / bsz)
+            else:
+                dout[bsz:].fill_(-1.0 / bsz)
+        dpre1 = mlp_tail_backward(d, h1, h2, dout, rows=bsz)
+        first_layer_backward(d, z, dpre1[:bsz], dfeats)
+        if x is None:
+            return loss_q, None, None
+        if mp:
+            return loss_q, loss_p, torch.bmm(dpre1[bsz:].view(K, bsz, -1), d.w1t_x[:, :, None]).view(K, bsz).t()
+        return loss_q, loss_p, torch.mm(dpre1[bsz:], d.w1_x)
+
+    def _gradients(self, b: dict[str, torch.Tensor]) -> tuple[float, float]:
+        """The gradients of ``losses`` into the online networks' ``.grad``; returns the losses."""
+        c = self.cfg
+        nf, nl, twin, mp = self._nf, self._nl, c.twin_q, c.multipass
+        nfl = nf + nl
+        bsz = b["reward"].shape[0]
+        nets = [self.q, self.param] + ([self.q2] if twin else [])
+        dn = self._dense
+        qd = [dn["q"]] + ([dn["q2"]] if twin else [])
+        pd = dn["param"]
+
+        # target (as ``target``)
+        z2 = self._ws("z", (len(nets), bsz, nfl + K))
+        ConvPass(b["next_grid"], [n.conv for n in (self.q_target, self.param_target, self.q2_target)[:len(nets)]],
+                 z2, grad=False, ws=self._ws)
+        z2[:, :, nf:nfl] = b["next_logic"]
+        pt = dn["param_target"]
+        x2 = torch.tanh(mlp_tail(pt, torch.addmm(pt.b1, z2[1, :, :nfl], pt.w1t))[2])
+        q2 = self._q_every_k(dn["q_target"], z2[0], x2)
+        if twin:
+            q2 = torch.minimum(q2, self._q_every_k(dn["q2_target"], z2[2], x2))
+        q2 = q2.masked_fill(~b["next_mask"], -torch.inf)
+        discount = c.gamma if c.n_step == 1 else c.gamma ** b["steps"]
+        y = b["reward"] + discount * (1.0 - b["done"]) * q2.max(1).values
+
+        # online features
+        z = self._ws("z", (len(nets), bsz, nfl + K))
+        conv = ConvPass(b["grid"], [n.conv for n in nets], z, grad=True, ws=self._ws)
+        z[:, :, nf:nfl] = b["logic"]
+        dfeats = self._ws("dfeats", (len(nets), bsz, nf))
+        k, x_b = b["action"][:, 0].long(), b["action"][:, 1:]
+        onehot = self._eye[k]
+        x_q = x_b * onehot if mp else x_b  # multi-pass: Q_k sees only x_k
+
+        # eq. 8's parameters x(s; w); their gradient from the first critic's pass below
+        hp1, hp2, out_p = mlp_tail(pd, torch.addmm(pd.b1, z[1, :, :nfl], pd.w1t))
+        x = torch.tanh(out_p)
+
+        # eq. 7 for each critic; eq. 8 in the same pass of the first critic's layers
+        loss_q, loss_p, dx = self._critic(qd[0], z[0], k, onehot, x_q, y, dfeats[0], x)
+        if twin:
+            loss_q = loss_q + self._critic(qd[1], z[2], k, onehot, x_q, y, dfeats[2])[0]
+        dpre1 = mlp_tail_backward(pd, hp1, hp2, torch.ops.aten.tanh_backward(dx, x), rows=bsz)
+        first_layer_backward(pd, z[1, :, :nfl], dpre1, dfeats[1])
+
+        set_conv_grads([n.conv for n in nets], conv.backward(dfeats))
+        return float(loss_q), float(loss_p)
 
     # ------------------------------------------------------------------ state
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:
@@ -251,8 +380,8 @@ class PDQNAgent:
             if self.cfg.twin_q:
                 self.q2.load_state_dict(state["q2"])
                 self.q2_target.load_state_dict(state["q2_target"])
-            self.opt_q.load_state_dict(state["opt_q"])
-            self.opt_param.load_state_dict(state["opt_param"])
+            load_adam_state(self.opt_q, state["opt_q"])
+            load_adam_state(self.opt_param, state["opt_param"])
             self.rng.bit_generator.state = state["rng"]
             self.noise.state[:] = np.asarray(state["ou"])
             self.epsilon, self.updates = state["epsilon"], state["updates"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import torch
 
 
 class Replay:
@@ -23,6 +24,7 @@ class Replay:
         self.steps = np.ones(capacity, dtype=np.float32)  # env steps from state to next state (n-step)
         self.size = 0
         self.pos = 0
+        self._batches: dict[int, tuple[dict[str, np.ndarray], dict[str, torch.Tensor]]] = {}
 
     def add(self, grid, logic, action, reward, next_grid, next_logic, done, next_mask, steps: int = 1) -> None:
         i = self.pos
@@ -35,6 +37,18 @@ class Replay:
     def sample(self, rng: np.random.Generator, batch: int) -> dict[str, np.ndarray]:
         idx = rng.integers(0, self.size, size=batch)
         return {f: getattr(self, f)[idx] for f in self.FIELDS}
+
+    def sample_torch(self, rng: np.random.Generator, batch: int) -> dict[str, torch.Tensor]:
+        """``sample``'s batch (the same draw from ``rng``) as torch tensors, gathered into buffers
+        that the next call overwrites; grids stay uint8."""
+        idx = rng.integers(0, self.size, size=batch)
+        if batch not in self._batches:
+            arrays = {f: np.empty((batch, *getattr(self, f).shape[1:]), getattr(self, f).dtype) for f in self.FIELDS}
+            self._batches[batch] = arrays, {f: torch.from_numpy(a) for f, a in arrays.items()}
+        arrays, tensors = self._batches[batch]
+        for f, a in arrays.items():
+            np.take(getattr(self, f), idx, axis=0, out=a)
+        return tensors
 
     def save(self, path: Path) -> None:
         n = self.size

@@ -1,4 +1,6 @@
-"""Ratios from one pytest-benchmark JSON file (all numbers from the same run).
+"""Ratios from one pytest-benchmark JSON file (all numbers from the same run): env step against
+raw SUMO, logging overhead, the projected training run, and each learner's update against its
+FLOP floor (the update's counted FLOPs at this core's measured matmul rate).
 
     ecodrive perf .benchmarks/perf.json
 """
@@ -11,6 +13,8 @@ from pathlib import Path
 from bench.args import Parser, fail
 
 STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes run longer than greedy ones)
+LEARNERS = ("prl", "mpdqn", "dqn", "ddpg")  # test_learner_update[...] benchmarks
+FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
     "env_step_over_sim_in_run": ("", "", 2.0, "env.step / its own simulationStep"),
@@ -48,6 +52,15 @@ def ratios(path: Path) -> dict[str, float]:
             out["matmul_gflops"] = rate / 1e9
             out["update_over_floor"] = med["test_learner_update[prl]"] / floor
             out["prl_1000_episodes_floor_min"] = floor * STEPS_PER_EPISODE * 1000 / 60
+    if "test_matmul_rate" in med:
+        rate = extra["test_matmul_rate"]["flops"] / med["test_matmul_rate"]
+        for m in LEARNERS:
+            name = f"test_learner_update[{m}]"
+            flops = extra.get(name, {}).get("flops")
+            if name in med and flops:
+                out[f"update_gflop_{m}"] = flops / 1e9
+                out[f"update_over_floor_{m}"] = med[name] * rate / flops
+                out[f"updates_per_s_{m}"] = 1.0 / med[name]  # median: one update's typical time
     return out
 
 
@@ -86,9 +99,15 @@ def main(argv: list[str] | None = None) -> int:
     if "update_over_floor" in r:
         print(f"{'PRL update: floating-point work':40s} {r['update_gflop']:6.3f} GFLOP "
               f"(one core's matmul rate: {r['matmul_gflops']:.1f} GFLOP/s)")
-        print(f"{'PRL update / its FLOP floor':40s} {r['update_over_floor']:6.2f}x")
         print(f"{'1000 episodes of updates at the floor':40s} {r['prl_1000_episodes_floor_min']:6.1f} min "
               f"(no env steps; one update of batch 128 per step)")
+    for m in LEARNERS:
+        if f"update_over_floor_{m}" in r:
+            good = r[f"update_over_floor_{m}"] <= FLOOR_LIMIT
+            ok &= good
+            print(f"{m.upper() + ' update / its FLOP floor':40s} {r[f'update_over_floor_{m}']:6.2f}x  "
+                  f"(target <= {FLOOR_LIMIT}x; {r[f'update_gflop_{m}']:.3f} GFLOP, "
+                  f"{r[f'updates_per_s_{m}']:.0f} updates/s) {'ok' if good else 'MISSED'}")
     return 0 if ok else 1
 
 

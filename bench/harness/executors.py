@@ -41,7 +41,7 @@ def run_task(task: Task) -> dict[str, Any]:
 
     from agents.registry import LEARNING, make_agent
     from bench.harness.episode import make_env, run_episode
-    from bench.harness.policies import load_policy
+    from bench.harness.policies import CheckpointError, load_policy
 
     torch.set_num_threads(1)
     key = (task.method, task.signals, task.policy_dir)
@@ -54,12 +54,16 @@ def run_task(task: Task) -> dict[str, Any]:
         _ENVS[(task.method, task.signals)] = make_env(task.method, task.signals)
     env = _ENVS[(task.method, task.signals)]
     if key not in _AGENTS:
-        agent = make_agent(task.method, env.observation_space, env.action_space)
-        sha = ""
+        sha, state, config = "", None, {}
         if task.method in LEARNING:
             state, manifest = load_policy(Path(task.policy_dir), task.method, env.cfg.to_dict())
+            sha, config = manifest["sha256"], manifest.get("agent_config") or {}
+        try:  # an experiment's policy (ecodrive train --set) is built with the config it trained with
+            agent = make_agent(task.method, env.observation_space, env.action_space, **config)
+        except (TypeError, ValueError) as e:
+            raise CheckpointError(f"{task.policy_dir}/manifest.json: agent_config {config!r} not accepted ({e})") from None
+        if state is not None:
             agent.load_state_dict(state)
-            sha = manifest["sha256"]
         _AGENTS[key] = (agent, sha)
     agent, sha = _AGENTS[key]
     t0 = time.perf_counter()

@@ -15,8 +15,9 @@ metrics) and the run's per-episode ``metrics.parquet``.
 
 ``--set FIELD=VALUE`` (repeatable) overrides a field of the method's agent config for an
 experiment (e.g. ``--set twin_q=true`` for PRL). Such a run gets its own folder
-(``<method>-<signals>-s<seed>+FIELD=VALUE``) and is never exported to ``models/``: the shipped
-policies are the paper's agents.
+(``<method>-<signals>-s<seed>+FIELD=VALUE``) and is never exported to the shipped ``models/``
+(those are the recipe's agents); give ``--models DIR`` to export it elsewhere, for example to
+evaluate it on the test cases with ``ecodrive run --models DIR``.
 """
 from __future__ import annotations
 
@@ -251,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
     ap.add_argument("--no-export", action="store_true", help="do not write <models>/<method>-<signals>/ at the end")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                    help="override an agent config field for an experiment (repeatable; such runs are not exported)")
+                    help="override an agent config field for an experiment (repeatable; exported only to an explicit --models DIR)")
     args = ap.parse_args(argv)
     if args.method not in LEARNING:
         ap.error(f"--method {args.method!r} is not accepted; choose one of {', '.join(LEARNING)}")
@@ -269,15 +270,17 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(str(e))
     suffix = "".join(f"+{k}={v}" for k, v in sorted(overrides.items()))
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
-    if overrides and not args.no_export:
-        print(f"note: an experiment ({suffix[1:]}); it is not exported to models/", file=sys.stderr)
+    experiment_to_shipped = bool(overrides) and args.models.resolve() == MODELS.resolve()
+    if experiment_to_shipped and not args.no_export:
+        print(f"note: an experiment ({suffix[1:]}); it is not exported to the shipped models/"
+              " (give --models DIR to export it elsewhere)", file=sys.stderr)
     try:
         writable_dir(out)
     except Unwritable as e:
         return fail(ap.prog, str(e))
     try:
         df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
-                   models=None if args.no_export or overrides else args.models,
+                   models=None if args.no_export or experiment_to_shipped else args.models,
                    command=["ecodrive", "train", *(argv if argv is not None else sys.argv[1:])],
                    validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select)
     except CheckpointError as e:
