@@ -21,11 +21,12 @@ from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
 from . import experiments, figures, metrics, tables
 from .html import Figure, Page, esc, experiment_caption, label, render
-from .load import RunError, component_sums, load_run, load_steps, stop_lines
+from .load import RunError, component_sums, load_plan, load_run, load_steps, stop_lines
 
-METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn")
+METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle")
 LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
+BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
 
 
 def build(run_dir: Path, out: Path) -> Path:
@@ -178,6 +179,9 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
                     trajs[method] = metrics.trajectory(steps)
                     if len(steps) > longest:  # bands over the longer drive
                         longest, bands = len(steps), metrics.signal_bands(steps, *stop_lines(steps))
+                plan = _bound_plan(run_dir, sub, case, warnings) if trajs else None
+                if plan is not None:
+                    trajs[BOUND_LABEL] = plan
                 if trajs and bands is not None:
                     name = f"compare-{signals}-case{case:03d}"
                     p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
@@ -185,6 +189,18 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
                                                     f"{signals} case {case}"))
                     md += [f"![{name}](figures/{p[0].name})", ""]
     return md, warnings
+
+
+def _bound_plan(run_dir: Path, sub: pd.DataFrame, case: int, warnings: list[str]) -> pd.DataFrame | None:
+    """The energy-optimal plan of ``case``, from the oracle's log when the run has one."""
+    rows = sub[(sub.method == "oracle") & (sub.case == case)]
+    if rows.empty:
+        return None
+    try:
+        return load_plan(resolve_log(run_dir, rows.mcap.iloc[0]))
+    except LogError as e:
+        warnings.append(str(e))
+        return None
 
 
 def _violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[str], signals: str) -> str:
@@ -199,9 +215,12 @@ def _violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[s
 
 def _trajectory_caption(drawn: list[str], signals: str, case: int) -> str:
     who = esc(" and ".join(label(m) for m in drawn))
+    plan = (" The dashed line is the energy-optimal plan, the trajectory of the case's bound (the ego alone on "
+            "the corridor; no energy curve)." if BOUND_LABEL in drawn else "")
     return (f"<b>fig:compare, {esc(signals)} signals, test case {case}</b> ({who}). Left: distance travelled [m] against "
             "time since entry [s], with the signal state at each stop line as green and red bars at its position; "
-            "middle: speed [m/s]; right: cumulative battery energy [Wh] (it falls where braking recovers energy).")
+            "middle: speed [m/s]; right: cumulative battery energy [Wh] (it falls where braking recovers energy)."
+            + plan)
 
 
 def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str]) -> tuple[pd.DataFrame | None, int]:

@@ -45,9 +45,11 @@ def trajectories(trajs: dict[str, pd.DataFrame], bands: pd.DataFrame, title: str
         axes[0].plot([b.t_start, b.t_end], [b.x, b.x], color="tab:green" if b.green else "tab:red", lw=3,
                      solid_capstyle="butt")
     for method, tr in trajs.items():
-        axes[0].plot(tr.t, tr.distance, label=method)
-        axes[1].plot(tr.t, tr.speed, label=method)
-        axes[2].plot(tr.t, tr.energy, label=method)
+        style = {"ls": "--", "color": "black", "lw": 1} if tr.energy.isna().all() else {}  # a plan: no energy
+        axes[0].plot(tr.t, tr.distance, label=method, **style)
+        axes[1].plot(tr.t, tr.speed, label=method, **style)
+        if not style:
+            axes[2].plot(tr.t, tr.energy, label=method)
     for ax, ylab in zip(axes, ("distance [m]", "speed [m/s]", "cumulative energy [Wh]")):
         ax.set_xlabel("time since entry [s]")
         ax.set_ylabel(ylab)

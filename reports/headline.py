@@ -20,7 +20,7 @@ from bench.paper import TABLE4, improvement
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
 SETTINGS = (("coordinated", "coord."), ("uncoordinated", "non-coord."))
-ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn")
+ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle")
 LABELS = {"baseline": "baseline (SUMO's driver)", "baseline0": "baseline0 (SUMO, sigma 0)", "glosa": "glosa (SUMO device)",
           "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013", "dqn": "DQN-27"}
 

@@ -23,7 +23,7 @@ STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT IN THIS RUN": "absent", "NO
                 "KNOWN FAIL": "fail", "OUTSIDE BAND": "fail"}
 METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
                  "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",
-                 "dqn": "DQN"}
+                 "dqn": "DQN", "oracle": "Oracle (energy-optimal plan replayed in traffic)"}
 METRIC_UNITS = {"energy": ("Energy", "Wh"), "travel_time": ("Travel time", "s")}
 
 

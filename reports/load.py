@@ -44,6 +44,17 @@ def load_steps(path: Path) -> tuple[pd.DataFrame, str]:
     return pd.DataFrame(rows), data.warning
 
 
+def load_plan(path: Path) -> pd.DataFrame | None:
+    """The planned trajectory a log carries (the ``oracle`` method's), as ``trajectory`` columns
+    (time since entry, distance, speed; no cumulative energy), or None."""
+    plan = read_log(path).plan
+    if not plan:
+        return None
+    t, x = np.asarray(plan["time"], float), np.asarray(plan["x"], float)
+    return pd.DataFrame({"t": t - t[0], "distance": x - x[0], "speed": np.asarray(plan["speed"], float),
+                         "energy": np.nan})
+
+
 def component_sums(path: Path) -> tuple[dict[str, float], str]:
     """The episode's sum of each reward component (``envs.rewards.COMPONENTS``) and of the reward,
     from the /step channel, and a warning ('' if the log is complete)."""

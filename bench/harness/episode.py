@@ -102,6 +102,9 @@ def run_episode(
             "battery_consumed": consumed, "battery_regenerated": regenerated,
         }
         if log is not None:
+            plan = getattr(agent, "plan_trace", None)  # the oracle's planned trajectory
+            if plan is not None:
+                log.add_plan(plan)
             log.finish(summary)
         return summary
     except BaseException:

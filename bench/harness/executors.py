@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.harness.cases import Case
+from bench.harness.oracle import NAME as ORACLE
 
 EXECUTORS = ("local", "ray")
 
@@ -50,6 +51,11 @@ def run_task(task: Task) -> dict[str, Any]:
 
         _ENVS[(task.method, task.signals)], agent = make(task.factory, task.signals)
         _AGENTS[key] = (agent, "")
+    if task.method == ORACLE and key not in _AGENTS:
+        from bench.harness.oracle import OracleAgent
+
+        _ENVS[(task.method, task.signals)] = env = make_env(OracleAgent, task.signals)  # type: ignore[arg-type]
+        _AGENTS[key] = (OracleAgent(env.cfg), "")
     if (task.method, task.signals) not in _ENVS:
         _ENVS[(task.method, task.signals)] = make_env(task.method, task.signals)
     env = _ENVS[(task.method, task.signals)]

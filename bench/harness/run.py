@@ -25,6 +25,7 @@ from bench.harness.bounds import attach
 from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
 from bench.harness.external import GROUP, AgentError, registered
+from bench.harness.oracle import NAME as ORACLE
 from bench.harness.policies import MODELS, CheckpointError, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import git_sha, package_versions
 from bench.io import Unwritable, atomic_json, atomic_parquet, sha256, writable_dir
@@ -52,9 +53,10 @@ def parser() -> Parser:
                     help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
                          "experiments (in `nox -s benchmark`)")
     users = registered()
-    ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, *users],
-                    help=f"among {', '.join([*METHODS, *users])} (default: every method with a shipped policy; "
-                         f"installed agents of the entry-point group {GROUP} run when named)")
+    ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, ORACLE, *users],
+                    help=f"among {', '.join([*METHODS, ORACLE, *users])} (default: every method with a shipped "
+                         f"policy; {ORACLE} (the energy-optimal plan replayed, a DP solve per case) and installed "
+                         f"agents of the entry-point group {GROUP} run when named)")
     ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
                     help="also evaluate your own agent: factory(observation_space, action_space) -> agents.base.Agent")
     ap.add_argument("--name", type=name, default=None,
@@ -84,7 +86,7 @@ def parse(argv: list[str]) -> dict[str, Any]:
     opts["factories"] = {m: users[m] for m in opts["methods"] or [] if m in users}
     if opts["agent"]:
         label = opts["name"] or opts["agent"].split(":")[-1]
-        if label in METHODS or label in opts["factories"]:
+        if label in (*METHODS, ORACLE) or label in opts["factories"]:
             ap.error(f"--name {label!r} is taken by a built-in or installed method; choose another")
         opts["factories"][label] = opts["agent"]
     elif opts["name"]:

@@ -1,7 +1,8 @@
 """MCAP step log: protobuf messages, zstd chunks, one file per episode.
 
 Channels: ``/meta`` (one ``Metadata``), ``/step`` (one ``Step`` per simulation step, log time =
-simulation time) and ``/episode`` (one ``Episode`` summary, written last). A file is written as
+simulation time) and ``/episode`` (one ``Episode`` summary, written last); metadata records ``ecodrive`` (the run's
+provenance, written first) and, for a method that plans, ``plan`` (its planned trajectory). A file is written as
 ``<name>.part`` and renamed when finished, so a finished ``.mcap`` is complete by construction;
 a killed run leaves a ``.part`` that ``read_log`` reads up to its last complete chunk.
 """
@@ -29,6 +30,7 @@ CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this 
 TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode,
           "/train": schema.TrainEpisode, "/fleet/vehicle": schema.FleetVehicle, "/fleet/cell": schema.FleetCell}
 PART = ".part"
+PLAN = "plan"  # MCAP metadata record of a planned trajectory (JSON under "json")
 # serialized FileDescriptorSets, built once per process (they are the same for every file)
 _SCHEMAS = {topic: (cls.DESCRIPTOR.full_name, build_file_descriptor_set(cls).SerializeToString())
             for topic, cls in TOPICS.items()}
@@ -106,6 +108,11 @@ class EpisodeLog:
         t = _ns(rec["time"])
         self._w.add_message(channel_id=self._step_channel, log_time=t, data=s.SerializeToString(), publish_time=t)
 
+    def add_plan(self, plan: dict[str, Any]) -> None:
+        """Attach a planned trajectory (``time``, ``x``, ``speed`` lists and scalars; the ``oracle``
+        method's) as the MCAP metadata record ``plan``, read back as ``LogData.plan``."""
+        self._w.add_metadata(PLAN, {"json": json.dumps(plan)})
+
     def finish(self, summary: dict[str, Any]) -> Path:
         """Write the episode summary, close, and publish the file under its final name."""
         t = _ns(self._last_time)
@@ -131,6 +138,7 @@ class LogData:
     train: list[Any] = field(default_factory=list)  # /train messages (training logs)
     fleet_vehicles: list[Any] = field(default_factory=list)  # /fleet/vehicle (mixed traffic)
     fleet_cell: Any = None  # /fleet/cell summary (mixed traffic)
+    plan: dict[str, Any] | None = None  # a planned trajectory (the oracle's), if the log has one
     complete: bool = False  # footer read and episode summary present
     warning: str = ""
 
@@ -155,6 +163,8 @@ def read_log(path: str | Path) -> LogData:
                     channels[rec.id] = rec.topic
                 elif kind == "Metadata" and rec.name == "ecodrive":
                     data.meta = dict(rec.metadata)
+                elif kind == "Metadata" and rec.name == PLAN:
+                    data.plan = json.loads(rec.metadata["json"])
                 elif kind == "Footer":
                     footer = True
                 elif isinstance(rec, Message):

@@ -6,7 +6,9 @@ Entities (timeline ``sim_time``, simulation seconds):
   /world/lanes, /world/stop_lines    static corridor drawing (top-down, metres)
   /world/signals                     signal heads coloured by the ego's phase
   /world/ego, /world/neighbours      vehicles as boxes; /world/trail the ego's last 60 s
-  /series/<name>                     speed, requested vs applied acceleration, energy, reward parts
+  /world/plan                        where the plan puts the ego (logs with a plan: the oracle)
+  /series/<name>                     speed (and planned speed), requested vs applied acceleration,
+                                     energy, reward parts
   /grid                              the occupancy grid as an image
   /events                            lane-change requests and executed changes
 """
@@ -57,6 +59,8 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
             links[s.signal.tls] = s.signal.link
     tls_ids = geo.get("tls", sorted(links))
     times = np.array([s.time for s in steps])
+    plan = data.plan
+    plan_x = dict(zip(np.round(plan["time"], 6), plan["x"])) if plan else {}
     trail: list[tuple[float, float]] = []
     for i, s in enumerate(steps):
         rec.set_time("sim_time", duration=s.time)
@@ -65,6 +69,9 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
         rec.log("/world/ego", rr.Boxes2D(centers=[[s.x - 2.5, s.y]], sizes=[[5.0, 1.8]], colors=(30, 120, 255),
                                          labels=["ego"]))
         rec.log("/world/trail", rr.LineStrips2D([trail], colors=(30, 120, 255)))
+        if round(s.time, 6) in plan_x:
+            rec.log("/world/plan", rr.Boxes2D(centers=[[plan_x[round(s.time, 6)] - 2.5, s.y]], sizes=[[5.0, 1.8]],
+                                              colors=(255, 160, 0, 120), labels=["plan"]))
         n = len(s.neighbour_x)
         if n:
             lengths = np.array(s.neighbour_length)
@@ -95,6 +102,11 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
     }
     for name, vals in cols.items():
         rec.send_columns(f"/series/{name}", indexes=[idx], columns=rr.Scalars.columns(scalars=np.asarray(vals, float)))
+    speed_views = ["/series/speed"]
+    if plan:
+        rec.send_columns("/series/planned_speed", indexes=[rr.TimeColumn("sim_time", duration=plan["time"])],
+                         columns=rr.Scalars.columns(scalars=np.asarray(plan["speed"], float)))
+        speed_views.append("/series/planned_speed")
     for c in COMPONENTS:
         vals = np.array([getattr(s.components, c) for s in steps])
         rec.send_columns(f"/series/reward_parts/{c}", indexes=[idx], columns=rr.Scalars.columns(scalars=vals))
@@ -102,7 +114,7 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
         rrb.Horizontal(rrb.Spatial2DView(name="corridor", origin="/world"),
                        rrb.Spatial2DView(name="occupancy grid", origin="/grid"), column_shares=[5, 1]),
         rrb.Horizontal(
-            rrb.TimeSeriesView(name="speed [m/s]", origin="/series", contents=["/series/speed"]),
+            rrb.TimeSeriesView(name="speed [m/s]", origin="/series", contents=speed_views),
             rrb.TimeSeriesView(name="acceleration [m/s^2]", origin="/series",
                                contents=["/series/requested_accel", "/series/applied_accel"]),
             rrb.TimeSeriesView(name="energy [Wh]", origin="/series",

@@ -70,3 +70,19 @@ def test_garbage_is_a_clear_error(tmp_path):
     out = _view(bad, "--save", tmp_path / "c.rrd")
     assert out.returncode == 2 and "error:" in out.stderr and "bad.mcap" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_a_plan_shows_beside_the_driven_trajectory(tmp_path, cases):
+    """The oracle's log carries its plan: the recording has the planned speed and the ghost."""
+    from bench.harness.oracle import OracleAgent
+
+    env = make_env(OracleAgent, "coordinated", {"arterial_flow": 0.0, "side_flow": 0.0})
+    try:
+        row = run_episode(env, OracleAgent(env.cfg), cases[0], "oracle", log_path=tmp_path / "o.mcap")
+    finally:
+        env.close()
+    out = _view(tmp_path / "o.mcap", "--save", tmp_path / "o.rrd")
+    assert out.returncode == 0, out.stderr
+    df = _read_rrd(tmp_path / "o.rrd")
+    assert df["/series/planned_speed:Scalars:scalars"].notna().sum() >= row["steps"]
+    assert df["/world/plan:Boxes2D:centers"].notna().sum() >= row["steps"] - 1

@@ -1,0 +1,71 @@
+"""The ``oracle`` method: the energy-optimal plan (``bench.oracle.dp``) replayed in SUMO.
+
+At the first step of an episode the agent solves the case's bound with the ``"cost"`` objective
+(least E + phi T through the known fixed-time signals, the ego alone on the corridor) for the
+departure it sees (``info["time"]`` at the reset is the env's ``t_depart``). Then it drives open
+loop in time: at step k it asks for the acceleration that brings its speed to the plan's speed at
+step k + 1, ``a = (v_plan[k+1] - v) / dt``, within [a_min, a_max]. It drives the ``longitudinal``
+action type, so the safety layer clips the request to Krauss' safe speed when traffic or a red
+light is in the way, and SUMO's LC2013 changes lanes, as for DDPG+LC2013. After the plan ends (a
+delayed ego) it holds the speed limit. In free flow the replay follows the plan step for step;
+where traffic delays the ego, the gap between the replayed cost and the bound is what traffic
+costs. (Where the plan reaches a stop line at speed just as green starts, SUMO's Krauss model
+slows the ego before the line, so the replay is a little slower than the bound even alone:
+``bench.oracle.dp``'s docstring.)
+
+The plan is kept as ``plan_trace`` (time, x, speed arrays) for the step log, where the viewer
+and the report draw it beside the driven trajectory.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from bench.oracle.dp import Plan, bound
+from envs.config import ScenarioConfig
+
+NAME = "oracle"
+OBJECTIVE = "cost"  # the bound the oracle replays: least E + phi T
+
+
+class OracleAgent:
+    """Replays the energy-optimal plan of each episode's departure; never learns."""
+
+    name = NAME
+    action_interface = "longitudinal"
+    env_overrides: dict[str, Any] = {}
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        self.cfg = cfg
+        self.plan: Plan | None = None
+
+    def act(self, obs: dict[str, np.ndarray], info: dict[str, Any], explore: bool = False) -> np.ndarray:
+        cfg, dt = self.cfg, self.cfg.step_length
+        if info["travel_time"] == 0.0 or self.plan is None:  # the reset's info: a new departure
+            self.plan = bound(cfg, float(info["time"]), OBJECTIVE)
+        plan = self.plan
+        k = int(round((float(info["time"]) - plan.t[0]) / dt))
+        target = float(plan.v[k + 1]) if k + 1 < len(plan.v) else cfg.speed_limit
+        speed = float(obs["logic"][cfg.lanes + 1])
+        accel = min(max((target - speed) / dt, cfg.a_min), cfg.a_max)
+        return np.array([accel], dtype=np.float32)
+
+    @property
+    def plan_trace(self) -> dict[str, list[float]] | None:
+        """The current episode's plan as plain lists (for the step log's metadata)."""
+        if self.plan is None:
+            return None
+        p = self.plan
+        return {"time": p.t.tolist(), "x": p.x.tolist(), "speed": p.v.tolist(), "energy": p.energy,
+                "travel_time": p.travel_time, "cost": p.cost, "objective": p.objective}
+
+    def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
+        return {}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"name": self.name}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state.get("name") != self.name:
+            raise ValueError(f"state is for agent {state.get('name')!r}, not {self.name!r}")
