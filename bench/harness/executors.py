@@ -49,7 +49,7 @@ def run_task(task: Task) -> dict[str, Any]:
         from bench.harness.external import make
 
         _ENVS[(task.method, task.signals)], agent = make(task.factory, task.signals)
-        _AGENTS[key] = (agent, "")
+        _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
     if (task.method, task.signals) not in _ENVS:
         _ENVS[(task.method, task.signals)] = make_env(task.method, task.signals)
     env = _ENVS[(task.method, task.signals)]
