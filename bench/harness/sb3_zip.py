@@ -43,10 +43,12 @@ DECODED = ("observation_space", "action_space", "policy_class", "policy_kwargs")
 MAX_DATA_BYTES = 64 * 2**20  # the JSON ``data`` entry; SB3's own are tens of kB
 # constants for the serialized entries that are never decoded (None for any other)
 CONSTANTS: dict[str, Any] = {"learning_rate": 0.0, "clip_range": 0.0, "train_freq": 1, "target_entropy": 0.0}
-OVERRIDES: dict[str, Any] = {"buffer_size": 1}  # no replay memory for a model that only acts
+# JSON entries replaced when present: no replay memory for a model that only acts; no env (SB3
+# would gym.make an "env" string, importing the module a "module:Env-v0" id names); the CPU
+OVERRIDES: dict[str, Any] = {"buffer_size": 1, "env": None, "device": "cpu"}
 
 ALLOWED: dict[str, frozenset[str]] = {k: frozenset(v) for k, v in {
-    "builtins": ("set", "frozenset", "slice", "complex", "bytearray"),
+    "builtins": ("set", "frozenset"),
     "collections": ("OrderedDict",),
     "copyreg": ("_reconstructor",),
     "numpy": ("dtype", "ndarray"),
@@ -100,8 +102,8 @@ class SafeUnpickler(pickle.Unpickler):
         mod = sys.modules.get(module)  # only modules already imported: nothing runs on the file's behalf
         if mod is not None and name.isidentifier():
             obj = getattr(mod, name, None)
-            for prefix, bases in self.rules:
-                if (module == prefix or module.startswith(prefix)) and isinstance(obj, type) \
+            for prefix, bases in self.rules:  # "a.b.": any module under a.b; "a.b": that module
+                if (module.startswith(prefix) if prefix.endswith(".") else module == prefix) and isinstance(obj, type) \
                         and issubclass(obj, bases) and obj.__module__ == module:
                     return obj
         raise Refused(f"{module}.{name}")
@@ -167,7 +169,7 @@ def read(path: Path) -> Saved:
                 custom[key] = CONSTANTS.get(key)  # never decoded: SB3 takes the constant instead
         elif key in DECODED:
             decoded[key] = item
-    custom.update({k: v for k, v in OVERRIDES.items() if k in data})
+    custom.update({k: _override(k) for k in OVERRIDES if k in data})
     missing = [k for k in DECODED[:3] if k not in decoded]
     if missing:
         raise ZipError(f"--sb3 {str(path)!r}: its 'data' lacks {', '.join(missing)}; expected a model saved by "
@@ -180,6 +182,14 @@ def read(path: Path) -> Saved:
     if not isinstance(decoded.get("policy_kwargs", {}), dict):
         raise ZipError(f"--sb3 {str(path)!r}: its policy_kwargs is not a dict")
     return Saved(Path(path), blob, hashlib.sha256(blob).hexdigest(), obs, act, cls, custom)
+
+
+def _override(key: str) -> Any:
+    if key == "device":
+        import torch
+
+        return torch.device("cpu")
+    return OVERRIDES[key]
 
 
 def _decode(path: Path, key: str, text: Any) -> Any:

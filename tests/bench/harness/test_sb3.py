@@ -153,11 +153,15 @@ class Payload:
 
 def planted(src: Path, dst: Path, key: str, marker: Path) -> Path:
     """``src`` with ``data[key]`` replaced by a serialized entry that runs code when unpickled."""
+    payload = {":type:": "<class 'str'>", ":serialized:": base64.b64encode(pickle.dumps(Payload(marker))).decode()}
+    return edited(src, dst, **{key: payload})
+
+
+def edited(src: Path, dst: Path, **items) -> Path:
+    """``src`` with entries of its ``data`` JSON replaced."""
     with zipfile.ZipFile(src) as z:
         entries = {n: z.read(n) for n in z.namelist()}
-    data = json.loads(entries["data"])
-    data[key] = {":type:": "<class 'str'>", ":serialized:": base64.b64encode(pickle.dumps(Payload(marker))).decode()}
-    entries["data"] = json.dumps(data).encode()
+    entries["data"] = json.dumps({**json.loads(entries["data"]), **items}).encode()
     with zipfile.ZipFile(dst, "w") as z:
         for n, b in entries.items():
             z.writestr(n, b)
@@ -178,7 +182,8 @@ def test_a_planted_payload_in_a_decoded_entry_is_refused_and_never_runs(key, sb3
 
 
 def test_a_payload_in_any_other_entry_is_never_unpickled(sb3, env_spaces, tmp_path):
-    """The schedules and buffers are replaced unread; SB3's own load, the control, runs the payload."""
+    """The schedules and buffers are replaced unread, a JSON "env" is dropped; SB3's own load, the
+    control, runs the payload."""
     from bench.harness import sb3 as adapter
     from bench.harness.external import build
 
@@ -186,11 +191,14 @@ def test_a_payload_in_any_other_entry_is_never_unpickled(sb3, env_spaces, tmp_pa
     good = saved(sb3, tmp_path / "good.zip", "PPO", *flat(env_spaces["longitudinal"]))
     bad = planted(good, tmp_path / "bad.zip", "lr_schedule", marker)
     bad = planted(bad, tmp_path / "bad2.zip", "_last_obs", marker)
+    worse = edited(bad, tmp_path / "bad3.zip", env="no_such_module_sb3:Nope-v0")  # SB3 would gym.make it
     obs, act = env_spaces["longitudinal"]
-    agent = build(adapter.spec("PPO", bad), obs, act)
+    agent = build(adapter.spec("PPO", worse), obs, act)
     assert act.contains(agent.act(obs.sample(), {})) and not marker.exists()
-    sb3.PPO.load(bad, device="cpu")  # what --sb3 must not do
+    sb3.PPO.load(bad, device="cpu")  # what --sb3 must not do: it runs the payloads
     assert marker.read_text() == "ran"
+    with pytest.raises(ModuleNotFoundError, match="no_such_module_sb3"):
+        sb3.PPO.load(worse, device="cpu")  # ... and imports the module "env" names
 
 
 @pytest.mark.parametrize("args, words", [
