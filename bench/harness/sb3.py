@@ -132,14 +132,34 @@ def factory(value: str) -> Factory:
     return Factory(algo, inspect(path, algo))
 
 
+class Unpickling(Exception):
+    """SB3 tried to unpickle an entry (not one of the exceptions its loader swallows)."""
+
+
+class _NoCloudpickle:
+    """Stands in for SB3's ``save_util.cloudpickle`` during ``load``: a second lock on the door
+    ``custom_objects`` closes, should an SB3 version unpickle an entry named there."""
+
+    def loads(self, *args: Any, **kw: Any) -> Any:
+        raise Unpickling("SB3 tried to unpickle an entry of the zip; refused")
+
+    def __getattr__(self, name: str) -> Any:
+        raise Unpickling(f"SB3 reached for cloudpickle.{name}; refused")
+
+
 def load(algo: str, saved: Saved) -> Any:
     """The SB3 model from the bytes ``read`` vetted: every serialized entry comes from
-    ``saved.custom_objects``, so SB3 unpickles none; weights via ``torch.load(weights_only=True)``."""
+    ``saved.custom_objects``, so SB3 unpickles none (and cannot: its cloudpickle is swapped out
+    meanwhile); weights via ``torch.load(weights_only=True)`` in SB3's loader."""
     import io
     import warnings
 
+    from stable_baselines3.common import save_util
+
     cls = algo_class(algo)
+    real = save_util.cloudpickle
     try:
+        save_util.cloudpickle = _NoCloudpickle()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return cls.load(io.BytesIO(saved.blob), env=None, device="cpu", custom_objects=saved.custom_objects)
@@ -147,12 +167,12 @@ def load(algo: str, saved: Saved) -> Any:
         msg = str(e).strip().splitlines()
         raise AgentError(f"--sb3 {str(saved.path)!r}: {algo}.load failed ({type(e).__name__}: "
                          f"{msg[0][:200] if msg else ''})") from None
+    finally:
+        save_util.cloudpickle = real
 
 
 class Sb3Agent:
     """A loaded SB3 model behind the ``agents.base.Agent`` protocol; greedy, learns nothing."""
-
-    env_overrides: dict[str, Any] = {}
 
     def __init__(self, name: str, interface: str, model: Any, observation_space: Any, action_space: Any,
                  flat: bool, sha256: str) -> None:

@@ -233,3 +233,19 @@ def test_without_sb3_the_package_imports_and_sb3_is_one_line(tmp_path):
     err = out.stderr.strip().splitlines()
     assert out.returncode == 2 and len(err) == 1 and "install the sb3 extra: pip install -e .[sb3]" in err[0], err
     assert not (tmp_path / "logs").exists()
+
+
+def test_sb3_cannot_unpickle_even_an_entry_left_out_of_custom_objects(sb3, env_spaces, tmp_path):
+    """The second lock: during the load SB3's cloudpickle is swapped for one that refuses."""
+    from bench.harness import sb3 as adapter
+    from bench.harness.external import AgentError
+    from bench.harness.sb3_zip import read
+
+    marker = tmp_path / "ran"
+    bad = planted(saved(sb3, tmp_path / "good.zip", "PPO", *flat(env_spaces["longitudinal"])), tmp_path / "bad.zip",
+                  "lr_schedule", marker)
+    vetted = read(bad)
+    del vetted.custom_objects["lr_schedule"]
+    with pytest.raises(AgentError, match="SB3 tried to unpickle an entry of the zip; refused"):
+        adapter.load("PPO", vetted)
+    assert not marker.exists() and sb3.common.save_util.cloudpickle.__name__ == "cloudpickle"
