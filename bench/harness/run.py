@@ -61,7 +61,8 @@ def parser() -> Parser:
                     help="also evaluate your own agent: factory(observation_space, action_space) -> agents.base.Agent")
     ap.add_argument("--sb3", type=Path, default=None, metavar="MODEL.zip",
                     help="also evaluate a Stable-Baselines3 model trained on EcoDrive-v0 (needs the sb3 extra; "
-                         "nothing in the zip is unpickled but its spaces and policy class and kwargs, through an allow list)")
+                         "nothing in the zip is unpickled but its spaces and policy class and kwargs, through an "
+                         "allow list)")
     ap.add_argument("--sb3-algo", default=None, choices=SB3_ALGOS,
                     help=f"the --sb3 model's algorithm: {', '.join(SB3_ALGOS)}")
     ap.add_argument("--name", type=name, default=None,

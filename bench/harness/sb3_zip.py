@@ -22,8 +22,10 @@ The weights are read by SB3's ``load_from_zip_file`` with ``torch.load(weights_o
 What this cannot do: an allowed class is still called with the file's arguments (a ``Box``, a
 ``ReLU``, a policy), so a hostile file can build such objects (say, a huge ``net_arch`` that eats
 memory) but not run code of its own. A model whose ``policy_kwargs`` name a class of the user's
-(a custom feature extractor) is refused: that class is code. Only modules already imported by
-gymnasium, numpy, torch and SB3 are looked in; nothing is imported on the file's behalf.
+(a custom feature extractor) is refused: that class is code. The classes allowed by rule are
+looked up only in modules already imported (nothing is imported on the file's behalf but the
+numpy modules of the fixed list). Old zips whose spaces are ``gym`` (not gymnasium) spaces are
+refused.
 """
 from __future__ import annotations
 
@@ -103,8 +105,8 @@ class SafeUnpickler(pickle.Unpickler):
         if mod is not None and name.isidentifier():
             obj = getattr(mod, name, None)
             for prefix, bases in self.rules:  # "a.b.": any module under a.b; "a.b": that module
-                if (module.startswith(prefix) if prefix.endswith(".") else module == prefix) and isinstance(obj, type) \
-                        and issubclass(obj, bases) and obj.__module__ == module:
+                under = module.startswith(prefix) if prefix.endswith(".") else module == prefix
+                if under and isinstance(obj, type) and issubclass(obj, bases) and obj.__module__ == module:
                     return obj
         raise Refused(f"{module}.{name}")
 
