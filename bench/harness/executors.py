@@ -50,7 +50,7 @@ def run_task(task: Task) -> dict[str, Any]:
         from bench.harness.external import make
 
         _ENVS[(task.method, task.signals)], agent = make(task.factory, task.signals)
-        _AGENTS[key] = (agent, "")
+        _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
     if task.method == ORACLE and key not in _AGENTS:
         from bench.harness.oracle import OracleAgent
 

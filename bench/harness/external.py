@@ -38,7 +38,12 @@ def registered() -> dict[str, str]:
 
 
 def load_factory(spec: str) -> Callable[..., Any]:
-    """The factory named by ``package.module:factory``."""
+    """The factory named by ``package.module:factory`` (or, for ``sb3:ALGO:PATH``, the one that
+    loads a Stable-Baselines3 model: ``bench.harness.sb3``)."""
+    if spec.startswith("sb3:"):
+        from bench.harness import sb3
+
+        return sb3.factory(spec)
     if not SPEC.match(spec):
         raise AgentError(f"--agent {spec!r} is not accepted; expected package.module:factory")
     module, attr = spec.split(":")
@@ -87,6 +92,8 @@ def build(spec: str, observation_space, action_space) -> Agent:
     factory = load_factory(spec)
     try:
         agent = factory(observation_space, action_space)
+    except AgentError:
+        raise
     except Exception as e:
         raise AgentError(f"agent factory {spec!r} failed ({type(e).__name__}: {e})") from None
     missing = [a for a in ("name", "action_interface", "env_overrides", "act", "observe", "state_dict",
@@ -106,6 +113,7 @@ class Checked:
         self.agent, self.space, self.spec = agent, action_space, spec
         self.name, self.action_interface = agent.name, agent.action_interface
         self.env_overrides = dict(agent.env_overrides)
+        self.sha256 = getattr(agent, "sha256", "")  # of the file it was loaded from, when it has one
 
     def act(self, obs, info, explore: bool = False):
         action = self.agent.act(obs, info, explore=explore)

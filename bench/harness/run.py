@@ -2,6 +2,7 @@
 
     ecodrive run [--profile smoke|paper|full] [--executor local|ray] [--address ADDR]
                         [--workers N] [--methods ...] [--signals ...] [--run-id ID] [--logs DIR]
+                        [--agent MODULE:FACTORY | --sb3 MODEL.zip --sb3-algo ALGO] [--name NAME]
 
 Writes ``<logs>/<run-id>/<signals>/<method>/case-XXX.mcap``, ``results.parquet`` and
 ``manifest.json``. Rerunning the same command skips cases whose MCAP is complete and reruns the
@@ -28,6 +29,7 @@ from bench.harness.external import GROUP, AgentError, registered
 from bench.harness.oracle import NAME as ORACLE
 from bench.harness.policies import MODELS, CheckpointError, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import git_sha, package_versions
+from bench.harness.sb3 import ALGOS as SB3_ALGOS
 from bench.io import Unwritable, atomic_json, atomic_parquet, sha256, writable_dir
 from bench.logs.mcaplog import episode_summary, resolve_log
 from envs.config import SIGNALS
@@ -59,8 +61,15 @@ def parser() -> Parser:
                          f"agents of the entry-point group {GROUP} run when named)")
     ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
                     help="also evaluate your own agent: factory(observation_space, action_space) -> agents.base.Agent")
+    ap.add_argument("--sb3", type=Path, default=None, metavar="MODEL.zip",
+                    help="also evaluate a Stable-Baselines3 model trained on EcoDrive-v0 (needs the sb3 extra; "
+                         "nothing in the zip is unpickled but its spaces and policy class and kwargs, through an "
+                         "allow list)")
+    ap.add_argument("--sb3-algo", default=None, choices=SB3_ALGOS,
+                    help=f"the --sb3 model's algorithm: {', '.join(SB3_ALGOS)}")
     ap.add_argument("--name", type=name, default=None,
-                    help="the --agent's method name in results and reports (default: the factory's name)")
+                    help="the --agent's or --sb3's method name in results and reports (default: the factory's "
+                         "name; sb3-<algo> for --sb3)")
     ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS), help="signal settings")
     ap.add_argument("--executor", default="local", choices=list(EXECUTORS), help="local process pool, or Ray")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray; default: a local Ray)")
@@ -84,14 +93,34 @@ def parse(argv: list[str]) -> dict[str, Any]:
     opts["run_id"] = opts["run_id"] or opts["profile"]
     users = registered()
     opts["factories"] = {m: users[m] for m in opts["methods"] or [] if m in users}
+    if opts["sb3"] or opts["sb3_algo"]:
+        opts["agent"] = sb3_spec(ap, opts)
     if opts["agent"]:
-        label = opts["name"] or opts["agent"].split(":")[-1]
+        label = opts["name"] or (f"sb3-{opts['sb3_algo'].lower()}" if opts["sb3"] else opts["agent"].split(":")[-1])
         if label in (*METHODS, ORACLE) or label in opts["factories"]:
             ap.error(f"--name {label!r} is taken by a built-in or installed method; choose another")
         opts["factories"][label] = opts["agent"]
+        opts["agent_sha256"] = {label: opts.pop("sb3_sha256")} if "sb3_sha256" in opts else {}
     elif opts["name"]:
-        ap.error("--name names an --agent; give --agent package.module:factory too")
+        ap.error("--name names an --agent or --sb3; give --agent package.module:factory or --sb3 MODEL.zip too")
     return opts
+
+
+def sb3_spec(ap: Parser, opts: dict[str, Any]) -> str:
+    """The factory spec of ``--sb3 --sb3-algo`` (``bench.harness.sb3``), the zip read and checked
+    now: bad input is one line before anything runs."""
+    if opts["agent"]:
+        ap.error("--sb3 and --agent each add one agent; give one of them")
+    if not (opts["sb3"] and opts["sb3_algo"]):
+        ap.error(f"--sb3 MODEL.zip and --sb3-algo go together; --sb3-algo is one of {', '.join(SB3_ALGOS)}")
+    from bench.harness import sb3
+
+    try:
+        saved = sb3.inspect(opts["sb3"], opts["sb3_algo"])
+    except AgentError as e:
+        ap.error(str(e))
+    opts["sb3_sha256"] = saved.sha256
+    return sb3.spec(opts["sb3_algo"], opts["sb3"])
 
 
 def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str, int]], list[str]]:
@@ -150,9 +179,10 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     for signals in opts["signals"]:
         for method, seed in [(m, sd) for m, s, sd in runs if s == signals]:
             pdir = str(policy_dir(method, signals, opts["models"], seed)) if seed >= 0 else ""
-            sha = sha256(Path(pdir) / "policy.pt") if pdir else ""  # a log of another policy is rerun
+            sha = (sha256(Path(pdir) / "policy.pt") if pdir  # a log of another policy is rerun
+                   else opts.get("agent_sha256", {}).get(method, ""))
             if sha:
-                shas[f"{method}-{signals}/s{seed}"] = sha
+                shas[f"{method}-{signals}" + (f"/s{seed}" if seed >= 0 else "")] = sha
             folder = run_dir / signals / method / (f"s{seed}" if seed >= 0 else "")
             for case in cases:
                 path = folder / f"case-{case.index:03d}.mcap"
