@@ -79,7 +79,7 @@ def run_episode(
                 script.after(env, steps)
             steps += 1
             ret += r
-            speed = float(obs["logic"][env.cfg.lanes + 1])
+            speed = float(obs["logic"][env.cfg.observed_lanes + 1])
             if speed < STOP_SPEED:
                 time_stopped += env.cfg.step_length
                 stops += moving
