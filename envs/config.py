@@ -300,17 +300,17 @@ def flat(nested: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 def _in_effect(scenario: Mapping[str, Any]) -> dict[str, Any]:
-    """Flat dict with JSON lists as tuples and the optional per-link / per-junction fields that
-    are None spelled out (``spacings`` None is ``spacing`` on every link, ...)."""
+    """Flat dict with JSON lists as tuples, and the optional per-link / per-junction fields that
+    spell out the corridor-wide value (``spacings`` = ``spacing`` on every link, ...) as None."""
     f = {k: tuple(v) if isinstance(v, list) else v for k, v in flat(backfill(scenario)).items()}
     n = f.get("n_intersections")
     if isinstance(n, int):
         for name, base, count in (("spacings", "spacing", n - 1), ("junction_cycles", "cycle", n),
                                   ("junction_greens", "main_green", n)):
-            if f.get(name) is None and base in f:
-                f[name] = (f[base],) * count
-    if f.get("obs_lanes") is None and "lanes" in f:
-        f["obs_lanes"] = f["lanes"]
+            if f.get(name) == (f.get(base),) * count:
+                f[name] = None
+    if f.get("obs_lanes") == f.get("lanes"):
+        f["obs_lanes"] = None
     return f
 
 
