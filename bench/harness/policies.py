@@ -123,20 +123,22 @@ def policy_spaces(folder: Path, manifest: dict[str, Any]) -> tuple[Any, Any]:
 
 
 def check_scenario(folder: Path, manifest: dict[str, Any], scenario: dict[str, Any], transfer: bool = False) -> dict:
-    """The scenario overrides the policy needs to drive ``scenario`` ({} or ``obs_lanes``). Without
-    ``transfer`` it must be the scenario it was trained on (the signals, the GLOSA device and the
-    reward aside); with it, any scenario it can observe (``transfer_overrides``)."""
+    """The scenario overrides the policy needs to drive ``scenario``: {} or the ``obs_lanes`` it
+    was trained with. Without ``transfer`` it must be the scenario it was trained on (the signals,
+    the GLOSA device and the reward aside); with it, any scenario it can observe
+    (``transfer_overrides``)."""
     from envs.config import diff
 
     trained = trained_scenario(folder, manifest)
-    if transfer:
-        return transfer_overrides(folder, trained, scenario)
-    # the reward is what the policy was trained for, not what it sees or drives in: not compared
-    differs = sorted({k.split(".")[0] for k in diff(manifest.get("scenario", {}), scenario)} - {"signals", "glosa", "reward"})
-    if differs:
-        raise CheckpointError(f"{folder / 'policy.pt'}: trained on a different scenario config (differs in: "
-                              f"{', '.join(differs)}); to evaluate it there anyway, give --transfer")
-    return {}
+    if not transfer:
+        # the reward is what the policy was trained for, not what it sees or drives in: not compared;
+        # nor is the observation's lane count, which follows the policy (below)
+        differs = sorted({k.split(".")[0] for k in diff(manifest.get("scenario", {}), scenario)}
+                         - {"signals", "glosa", "reward", "obs_lanes"})
+        if differs:
+            raise CheckpointError(f"{folder / 'policy.pt'}: trained on a different scenario config (differs in: "
+                                  f"{', '.join(differs)}); to evaluate it there anyway, give --transfer")
+    return transfer_overrides(folder, trained, scenario)
 
 
 def transfer_overrides(folder: Path, trained: ScenarioConfig, scenario: dict[str, Any]) -> dict:

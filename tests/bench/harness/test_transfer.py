@@ -119,6 +119,22 @@ def test_what_a_policy_cannot_observe_is_refused_with_transfer():
     assert check_scenario(PRL, manifest, ScenarioConfig(spacing=600.0).to_dict(), transfer=True) == {}
 
 
+def test_a_policy_trained_with_a_padded_view_keeps_it_at_home(tmp_path):
+    """Trained on 3 lanes seen as 5, it drives its own road seen as 5 again, without --transfer."""
+    import shutil
+
+    folder = tmp_path / "prl-coordinated" / "s0"
+    shutil.copytree(PRL, folder)
+    manifest = read_manifest(folder)
+    manifest["scenario"] = ScenarioConfig(lanes=3, obs_lanes=5).to_dict()
+    assert check_scenario(folder, manifest, ScenarioConfig(lanes=3).to_dict()) == {"obs_lanes": 5}
+    assert check_scenario(folder, manifest, ScenarioConfig(lanes=3, obs_lanes=5).to_dict()) == {"obs_lanes": 5}
+    with pytest.raises(CheckpointError, match="observes 5 lanes, not obs_lanes=6"):
+        check_scenario(folder, manifest, ScenarioConfig(lanes=3, obs_lanes=6).to_dict())
+    with pytest.raises(CheckpointError, match="differs in: lanes"):
+        check_scenario(folder, manifest, ScenarioConfig(lanes=2).to_dict())
+
+
 def test_a_transferred_policy_keeps_the_spaces_it_trained_with():
     """Its logic scaling comes from the training scenario's bounds, not the road it drives."""
     obs, act = policy_spaces(PRL, read_manifest(PRL))
