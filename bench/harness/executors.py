@@ -78,7 +78,7 @@ def run_task(task: Task) -> dict[str, Any]:
     agent, sha = _AGENTS[key]
     t0 = time.perf_counter()
     row = run_episode(env, agent, task.case, task.method, log_path=Path(task.path), agent_sha256=sha,
-                      meta=dict(task.meta))
+                      log_meta=dict(task.meta))
     row["episode_wall_s"] = time.perf_counter() - t0
     row["mcap"] = task.path
     row["train_seed"] = task.train_seed
