@@ -11,7 +11,7 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, NamedTuple
 
 SIGNALS = ("coordinated", "uncoordinated")
 REWARDS = ("r1", "r2", "r")
@@ -20,7 +20,12 @@ LANE_CHANGE_CHARGES = ("request", "lane")
 # Scenario fields added after saved runs existed ("a.b" = field b of sub-config a), with the value
 # their absence meant: the behaviour from before the field. Only these are filled into an older
 # saved config; a run resumed from such a config keeps that value (bench.training.train).
-ADDED_FIELDS: dict[str, Any] = {"ego_sigma": 0.5, "reward.lane_change_charge": "lane"}
+ADDED_FIELDS: dict[str, Any] = {"ego_sigma": 0.5, "reward.lane_change_charge": "lane", "spacings": None,
+                                "junction_cycles": None, "junction_greens": None, "junction_offsets": None,
+                                "obs_lanes": None}
+# optional scenario fields whose None means "as the corridor-wide field(s)": the network cache key
+# leaves them out while None, so a config without them builds (and reuses) the same files as before
+OPTIONAL_FIELDS = ("spacings", "junction_cycles", "junction_greens", "junction_offsets", "obs_lanes")
 
 
 class ConfigError(ValueError):
@@ -29,6 +34,19 @@ class ConfigError(ValueError):
 
 def _rng(lo: float | None, hi: float | None, *, lo_open: bool = False) -> dict[str, Any]:
     return {"lo": lo, "hi": hi, "lo_open": lo_open}
+
+
+def _each(lo: float, hi: float) -> dict[str, Any]:
+    """Range of every entry of an optional tuple field (None: the field is not set)."""
+    return {**_rng(lo, hi), "each": True, "optional": True}
+
+
+class SignalTiming(NamedTuple):
+    """One junction's fixed-time plan: arterial green, yellow, side green, yellow."""
+
+    cycle: float  # [s]
+    green: float  # [s] arterial green, at the start of the cycle
+    offset: float  # [s] SUMO tlLogic offset, in [0, cycle)
 
 
 @dataclass(frozen=True)
@@ -81,7 +99,7 @@ class ScenarioConfig:
 
     signals: str = field(default="coordinated", metadata={"choices": SIGNALS})
     n_intersections: int = field(default=5, metadata=_rng(1, 10))  # [-]
-    spacing: float = field(default=440.0, metadata=_rng(100.0, 2000.0))  # [m] between stop lines
+    spacing: float = field(default=440.0, metadata=_rng(100.0, 2000.0))  # [m] between junctions (see spacings)
     lanes: int = field(default=5, metadata=_rng(1, 6))  # [-] through lanes per direction
     side_length: float = field(default=200.0, metadata=_rng(50.0, 1000.0))  # [m] side streets
     speed_limit: float = field(default=50.0 / 3.6, metadata=_rng(5.0, 40.0))  # V_max [m/s]
@@ -106,33 +124,116 @@ class ScenarioConfig:
     max_episode_time: float = field(default=900.0, metadata=_rng(10.0, 7200.0))  # [s] truncation
     glosa: bool = False  # equip the ego with SUMO's GLOSA device (range = v2i_range)
     ego_sigma: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # Krauss driver imperfection of the ego's vType (SUMO default)
+    # [m] junction centre to the next one, J1->J2 .. J(n-1)->Jn: n_intersections - 1 values, each in
+    # spacing's range; None: all `spacing`. The entry (W->J1) and exit (Jn->E) links stay `spacing`.
+    spacings: tuple[float, ...] | None = field(default=None, metadata=_each(100.0, 2000.0))
+    # per-junction signal plans, n_intersections values each; None: the corridor-wide cycle,
+    # main_green and the named setting's offsets. A junction's green + 2 * yellow must be < its cycle.
+    junction_cycles: tuple[float, ...] | None = field(default=None, metadata=_each(30.0, 240.0))  # [s]
+    junction_greens: tuple[float, ...] | None = field(default=None, metadata=_each(5.0, 200.0))  # [s] arterial
+    # [s] in [0, that junction's cycle); replace the offsets of `signals`, which then only names the plan
+    junction_offsets: tuple[float, ...] | None = field(default=None, metadata=_each(0.0, 240.0))
+    # lanes of the observation (grid columns, lane one-hot), lanes..6; None: `lanes`. Lanes the road
+    # lacks read as occupied, so a policy trained on more lanes drives a narrower road.
+    obs_lanes: int | None = field(default=None, metadata={**_rng(1, 6), "optional": True})
     ev: EVParams = field(default_factory=EVParams)
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
+        for name in ("spacings", "junction_cycles", "junction_greens", "junction_offsets"):
+            value = getattr(self, name)
+            if isinstance(value, list):  # JSON has no tuples
+                object.__setattr__(self, name, tuple(value))
         _validate(self)
+        for name in ("spacings", "junction_cycles", "junction_greens", "junction_offsets"):
+            value = getattr(self, name)
+            if value is not None:  # 440 and 440.0 are one value: one digest, one cached network
+                object.__setattr__(self, name, tuple(float(v) for v in value))
         if self.insert_min > self.insert_max:
             raise ConfigError(f"insert_min={self.insert_min} must be <= insert_max={self.insert_max}")
         if self.main_green + 2 * self.yellow >= self.cycle:
             raise ConfigError(
                 f"main_green={self.main_green} + 2*yellow={2 * self.yellow} must be < cycle={self.cycle}"
             )
+        self._check_junctions()
+        if self.obs_lanes is not None and self.obs_lanes < self.lanes:
+            raise ConfigError(f"obs_lanes={self.obs_lanes} is out of range; accepted: lanes={self.lanes}..6 "
+                              f"(the observation pads missing lanes, it cannot drop real ones)")
+
+    def _check_junctions(self) -> None:
+        n = self.n_intersections
+        for name, want in (("spacings", n - 1), ("junction_cycles", n), ("junction_greens", n), ("junction_offsets", n)):
+            value = getattr(self, name)
+            if value is not None and len(value) != want:
+                raise ConfigError(f"{name} has {len(value)} value(s); accepted: {want} "
+                                  f"({'one per link between consecutive junctions' if name == 'spacings' else 'one per junction'}, "
+                                  f"n_intersections={n})")
+        cycles = self.junction_cycles or (self.cycle,) * n
+        greens = self.junction_greens or (self.main_green,) * n
+        for k, (c, g) in enumerate(zip(cycles, greens), start=1):
+            if g + 2 * self.yellow >= c:
+                gl = f"junction_greens[{k - 1}]" if self.junction_greens else "main_green"
+                cl = f"junction_cycles[{k - 1}]" if self.junction_cycles else "cycle"
+                raise ConfigError(f"{gl}={g} + 2*yellow={2 * self.yellow} must be < {cl}={c} (J{k})")
+        for k, (o, c) in enumerate(zip(self.junction_offsets or (), cycles), start=1):
+            if not o < c:
+                raise ConfigError(f"junction_offsets[{k - 1}]={o} is out of range; accepted: [0, {c}) (J{k}'s cycle)")
 
     # ------------------------------------------------------------------ derived
     @property
+    def observed_lanes(self) -> int:
+        """Lanes of the observation: ``obs_lanes``, or ``lanes`` when it is not set."""
+        return self.lanes if self.obs_lanes is None else self.obs_lanes
+
+    @property
     def grid_shape(self) -> tuple[int, int]:
-        """(cells along the road, lanes) of the occupancy grid."""
-        return (int(round((self.grid_ahead + self.grid_behind) / self.cell_length)), self.lanes)
+        """(cells along the road, observed lanes) of the occupancy grid."""
+        return (int(round((self.grid_ahead + self.grid_behind) / self.cell_length)), self.observed_lanes)
+
+    @property
+    def node_x(self) -> list[float]:
+        """[m] x of the arterial's nodes W, J1..Jn, E (W at 0)."""
+        n = self.n_intersections
+        if self.spacings is None:
+            return [k * self.spacing for k in range(n + 2)]
+        xs = [0.0, self.spacing]
+        for gap in self.spacings:
+            xs.append(xs[-1] + gap)
+        return [*xs, xs[-1] + self.spacing]
+
+    @property
+    def max_spacing(self) -> float:
+        """[m] longest link of the arterial."""
+        return max((self.spacing, *(self.spacings or ())))
+
+    @property
+    def timing(self) -> list[SignalTiming]:
+        """Each junction's plan (J1 first): the per-junction fields where set, else the
+        corridor-wide ones; offsets: green wave (distance from J1 / speed limit, modulo the
+        junction's cycle) or all in sync, as ``signals`` says, unless ``junction_offsets`` is set."""
+        n = self.n_intersections
+        cycles = self.junction_cycles or (self.cycle,) * n
+        greens = self.junction_greens or (self.main_green,) * n
+        if self.junction_offsets is not None:
+            offsets = list(self.junction_offsets)
+        elif self.signals == "uncoordinated":
+            offsets = [0.0] * n
+        elif self.spacings is None:  # the original formula, so uniform corridors keep their offsets bit for bit
+            offsets = [round(math.fmod(k * self.spacing / self.speed_limit, cycles[k]), 3) for k in range(n)]
+        else:
+            xs = self.node_x
+            offsets = [round(math.fmod((xs[k + 1] - xs[1]) / self.speed_limit, cycles[k]), 3) for k in range(n)]
+        return [SignalTiming(c, g, o) for c, g, o in zip(cycles, greens, offsets)]
 
     @property
     def offsets(self) -> list[float]:
-        """Signal offsets [s]: green wave (distance / speed limit) or all in sync."""
-        if self.signals == "uncoordinated":
-            return [0.0] * self.n_intersections
-        return [
-            round(math.fmod(k * self.spacing / self.speed_limit, self.cycle), 3)
-            for k in range(self.n_intersections)
-        ]
+        """Signal offsets [s] of J1..Jn (see ``timing``)."""
+        return [t.offset for t in self.timing]
+
+    @property
+    def max_cycle(self) -> float:
+        """[s] longest signal cycle: the bound on any time to green."""
+        return max((self.cycle, *(self.junction_cycles or ())))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -198,10 +299,26 @@ def flat(nested: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def _in_effect(scenario: Mapping[str, Any]) -> dict[str, Any]:
+    """Flat dict with JSON lists as tuples, and the optional per-link / per-junction fields that
+    spell out the corridor-wide value (``spacings`` = ``spacing`` on every link, ...) as None;
+    ``obs_lanes`` as the lanes observed (``lanes`` when unset)."""
+    f = {k: tuple(v) if isinstance(v, list) else v for k, v in flat(backfill(scenario)).items()}
+    n = f.get("n_intersections")
+    if isinstance(n, int):
+        for name, base, count in (("spacings", "spacing", n - 1), ("junction_cycles", "cycle", n),
+                                  ("junction_greens", "main_green", n)):
+            if f.get(name) == (f.get(base),) * count:
+                f[name] = None
+    if f.get("obs_lanes") is None:  # the observation's lanes in effect
+        f["obs_lanes"] = f.get("lanes")
+    return f
+
+
 def diff(a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
     """Dotted fields in which two scenario dicts differ in effect (both backfilled first). The
     lane-change charging has no effect where r_p^c is 0 in both."""
-    fa, fb = flat(backfill(a)), flat(backfill(b))
+    fa, fb = _in_effect(a), _in_effect(b)
     keys = sorted(k for k in set(fa) | set(fb) if fa.get(k) != fb.get(k))
     if fa.get("reward.lane_change_penalty") == fb.get("reward.lane_change_penalty") == 0:
         keys = [k for k in keys if k != "reward.lane_change_charge"]
@@ -239,12 +356,23 @@ def _validate(obj: Any) -> None:
             if f.type in ("bool",) and not isinstance(value, bool):
                 raise ConfigError(f"{name}={value!r} must be true or false")
             continue
-        want_int = f.type == "int"
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (want_int and not isinstance(value, int)):
-            raise ConfigError(f"{name}={value!r} must be {'an integer' if want_int else 'a number'}")
-        lo, hi = meta["lo"], meta["hi"]
-        bad = (not math.isfinite(value)) or (lo is not None and (value <= lo if meta["lo_open"] else value < lo))
-        bad = bad or (hi is not None and value > hi)
-        if bad:
-            lb = "(" if meta["lo_open"] else "["
-            raise ConfigError(f"{name}={value!r} is out of range; accepted: {lb}{lo}, {hi}]")
+        if value is None and meta.get("optional"):
+            continue
+        if meta.get("each"):
+            if not isinstance(value, tuple):
+                raise ConfigError(f"{name}={value!r} must be a list of numbers (or null)")
+            for i, v in enumerate(value):
+                _check_number(f"{name}[{i}]", v, meta, want_int=False)
+            continue
+        _check_number(name, value, meta, want_int=f.type.startswith("int"))
+
+
+def _check_number(name: str, value: Any, meta: Mapping[str, Any], want_int: bool) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (want_int and not isinstance(value, int)):
+        raise ConfigError(f"{name}={value!r} must be {'an integer' if want_int else 'a number'}")
+    lo, hi = meta["lo"], meta["hi"]
+    bad = (not math.isfinite(value)) or (lo is not None and (value <= lo if meta["lo_open"] else value < lo))
+    bad = bad or (hi is not None and value > hi)
+    if bad:
+        lb = "(" if meta["lo_open"] else "["
+        raise ConfigError(f"{name}={value!r} is out of range; accepted: {lb}{lo}, {hi}]")

@@ -27,7 +27,10 @@ class EcoDriveEnv(gym.Env):
     10 m behind to 50 m ahead of the ego's front bumper in 1 m cells (row 0 farthest behind),
     lane 0 rightmost; 0 = occupied, 1 = free. ``logic`` = [lane one-hot (5), distance to the
     next stop line (m), speed (m/s), red flag, time to green (s)]; red flag and time to green
-    are -1 outside the 300 m V2I range. Raw units: agents normalise.
+    are -1 outside the 300 m V2I range. Raw units: agents normalise. The 5 is the config's
+    ``obs_lanes`` (default: ``lanes``): on a road with fewer lanes than that, the missing lanes
+    (left of the real ones) are grid columns of 0 (occupied), the one-hot keeps its length and a
+    change into them is masked, so a policy trained on more lanes can drive the road.
 
     ## Action space
     Set by ``action``: ``parameterized`` ``Tuple(Discrete(3), Box(-4, 3, (3,)))`` (k index,

@@ -30,7 +30,7 @@ STALL_FREE = 10.0  # [m] of free lane ahead, beyond which standing is not queuei
 def stalled(grids: np.ndarray, logics: np.ndarray, cfg: ScenarioConfig) -> np.ndarray:
     """Per CV: standing with more than ``STALL_FREE`` m free ahead in its lane and no red light
     (queueing and waiting at red are not stalls). From the observations alone."""
-    lanes = cfg.lanes
+    lanes = cfg.observed_lanes  # the logic vector's one-hot
     lane = logics[:, :lanes].argmax(1)
     front = int(round(cfg.grid_behind / cfg.cell_length))
     ahead = grids[np.arange(len(grids)), front:front + int(np.ceil(STALL_FREE / cfg.cell_length)) + 1, lane]

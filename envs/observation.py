@@ -25,8 +25,9 @@ _RED = frozenset("rRyYu")
 def occupancy_grid(
     ego_x: float, others: Sequence[Sequence[float]], lane_y: Sequence[float], cfg: ScenarioConfig
 ) -> np.ndarray:
-    """Grid of shape (rows, lanes); row 0 is ``grid_behind`` m behind the ego's front bumper,
-    the last row ``grid_ahead`` m ahead; lane 0 is the rightmost. 1 = free, 0 = occupied.
+    """Grid of shape (rows, observed lanes); row 0 is ``grid_behind`` m behind the ego's front
+    bumper, the last row ``grid_ahead`` m ahead; lane 0 is the rightmost. 1 = free, 0 = occupied.
+    Columns beyond the road's lanes (``cfg.obs_lanes`` > ``len(lane_y)``) read as occupied.
 
     ``others``: rows of [x, y, angle (deg), length (m)] of the other vehicles (front bumper
     positions, as SUMO reports them). A plain loop: with tens of neighbours it beats numpy's
@@ -36,6 +37,7 @@ def occupancy_grid(
     grid = np.ones((rows, lanes), dtype=np.float32)
     half = LANE_WIDTH / 2
     y0, n = lane_y[0], len(lane_y)
+    grid[:, n:] = 0.0  # lanes the road does not have
     pitch = (lane_y[-1] - y0) / (n - 1) if n > 1 else 1.0
     origin = ego_x - cfg.grid_behind
     inv = 1.0 / cfg.cell_length
@@ -78,21 +80,27 @@ class SignalView:
     time_to_green: float  # [s]; -1 out of V2I range
 
 
+def observation_space(cfg: ScenarioConfig) -> spaces.Dict:
+    """The observation space of ``cfg``: a function of the config alone, so a policy's space can
+    be rebuilt from the scenario it was trained on (its logic bounds are its input scaling)."""
+    rows, lanes = cfg.grid_shape
+    d_max = cfg.max_spacing * 2 + cfg.side_length  # generous bound on distance to the next stop line
+    low = np.array([0.0] * lanes + [0.0, 0.0, -1.0, -1.0], dtype=np.float32)
+    high = np.array([1.0] * lanes + [d_max, cfg.speed_limit * 1.5, 1.0, cfg.max_cycle], dtype=np.float32)
+    return spaces.Dict({
+        "grid": spaces.Box(0.0, 1.0, shape=(rows, lanes), dtype=np.float32),
+        "logic": spaces.Box(low, high, dtype=np.float32),
+    })
+
+
 class GridLogicObservation:
-    """Dict observation {"grid": (rows, lanes) in {0,1}, "logic": (lanes + 4,)}."""
+    """Dict observation {"grid": (rows, observed lanes) in {0,1}, "logic": (observed lanes + 4,)}."""
 
     def __init__(self, cfg: ScenarioConfig, files: ScenarioFiles) -> None:
         self.cfg = cfg
         self.lane_y = tuple(files.lane_y)
-        rows, lanes = cfg.grid_shape
-        d_max = cfg.spacing * 2 + cfg.side_length  # generous bound on distance to the next stop line
-        low = np.array([0.0] * lanes + [0.0, 0.0, -1.0, -1.0], dtype=np.float32)
-        high = np.array([1.0] * lanes + [d_max, cfg.speed_limit * 1.5, 1.0, cfg.cycle], dtype=np.float32)
-        self.space = spaces.Dict({
-            "grid": spaces.Box(0.0, 1.0, shape=(rows, lanes), dtype=np.float32),
-            "logic": spaces.Box(low, high, dtype=np.float32),
-        })
-        self._low, self._high = low, high
+        self.space = observation_space(cfg)
+        self._high = self.space["logic"].high
 
     def signal(self, session: SumoSession, vid: str) -> SignalView | None:
         nxt = session.next_signal(vid)
@@ -114,8 +122,8 @@ class GridLogicObservation:
         grid = occupancy_grid(x, others, self.lane_y, self.cfg)
         sig = self.signal(session, vid)
         if sig is None:
-            logic = logic_vector(lane, self.cfg.lanes, 0.0, speed, NO_V2I, NO_V2I)
+            logic = logic_vector(lane, self.cfg.observed_lanes, 0.0, speed, NO_V2I, NO_V2I)
         else:
-            logic = logic_vector(lane, self.cfg.lanes, min(sig.distance, self._high[-4]), speed, sig.red,
+            logic = logic_vector(lane, self.cfg.observed_lanes, min(sig.distance, self._high[-4]), speed, sig.red,
                                  min(sig.time_to_green, self._high[-1]))
         return {"grid": grid, "logic": logic}, sig, others

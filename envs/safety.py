@@ -31,7 +31,8 @@ def was_clipped(requested: float, applied: float, speed_before: float, dt: float
 
 
 def lane_mask(lane: int, lanes: int, could_left: bool, could_right: bool) -> np.ndarray:
-    """Mask over k in (-1 left, 0 stay, +1 right): 1 allowed, 0 masked. Staying is always allowed."""
+    """Mask over k in (-1 left, 0 stay, +1 right): 1 allowed, 0 masked. Staying is always allowed;
+    ``lanes`` is the road's lane count, so no change leaves the road (whatever SUMO says)."""
     left = could_left and lane < lanes - 1
     right = could_right and lane > 0
     return np.array([left, True, right], dtype=np.int8)

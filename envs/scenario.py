@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-from .config import ScenarioConfig
+from .config import OPTIONAL_FIELDS, ScenarioConfig
 
 EGO_TYPE = "ev"  # vType of the controlled / measured vehicle
 GLOSA_TYPE = "ev_glosa"  # the same EV with SUMO's GLOSA device (range = V2I range)
@@ -24,6 +24,7 @@ EGO_ROUTE = "arterial"  # route id W -> E along the whole arterial
 CV_FLOW = "cv"  # id prefix of the CV flow in mixed traffic (vehicles "cv.N")
 LANE_WIDTH = 3.2  # [m] SUMO default lane width
 BUILD_VERSION = 5  # bump when the generated files change meaning
+NOT_BUILT = ("reward", "max_episode_time", "glosa", "obs_lanes")  # config fields the files do not depend on
 
 
 @dataclass(frozen=True)
@@ -63,7 +64,8 @@ def _netconvert() -> str:
 
 def build(cfg: ScenarioConfig) -> ScenarioFiles:
     """Return the scenario files for ``cfg``, building them into the cache if needed."""
-    key_fields = {k: v for k, v in cfg.to_dict().items() if k not in ("reward", "max_episode_time", "glosa")}
+    key_fields = {k: v for k, v in cfg.to_dict().items()
+                  if k not in NOT_BUILT and not (k in OPTIONAL_FIELDS and v is None)}
     key_fields["_build"] = BUILD_VERSION
     key_fields["_sumo"] = _sumo_version()
     import hashlib
@@ -112,11 +114,12 @@ def _node(k: int, n: int) -> str:
 def _write_all(cfg: ScenarioConfig, out: Path) -> None:
     n = cfg.n_intersections
     nodes = ET.Element("nodes")
+    xs = cfg.node_x
     for k in range(n + 2):
-        ET.SubElement(nodes, "node", id=_node(k, n), x=f"{k * cfg.spacing:.2f}", y="0",
+        ET.SubElement(nodes, "node", id=_node(k, n), x=f"{xs[k]:.2f}", y="0",
                       type="traffic_light" if 1 <= k <= n else "priority")
     for k in range(1, n + 1):
-        x = f"{k * cfg.spacing:.2f}"
+        x = f"{xs[k]:.2f}"
         ET.SubElement(nodes, "node", id=f"N{k}", x=x, y=f"{cfg.side_length:.2f}", type="priority")
         ET.SubElement(nodes, "node", id=f"S{k}", x=x, y=f"{-cfg.side_length:.2f}", type="priority")
     edges = ET.Element("edges")
@@ -158,23 +161,30 @@ def _write_all(cfg: ScenarioConfig, out: Path) -> None:
 
 
 def _write_signals(cfg: ScenarioConfig, net: ET.Element, path: Path) -> None:
-    """Copy netconvert's phase states, set the 90 s plan and each junction's offset."""
+    """Copy netconvert's phase states, set each junction's plan (arterial green, yellow, side
+    green, yellow) and offset."""
     add = ET.Element("additional")
-    side_green = cfg.cycle - cfg.main_green - 2 * cfg.yellow
-    for k, offset in enumerate(cfg.offsets, start=1):
+    for k, (cycle, green, offset) in enumerate(cfg.timing, start=1):
         tl = net.find(f"./tlLogic[@id='J{k}']")
         if tl is None:
             raise RuntimeError(f"netconvert produced no traffic light at J{k}")
-        phases = tl.findall("phase")
-        states = [p.get("state") for p in phases]
+        # an all-red phase (netconvert adds one at the wide junctions of a 6-lane arterial) is
+        # dropped: every corridor runs the same 4-phase plan
+        states = [st for p in tl.findall("phase") if set(st := p.get("state")) - set("rs")]
         through = net.find(f"./connection[@from='A{k - 1}'][@to='A{k}']")
-        if through is None or states[0][int(through.get("linkIndex"))] not in "gG":
-            raise RuntimeError(f"phase 0 at J{k} is not the arterial green: {states}")
         if len(states) != 4:
             raise RuntimeError(f"expected a 4-phase plan at J{k}, netconvert made {states}")
+        # netconvert starts with the arterial's green, except where the side streets have as many
+        # lanes (one-lane arterial): it then starts with theirs, and the plan is turned round
+        first = next((i for i, st in enumerate(states) if through is not None
+                      and st[int(through.get("linkIndex"))] in "gG"), None)
+        if first not in (0, 2):
+            raise RuntimeError(f"no arterial green phase at J{k}: {states}")
+        states = states[first:] + states[:first]
         logic = ET.SubElement(add, "tlLogic", id=f"J{k}", type="static", programID=cfg.signals,
                               offset=f"{offset:g}")
-        for state, dur in zip(states, (cfg.main_green, cfg.yellow, side_green, cfg.yellow)):
+        side_green = cycle - green - 2 * cfg.yellow
+        for state, dur in zip(states, (green, cfg.yellow, side_green, cfg.yellow)):
             ET.SubElement(logic, "phase", duration=f"{dur:g}", state=state)
     _write_xml(add, path)
 

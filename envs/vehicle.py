@@ -58,6 +58,7 @@ class ControlledVehicle:
         self.kin = s.kinematics(self.vid)
         obs, self.signal, self.others = self.obs_type.observe(s, self.vid, self.kin, s.neighbours(self.vid))
         lane = self.kin.lane
+        # the road's lanes, not the observation's: a change into a padded lane is masked
         self.mask = safety.lane_mask(lane, self.cfg.lanes, s.could_change(self.vid, 1), s.could_change(self.vid, -1))
         return obs
 

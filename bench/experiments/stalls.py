@@ -58,7 +58,7 @@ def trace(signals: str, mpr: float, demand: float, duration: float, at: tuple[in
     agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space)
     state, _ = load_policy(policy_dir("prl", signals, models), "prl")  # trained alone, driven in a fleet
     agent.load_state_dict(state)
-    lanes, front = cfg.lanes, int(round(cfg.grid_behind / cfg.cell_length))
+    lanes, front = cfg.observed_lanes, int(round(cfg.grid_behind / cfg.cell_length))
     rows: list[dict[str, Any]] = []
 
     def policy(grids: np.ndarray, logics: np.ndarray, masks: np.ndarray) -> list:

@@ -8,6 +8,7 @@ reused by a rerun (the DP takes a few seconds per case).
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,14 +31,15 @@ class BoundTask:
     case: int
     depart_time: float  # [s] the ego's entry step on this case
     time_limit: float  # [s] the baseline's travel time on this case (NO_LIMIT: no equal-time bound)
+    scenario: str = ""  # JSON of the run's scenario overrides (bench.harness.scenarios), "" none
 
 
 def solve(task: BoundTask) -> dict[str, Any]:
     """Both bounds of one case (runs in a worker)."""
+    from bench.harness.scenarios import setting
     from bench.oracle.dp import bound
-    from envs.config import ScenarioConfig
 
-    cfg = ScenarioConfig(signals=task.signals)
+    cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
     t0 = time.perf_counter()
     cost = bound(cfg, task.depart_time, "cost")
     row = {"signals": task.signals, "case": task.case, "depart_time": task.depart_time, "time_limit": task.time_limit,
@@ -50,24 +52,26 @@ def solve(task: BoundTask) -> dict[str, Any]:
     return row
 
 
-def tasks_for(results: pd.DataFrame) -> list[BoundTask]:
+def tasks_for(results: pd.DataFrame, scenario: str = "") -> list[BoundTask]:
     """One task per (signals, case) of ``results``: the departure every method shared on that case
     (they share the traffic until the ego's insertion), the baseline's travel time as the limit."""
     out = []
     for (s, c), g in results.groupby(["signals", "case"]):
         base = g[g.method == "baseline"]
         limit = float(base.travel_time.iloc[0]) if len(base) and bool(base.terminated.iloc[0]) else NO_LIMIT
-        out.append(BoundTask(str(s), int(c), float(g.depart_time.iloc[0]), limit))
+        out.append(BoundTask(str(s), int(c), float(g.depart_time.iloc[0]), limit, scenario))
     return out
 
 
-def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner) -> pd.DataFrame:
+def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
+           scenario: dict[str, Any] | None = None) -> pd.DataFrame:
     """``results`` with the bound columns of its case, solving (with ``runner(tasks, workers,
-    fn)``, an executor of ``bench.harness.executors``) only what ``bounds.parquet`` lacks."""
+    fn)``, an executor of ``bench.harness.executors``) only what ``bounds.parquet`` lacks, on the
+    run's ``scenario`` (overrides; one per run folder)."""
     path = run_dir / "bounds.parquet"
     done = pd.read_parquet(path) if path.is_file() else pd.DataFrame(columns=COLUMNS)
     have = set(map(tuple, done[KEY].astype(object).values)) if len(done) else set()
-    todo = [t for t in tasks_for(results) if (t.signals, t.case, t.depart_time, t.time_limit) not in have]
+    todo = [t for t in tasks_for(results, json.dumps(scenario, sort_keys=True) if scenario else "") if (t.signals, t.case, t.depart_time, t.time_limit) not in have]
     if todo:
         new = pd.DataFrame(list(runner(todo, workers, solve)), columns=COLUMNS)
         done = pd.concat([done, new], ignore_index=True) if len(done) else new

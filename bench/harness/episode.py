@@ -40,9 +40,10 @@ def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = N
 
 def run_episode(
     env: EcoDriveEnv, agent: Agent, case: Case, method: str, log_path: Path | None = None,
-    agent_sha256: str = "", script: Any = None,
+    agent_sha256: str = "", script: Any = None, log_meta: dict[str, str] | None = None,
 ) -> dict[str, Any]:
     """Greedy episode of ``agent`` on ``case``; returns the summary row (also the /episode record).
+    ``log_meta``: more step-log metadata (the harness: the training and evaluation scenarios).
 
     ``script`` (the lateral scenarios) has ``start(env)``, called after the reset, and
     ``before(env, step)`` / ``after(env, step)``, called around every step."""
@@ -56,6 +57,7 @@ def run_episode(
             "geometry_json": meta_json({"lane_y": env.files.lane_y, "stop_lines": env.files.stop_lines,
                                         "junction_x": env.files.junction_x, "tls": env.files.tls_ids,
                                         "lane_width": LANE_WIDTH, "v2i_range": env.cfg.v2i_range}),
+            **(log_meta or {}),
         }
         log = EpisodeLog(log_path, meta)
         env.recorder = log.record
@@ -79,7 +81,7 @@ def run_episode(
                 script.after(env, steps)
             steps += 1
             ret += r
-            speed = float(obs["logic"][env.cfg.lanes + 1])
+            speed = float(obs["logic"][env.cfg.observed_lanes + 1])
             if speed < STOP_SPEED:
                 time_stopped += env.cfg.step_length
                 stops += moving

@@ -5,6 +5,7 @@ on the executor (tests compare them).
 """
 from __future__ import annotations
 
+import json
 import multiprocessing as mp
 import os
 import time
@@ -29,11 +30,15 @@ class Task:
     policy_dir: str  # models/<method>-<signals>/s<seed> for learning methods, "" otherwise
     train_seed: int = -1  # the policy's training seed; -1 for rule-based methods
     factory: str = ""  # a user agent's package.module:factory (bench.harness.external), "" otherwise
+    scenario: str = ""  # JSON of the env's scenario overrides (bench.harness.scenarios), "" none
+    transfer: bool = False  # the policy may drive a scenario other than its training one
+    meta: tuple[tuple[str, str], ...] = ()  # extra step-log metadata (the scenarios)
 
 
-# per worker process: one env per (method, signals); one agent per (method, signals, policy folder)
-_ENVS: dict[tuple[str, str], Any] = {}
-_AGENTS: dict[tuple[str, str, str], tuple[Any, str]] = {}  # agent, policy sha256
+# per worker process: one env per (method, signals, scenario); one agent per (method, signals,
+# policy folder, scenario)
+_ENVS: dict[tuple[str, str, str], Any] = {}
+_AGENTS: dict[tuple[str, str, str, str], tuple[Any, str]] = {}  # agent, policy sha256
 
 
 def run_task(task: Task) -> dict[str, Any]:
@@ -42,30 +47,35 @@ def run_task(task: Task) -> dict[str, Any]:
 
     from agents.registry import LEARNING, make_agent
     from bench.harness.episode import make_env, run_episode
-    from bench.harness.policies import CheckpointError, load_policy
+    from bench.harness.policies import CheckpointError, load_policy, policy_spaces
 
     torch.set_num_threads(1)
-    key = (task.method, task.signals, task.policy_dir)
+    scenario = json.loads(task.scenario) if task.scenario else None
+    env_key = (task.method, task.signals, task.scenario)
+    key = (task.method, task.signals, task.policy_dir, task.scenario)
     if task.factory and key not in _AGENTS:
         from bench.harness.external import make
 
-        _ENVS[(task.method, task.signals)], agent = make(task.factory, task.signals)
+        _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
         _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
     if task.method == ORACLE and key not in _AGENTS:
         from bench.harness.oracle import OracleAgent
 
-        _ENVS[(task.method, task.signals)] = env = make_env(OracleAgent, task.signals)  # type: ignore[arg-type]
+        _ENVS[env_key] = env = make_env(OracleAgent, task.signals, scenario)  # type: ignore[arg-type]
         _AGENTS[key] = (OracleAgent(env.cfg), "")
-    if (task.method, task.signals) not in _ENVS:
-        _ENVS[(task.method, task.signals)] = make_env(task.method, task.signals)
-    env = _ENVS[(task.method, task.signals)]
+    if env_key not in _ENVS:
+        _ENVS[env_key] = make_env(task.method, task.signals, scenario)
+    env = _ENVS[env_key]
     if key not in _AGENTS:
         sha, state, config = "", None, {}
+        spaces = env.observation_space, env.action_space
         if task.method in LEARNING:
-            state, manifest = load_policy(Path(task.policy_dir), task.method, env.cfg.to_dict())
+            state, manifest = load_policy(Path(task.policy_dir), task.method, env.cfg.to_dict(), task.transfer)
             sha, config = manifest["sha256"], manifest.get("agent_config") or {}
+            if task.transfer:  # the spaces it trained with: its shapes, and its input scaling
+                spaces = policy_spaces(Path(task.policy_dir), manifest)
         try:  # an experiment's policy (ecodrive train --set) is built with the config it trained with
-            agent = make_agent(task.method, env.observation_space, env.action_space, **config)
+            agent = make_agent(task.method, *spaces, **config)
         except (TypeError, ValueError) as e:
             raise CheckpointError(f"{task.policy_dir}/manifest.json: agent_config {config!r} not accepted ({e})") from None
         if state is not None:
@@ -73,7 +83,8 @@ def run_task(task: Task) -> dict[str, Any]:
         _AGENTS[key] = (agent, sha)
     agent, sha = _AGENTS[key]
     t0 = time.perf_counter()
-    row = run_episode(env, agent, task.case, task.method, log_path=Path(task.path), agent_sha256=sha)
+    row = run_episode(env, agent, task.case, task.method, log_path=Path(task.path), agent_sha256=sha,
+                      log_meta=dict(task.meta))
     row["episode_wall_s"] = time.perf_counter() - t0
     row["mcap"] = task.path
     row["train_seed"] = task.train_seed

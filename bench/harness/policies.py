@@ -10,11 +10,14 @@ from __future__ import annotations
 import json
 import pickle
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
 from bench.io import atomic_json, atomic_torch_save, sha256
+
+if TYPE_CHECKING:
+    from envs.config import ScenarioConfig
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
@@ -66,18 +69,16 @@ def save_policy(folder: Path, state: dict[str, Any], manifest: dict[str, Any]) -
     return path
 
 
-def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = None) -> tuple[dict, dict]:
-    """(state, manifest) of a shipped policy, verified."""
+def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = None,
+                transfer: bool = False) -> tuple[dict, dict]:
+    """(state, manifest) of a shipped policy, verified. Given the ``scenario`` (config dict) it is
+    to drive, the policy must have been trained on it, or (``transfer``) be able to observe it
+    (``transfer_overrides``)."""
     man_path, path = folder / "manifest.json", folder / "policy.pt"
     if not man_path.is_file() or not path.is_file():
         raise CheckpointError(f"{folder}: no trained policy (expected policy.pt and manifest.json); "
                               f"train one with the command in the README")
-    try:
-        manifest = json.loads(man_path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise CheckpointError(f"{man_path}: manifest is not valid JSON ({e})") from None
-    if not isinstance(manifest, dict):
-        raise CheckpointError(f"{man_path}: manifest is a JSON {type(manifest).__name__}, expected an object")
+    manifest = read_manifest(folder)
     digest = sha256(path)
     if manifest.get("sha256") != digest:
         raise CheckpointError(f"{path}: sha256 {digest[:12]}... does not match the manifest's "
@@ -86,15 +87,77 @@ def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = Non
         raise CheckpointError(f"{path}: policy is for method {manifest.get('method')!r}, not {method!r}")
     state = load_torch(path)
     if scenario is not None:
-        from envs.config import ConfigError, ScenarioConfig, backfill, diff
-
-        trained = manifest.get("scenario", {})
-        try:
-            ScenarioConfig.from_dict(backfill(trained))  # fields added later: the value their absence meant
-        except ConfigError as e:
-            raise CheckpointError(f"{man_path}: scenario config not accepted ({e})") from None
-        # the reward is what the policy was trained for, not what it sees or drives in: not compared
-        differs = sorted({k.split(".")[0] for k in diff(trained, scenario)} - {"signals", "glosa", "reward"})
-        if differs:
-            raise CheckpointError(f"{path}: trained on a different scenario config (differs in: {', '.join(differs)})")
+        check_scenario(folder, manifest, scenario, transfer)
     return state, manifest
+
+
+def read_manifest(folder: Path) -> dict[str, Any]:
+    man_path = folder / "manifest.json"
+    try:
+        manifest = json.loads(man_path.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CheckpointError(f"{man_path}: manifest is not valid JSON ({e})") from None
+    if not isinstance(manifest, dict):
+        raise CheckpointError(f"{man_path}: manifest is a JSON {type(manifest).__name__}, expected an object")
+    return manifest
+
+
+def trained_scenario(folder: Path, manifest: dict[str, Any]) -> ScenarioConfig:
+    """The scenario the policy was trained on; fields added later read as their absence meant."""
+    from envs.config import ConfigError, ScenarioConfig, backfill
+
+    try:
+        return ScenarioConfig.from_dict(backfill(manifest.get("scenario", {})))
+    except ConfigError as e:
+        raise CheckpointError(f"{folder / 'manifest.json'}: scenario config not accepted ({e})") from None
+
+
+def policy_spaces(folder: Path, manifest: dict[str, Any]) -> tuple[Any, Any]:
+    """(observation space, action space) the policy was trained with, from its manifest."""
+    from agents.registry import ACTION_INTERFACE
+    from envs.action import make_action
+    from envs.observation import observation_space
+
+    cfg = trained_scenario(folder, manifest)
+    return observation_space(cfg), make_action(ACTION_INTERFACE[manifest["method"]], cfg).space
+
+
+def check_scenario(folder: Path, manifest: dict[str, Any], scenario: dict[str, Any], transfer: bool = False) -> dict:
+    """The scenario overrides the policy needs to drive ``scenario``: {} or the ``obs_lanes`` it
+    was trained with. Without ``transfer`` it must be the scenario it was trained on (the signals,
+    the GLOSA device and the reward aside); with it, any scenario it can observe
+    (``transfer_overrides``)."""
+    from envs.config import diff
+
+    trained = trained_scenario(folder, manifest)
+    if not transfer:
+        # the reward is what the policy was trained for, not what it sees or drives in: not compared;
+        # nor is the observation's lane count, which follows the policy (below)
+        differs = sorted({k.split(".")[0] for k in diff(manifest.get("scenario", {}), scenario)}
+                         - {"signals", "glosa", "reward", "obs_lanes"})
+        if differs:
+            raise CheckpointError(f"{folder / 'policy.pt'}: trained on a different scenario config (differs in: "
+                                  f"{', '.join(differs)}); to evaluate it there anyway, give --transfer")
+    return transfer_overrides(folder, trained, scenario)
+
+
+def transfer_overrides(folder: Path, trained: ScenarioConfig, scenario: dict[str, Any]) -> dict:
+    """What a policy trained on ``trained`` needs to observe ``scenario``: its observation shape
+    is fixed by training, so the road may have fewer lanes (``obs_lanes`` = the lanes it observed,
+    the others padded as occupied) but the grid must have the same cells."""
+    from envs.config import ConfigError, ScenarioConfig
+
+    try:
+        target = ScenarioConfig.from_dict({**scenario, "obs_lanes": None})
+    except ConfigError as e:
+        raise CheckpointError(f"scenario not accepted ({e})") from None
+    need, given = trained.observed_lanes, scenario.get("obs_lanes")
+    where = f"{folder / 'policy.pt'}: cannot drive this scenario:"
+    if target.lanes > need:
+        raise CheckpointError(f"{where} it observes {need} lanes and the road has {target.lanes} (accepted: 1..{need})")
+    if given is not None and given != need:
+        raise CheckpointError(f"{where} it observes {need} lanes, not obs_lanes={given}")
+    if target.grid_shape[0] != trained.grid_shape[0]:
+        raise CheckpointError(f"{where} its grid has {trained.grid_shape[0]} cells along the road, this one "
+                              f"{target.grid_shape[0]} (grid_ahead, grid_behind, cell_length)")
+    return {} if need == target.lanes else {"obs_lanes": need}

@@ -3,10 +3,13 @@
     ecodrive run [--profile smoke|paper|full] [--executor local|ray] [--address ADDR]
                         [--workers N] [--methods ...] [--signals ...] [--run-id ID] [--logs DIR]
                         [--agent MODULE:FACTORY | --sb3 MODEL.zip --sb3-algo ALGO] [--name NAME]
+                        [--scenario FILE.json] [--set FIELD=VALUE ...] [--transfer]
 
 Writes ``<logs>/<run-id>/<signals>/<method>/case-XXX.mcap``, ``results.parquet`` and
 ``manifest.json``. Rerunning the same command skips cases whose MCAP is complete and reruns the
-rest, so a killed run loses nothing that finished. Evaluation is greedy.
+rest, so a killed run loses nothing that finished. Evaluation is greedy. ``--scenario`` and
+``--set`` evaluate on another corridor (one per run folder and setting); a policy drives a
+scenario other than its training one only with ``--transfer`` (``bench.harness.scenarios``).
 """
 from __future__ import annotations
 
@@ -21,7 +24,7 @@ from tqdm import tqdm
 
 from agents.registry import LEARNING, METHODS
 from bench.args import Parser, fail, int_in, name
-from bench.harness import external
+from bench.harness import external, scenarios
 from bench.harness.bounds import attach
 from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
@@ -42,7 +45,8 @@ PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, 
 KEEP = ("method", "signals", "train_seed", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
         "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",
         "lane_changes_applied", "clips", "jerk_exceedances", "collisions", "teleports", "battery_consumed",
-        "battery_regenerated", "mcap")
+        "battery_regenerated", "mcap", "eval_scenario_hash", "train_scenario_hash")
+SCENARIO_COLUMNS = ("eval_scenario_hash", "train_scenario_hash")  # not in tables written before them
 
 
 class UsageError(Exception):
@@ -83,6 +87,7 @@ def parser() -> Parser:
                          "<run>/bounds.parquet): columns cost_bound and energy_bound")
     ap.add_argument("--train-seeds", nargs="+", type=int_in(0), default=None, metavar="SEED",
                     help="training seeds of the learning methods to evaluate, each >= 0 (default: every shipped one)")
+    scenarios.add_options(ap)
     return ap
 
 
@@ -103,6 +108,10 @@ def parse(argv: list[str]) -> dict[str, Any]:
         opts["agent_sha256"] = {label: opts.pop("sb3_sha256")} if "sb3_sha256" in opts else {}
     elif opts["name"]:
         ap.error("--name names an --agent or --sb3; give --agent package.module:factory or --sb3 MODEL.zip too")
+    try:
+        opts["scenario"] = scenarios.parse_overrides(opts.pop("scenario"), opts.pop("set_scenario"), opts["signals"])
+    except ValueError as e:
+        ap.error(str(e))
     return opts
 
 
@@ -162,9 +171,10 @@ def check_writable(run_dir: Path) -> None:
 def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     runs, skipped = resolve_methods(opts)
     factories = opts.get("factories", {})
+    overrides, transfer = opts.get("scenario") or {}, bool(opts.get("transfer"))
     for spec in factories.values():  # a factory that cannot build its agent fails before any episode
         try:
-            env, _ = external.make(spec, opts["signals"][0])
+            env, _ = external.make(spec, opts["signals"][0], overrides or None)
             env.close()
         except AgentError as e:
             raise UsageError(str(e)) from None
@@ -172,13 +182,19 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     if skipped:
         print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
     run_dir = opts["logs"] / opts["run_id"]
+    evals = {s: scenarios.setting(s, overrides) for s in opts["signals"]}
+    pdirs = {(m, s, sd): str(policy_dir(m, s, opts["models"], sd)) if sd >= 0 else "" for m, s, sd in runs}
+    # a policy that may not (or cannot) drive the scenario is refused before anything is written
+    where = {r: scenarios.evaluation(r[0], r[1], pdirs[r], overrides, transfer) for r in runs}
+    one_scenario(run_dir, {s: c.digest() for s, c in evals.items()})
     check_writable(run_dir)
     cases = load()[: PROFILES[opts["profile"]]]
     rows, tasks = [], []
     shas = {}
+    trained = {ev.train_hash: ev.train for ev in where.values() if ev.train_hash}
     for signals in opts["signals"]:
         for method, seed in [(m, sd) for m, s, sd in runs if s == signals]:
-            pdir = str(policy_dir(method, signals, opts["models"], seed)) if seed >= 0 else ""
+            pdir, ev = pdirs[(method, signals, seed)], where[(method, signals, seed)]
             sha = (sha256(Path(pdir) / "policy.pt") if pdir  # a log of another policy is rerun
                    else opts.get("agent_sha256", {}).get(method, ""))
             if sha:
@@ -186,11 +202,13 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
             folder = run_dir / signals / method / (f"s{seed}" if seed >= 0 else "")
             for case in cases:
                 path = folder / f"case-{case.index:03d}.mcap"
-                done = episode_summary(path, agent_sha256=sha)
+                done = episode_summary(path, agent_sha256=sha, eval_scenario=ev.eval_hash,
+                                       legacy_scenario=scenarios.legacy_hash(signals))
                 if done is not None:
                     rows.append({**done, "mcap": str(path), "episode_wall_s": float("nan"), "train_seed": seed})
                 else:
-                    tasks.append(Task(method, signals, case, str(path), pdir, seed, factories.get(method, "")))
+                    tasks.append(Task(method, signals, case, str(path), pdir, seed, factories.get(method, ""),
+                                      scenario=ev.scenario, transfer=transfer, meta=ev.meta(transfer)))
     t0 = time.perf_counter()
     it = (run_local(tasks, opts["workers"]) if opts["executor"] == "local"
           else run_ray(tasks, opts["address"], opts["workers"]))
@@ -200,6 +218,8 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
             bar.update(1)
     wall = time.perf_counter() - t0
     df = pd.DataFrame(rows).rename(columns={"return_": "return", "case_index": "case", "sumo_seed": "seed"})
+    for i, col in enumerate(SCENARIO_COLUMNS):
+        df[col] = [(ev.eval_hash, ev.train_hash)[i] for ev in map(where.get, zip(df.method, df.signals, df.train_seed))]
     ran = df["episode_wall_s"].dropna()
     kept = earlier_rows(run_dir, df)
     df = pd.concat([df[list(KEEP)], kept], ignore_index=True) if len(kept) else df[list(KEEP)]
@@ -209,7 +229,7 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
         def runner(tasks, workers, fn):
             return (run_local(tasks, workers, fn) if opts["executor"] == "local"
                     else run_ray(tasks, opts["address"], workers, fn))
-        df = attach(run_dir, df, opts["workers"], runner)
+        df = attach(run_dir, df, opts["workers"], runner, overrides)
     atomic_parquet(df, run_dir / "results.parquet")
     manifest = {
         "command": " ".join(["ecodrive", "run", *opts.get("argv", [])]), "profile": opts["profile"],
@@ -222,9 +242,8 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
         "harness_overhead": round(float(wall * min(opts["workers"], max(len(ran), 1)) / ran.sum() - 1), 4)
         if len(ran) else None,
     }
-    from envs.config import ScenarioConfig
-
-    manifest["scenario"] = {s: ScenarioConfig(signals=s).to_dict() for s in opts["signals"]}
+    manifest["scenario"] = {s: c.to_dict() for s, c in evals.items()}  # eval_scenario_hash: their digests
+    manifest.update(scenario_overrides=overrides, transfer=transfer, train_scenarios=trained)
     if opts.get("bounds"):  # the DP's per-case time, as measured in this run's workers
         manifest["bound_wall_s_median"] = round(float(pd.read_parquet(run_dir / "bounds.parquet").bound_wall_s.median()), 3)
     atomic_json(manifest, run_dir / "manifest.json")
@@ -243,12 +262,32 @@ def earlier_rows(run_dir: Path, df: pd.DataFrame) -> pd.DataFrame:
     except Exception as e:  # pyarrow's errors for a truncated file have no common base
         raise UsageError(f"{path}: not a readable results table ({type(e).__name__}); move it away to start "
                          f"afresh, or use another --run-id") from None
+    if set(SCENARIO_COLUMNS) - set(old.columns) and "signals" in old.columns:  # a table from before them
+        old = old.assign(eval_scenario_hash=old.signals.map(scenarios.legacy_hash), train_scenario_hash="")
     if not set(KEEP) <= set(old.columns):
         return pd.DataFrame(columns=list(KEEP))
     now = set(zip(df.signals, df.method, df.train_seed, df.case))
     rows = [r for r in old.itertuples(index=False) if (r.signals, r.method, r.train_seed, r.case) not in now]
     keep = [r._asdict() for r in rows if episode_summary(resolve_log(run_dir, r.mcap)) is not None]
     return pd.DataFrame(keep, columns=list(KEEP))
+
+
+def one_scenario(run_dir: Path, hashes: dict[str, str]) -> None:
+    """A run folder holds one scenario per signal setting: a command on another one is refused
+    before it overwrites any step log (the results table says which scenario the folder has)."""
+    path = run_dir / "results.parquet"
+    try:
+        old = pd.read_parquet(path) if path.is_file() else pd.DataFrame(columns=["signals"])
+    except Exception:  # earlier_rows reports an unreadable table
+        return
+    if "signals" not in old.columns:
+        return
+    have = old.eval_scenario_hash if "eval_scenario_hash" in old.columns else old.signals.map(scenarios.legacy_hash)
+    for signals, want in hashes.items():
+        other = sorted(set(have[old.signals == signals]) - {want})
+        if other:
+            raise UsageError(f"{run_dir} holds {signals} episodes of another scenario (eval_scenario_hash "
+                             f"{', '.join(other)}, this command's is {want}); use another --run-id")
 
 
 def _relative(run_dir: Path, mcap: str) -> str:

@@ -235,18 +235,22 @@ def is_complete(path: str | Path) -> bool:
         return False
 
 
-def episode_summary(path: str | Path, agent_sha256: str | None = None) -> dict[str, Any] | None:
+def episode_summary(path: str | Path, agent_sha256: str | None = None, eval_scenario: str | None = None,
+                    legacy_scenario: str = "") -> dict[str, Any] | None:
     """The /episode record of a finished log through the MCAP index (fast), or None when the
-    file is missing, unfinished or damaged, or (given ``agent_sha256``) was written by another
-    policy: the harness then reruns the case."""
+    file is missing, unfinished or damaged, or (given ``agent_sha256``, ``eval_scenario``) was
+    written by another policy or on another scenario: the harness then reruns the case. A log
+    without an ``eval_scenario_hash`` counts as written on ``legacy_scenario``."""
     from mcap.reader import make_reader
 
     try:
         with open(path, "rb") as f:
             reader = make_reader(f, validate_crcs=True)
-            if agent_sha256 is not None:
+            if agent_sha256 is not None or eval_scenario is not None:
                 meta = next((m.metadata for m in reader.iter_metadata() if m.name == "ecodrive"), {})
-                if meta.get("agent_sha256", "") != agent_sha256:
+                if agent_sha256 is not None and meta.get("agent_sha256", "") != agent_sha256:
+                    return None
+                if eval_scenario is not None and meta.get("eval_scenario_hash", legacy_scenario) != eval_scenario:
                     return None
             for _, channel, message in reader.iter_messages(topics=["/episode"]):
                 ep = schema.Episode.FromString(message.data)

@@ -15,8 +15,8 @@ free, as in the env: the optimum recuperates its kinetic energy in the last metr
 Signal timing is SUMO's: a program with offset ``o`` is at cycle position ``(t - o) mod C``, and
 a switch due at ``s`` rules the whole step ``[t, t + dt)`` containing ``s`` (SUMO runs the events
 due before ``t + dt`` at the start of that step). So the step from ``t`` is green iff
-``0 < (t + dt - o) mod C <= main_green``. Positions are SUMO x coordinates (the arterial runs
-along +x; the W->E route distance is x minus the start).
+``0 < (t + dt - o) mod C <= G``, each junction with its own ``o``, ``C``, ``G`` (``ScenarioConfig.timing``).
+Positions are SUMO x coordinates read from the network (uneven spacing included).
 
 Method. Speeds live on ``v = j dv``, ``dv = speed_limit / n`` (the start speed is a grid point),
 positions on ``x = x0 + i dx``, ``dx = dv dt``: the Euler update maps grid states onto grid
@@ -122,9 +122,9 @@ class Corridor:
     v0: float  # [m/s] its insertion speed
     x_end: float  # [m] start of the exit edge: reaching it ends the episode
     stop_lines: tuple[float, ...]  # [m] W->E stop lines
-    offsets_ms: tuple[int, ...]  # [ms] signal offsets as SUMO reads them
-    cycle_ms: int  # [ms]
-    green_ms: int  # [ms] arterial green at the start of each cycle
+    offsets_ms: tuple[int, ...]  # [ms] signal offsets as SUMO reads them, one per stop line
+    cycles_ms: tuple[int, ...]  # [ms] one per stop line
+    greens_ms: tuple[int, ...]  # [ms] arterial green at the start of each cycle, one per stop line
 
     @classmethod
     def from_config(cls, cfg: ScenarioConfig) -> Corridor:
@@ -140,21 +140,25 @@ class Corridor:
         def sumo_ms(seconds: float) -> int:  # the .add.xml writes "%g"; SUMO keeps milliseconds
             return int(round(float(f"{seconds:g}") * MS))
 
-        side = cfg.cycle - cfg.main_green - 2 * cfg.yellow
+        timing, y = cfg.timing, cfg.yellow  # a cycle is the sum of the phases SUMO read
         return cls(
             x0=lane_start(files.arterial_edges[0]) + cfg.vehicle_length + POSITION_EPS,
             v0=cfg.speed_limit, x_end=lane_start(files.exit_edge), stop_lines=tuple(files.stop_lines),
-            offsets_ms=tuple(sumo_ms(o) for o in cfg.offsets),
-            cycle_ms=sumo_ms(cfg.main_green) + 2 * sumo_ms(cfg.yellow) + sumo_ms(side),
-            green_ms=sumo_ms(cfg.main_green),
+            offsets_ms=tuple(sumo_ms(t.offset) for t in timing), greens_ms=tuple(sumo_ms(t.green) for t in timing),
+            cycles_ms=tuple(sumo_ms(t.green) + 2 * sumo_ms(y) + sumo_ms(t.cycle - t.green - 2 * y) for t in timing),
         )
+
+    def first(self, k: int) -> Corridor:
+        """The corridor with only its first ``k`` signals (tests: none, or a single red)."""
+        return replace(self, stop_lines=self.stop_lines[:k], offsets_ms=self.offsets_ms[:k],
+                       cycles_ms=self.cycles_ms[:k], greens_ms=self.greens_ms[:k])
 
     def green(self, t_start: np.ndarray, dt: float) -> np.ndarray:
         """(len(t_start), n stop lines) bool: the arterial is green in the step from ``t``."""
         t_ms = np.rint(np.asarray(t_start, dtype=float) * MS).astype(np.int64)
         end = t_ms[:, None] + int(round(dt * MS)) - np.asarray(self.offsets_ms, dtype=np.int64)[None, :]
-        pos = np.mod(end, self.cycle_ms)
-        return (pos > 0) & (pos <= self.green_ms)
+        pos = np.mod(end, np.asarray(self.cycles_ms, dtype=np.int64)[None, :])
+        return (pos > 0) & (pos <= np.asarray(self.greens_ms, dtype=np.int64)[None, :])
 
 
 @dataclass
@@ -253,8 +257,8 @@ class _Run:
         if rate <= 0:
             raise ValueError("phi = 0 and no constant power intake: no horizon; use objective='energy'")
         ke_back = cfg.ev.recuperation_efficiency * 0.5 * (cfg.ev.mass + cfg.ev.rotating_mass) * cor.v0 ** 2 / 3600.0
-        n_red = math.ceil((cor.cycle_ms - cor.green_ms) / (dt * MS))
-        horizon = math.ceil((cor.x_end - cor.x0) / (cor.v0 * dt)) + len(cor.stop_lines) * n_red + HORIZON_MARGIN
+        n_red = sum(math.ceil((c - g) / (dt * MS)) for c, g in zip(cor.cycles_ms, cor.greens_ms))
+        horizon = math.ceil((cor.x_end - cor.x0) / (cor.v0 * dt)) + n_red + HORIZON_MARGIN
         while horizon * dt <= MAX_HORIZON:
             sol = self.backward(lat, lat.windows(horizon))
             if not np.isfinite(sol.value):

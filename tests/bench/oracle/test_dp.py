@@ -25,16 +25,41 @@ def corridor() -> Corridor:
     return Corridor.from_config(CFG)
 
 
+# 3 lanes, uneven links, a plan of its own at every junction, explicit offsets at two of them
+UNEVEN = {"lanes": 3, "spacings": (300.0, 650.0, 180.0), "n_intersections": 4,
+          "junction_cycles": (90.0, 120.0, 60.0, 75.0), "junction_greens": (42.0, 70.0, 25.0, 30.0),
+          "junction_offsets": (0.0, 17.5, 59.0, 3.0)}
+
+
 def _through_links(env: EcoDriveEnv) -> list[int]:
     """Link index of the W->E through movement at each signal, read from SUMO's net."""
     net = ET.parse(env.files.net).getroot()
     return [int(net.find(f"./connection[@from='A{k}'][@to='A{k + 1}'][@fromLane='0']").get("linkIndex"))
-            for k in range(CFG.n_intersections)]
+            for k in range(env.cfg.n_intersections)]
 
 
-def test_geometry_and_signals_match_sumo(corridor):
-    env = EcoDriveEnv(action="sumo", **FREE_FLOW)
+def test_uneven_per_junction_corridor_reads_its_own_geometry_and_timing():
+    cfg = ScenarioConfig(**UNEVEN)
+    cor = Corridor.from_config(cfg)
+    assert np.diff(cor.stop_lines) == pytest.approx(UNEVEN["spacings"])  # same junction shape everywhere
+    assert cor.cycles_ms == (90000, 120000, 60000, 75000) and cor.greens_ms == (42000, 70000, 25000, 30000)
+    assert cor.offsets_ms == (0, 17500, 59000, 3000)
+    # by hand: J3 (C 60, G 25, offset 59) is green in the step from t iff 0 < (t + 1 - 59) mod 60 <= 25
+    t = np.arange(0.0, 240.0)
+    hand = np.array([0 < (x + 1 - 59) % 60 <= 25 for x in t])
+    assert (cor.green(t, 1.0)[:, 2] == hand).all()
+    plan = bound(cfg, 200.0)
+    for t_cross, c, g, o in zip(plan.crossings, UNEVEN["junction_cycles"], UNEVEN["junction_greens"],
+                                UNEVEN["junction_offsets"]):
+        assert 0 < (t_cross + 1 - o) % c <= g
+
+
+@pytest.mark.parametrize("scenario", [{}, UNEVEN], ids=["paper", "uneven"])
+def test_geometry_and_signals_match_sumo(corridor, scenario):
+    env = EcoDriveEnv(action="sumo", **FREE_FLOW, **scenario)
     try:
+        if scenario:
+            corridor = Corridor.from_config(ScenarioConfig(**scenario))
         assert Corridor.from_config(env.cfg) == corridor  # traffic does not move the geometry
         env.reset(options={"sumo_seed": 1, "insert_time": 30.0})
         assert env.ego.kin[0] == pytest.approx(corridor.x0, abs=1e-9)
@@ -50,7 +75,7 @@ def test_geometry_and_signals_match_sumo(corridor):
             checked += 1
             if terminated or truncated:
                 break
-        assert terminated and checked > 150
+        assert terminated and checked > (100 if scenario else 150)
         assert xs[-2] < corridor.x_end <= xs[-1]  # the env ends the step the exit edge is reached
     finally:
         env.close()
@@ -90,7 +115,7 @@ def _cruise_speed(cfg: ScenarioConfig, grid: Grid) -> float:
 
 @pytest.mark.slow
 def test_always_green_optimum_is_a_cruise(corridor):
-    free = dataclasses.replace(corridor, stop_lines=(), offsets_ms=())
+    free = corridor.first(0)
     v_star = _cruise_speed(CFG, Grid())
     assert v_star == pytest.approx(CFG.speed_limit)  # phi = 1 Wh/s: the limit is the best constant speed
     step = float(energy_wh(v_star, v_star, 1.0, CFG.ev)) + CFG.reward.phi  # [Wh] one cruise step
@@ -116,7 +141,7 @@ def test_always_green_cruise_at_an_interior_speed(corridor):
     per_metre = (energy_wh(speeds, speeds, 1.0, cfg.ev) + 0.3) / speeds
     v_star = speeds[np.argmin(per_metre)]  # hand: 11.87 m/s, below the limit
     assert 11.0 < v_star < 12.5
-    free = dataclasses.replace(corridor, stop_lines=(), offsets_ms=())
+    free = corridor.first(0)
     plan = solve(free, cfg, 0.0)
     mid = (plan.x > 700) & (plan.x < 1500)
     coarse_dv = Grid().spacing(cfg, fine=False)[0]
@@ -125,7 +150,7 @@ def test_always_green_cruise_at_an_interior_speed(corridor):
 
 @pytest.mark.slow
 def test_single_red_arrives_as_green_starts(corridor):
-    red = dataclasses.replace(corridor, stop_lines=corridor.stop_lines[:1], offsets_ms=corridor.offsets_ms[:1])
+    red = corridor.first(1)
     depart, s, v_max = 20.0, corridor.stop_lines[0], CFG.speed_limit
     # by hand: at full speed the ego crosses the first stop line in step k = 30, from t = 50 s;
     # J1 (offset 0) is green in the steps from t with 0 < (t + 1) mod 90 <= 42: 50 s is red
@@ -139,7 +164,7 @@ def test_single_red_arrives_as_green_starts(corridor):
     assert plan.x[k] < s <= plan.x[k + 1] and plan.v[k + 1] > 5.0  # rolls over the line, no stop
     # against the free corridor and a hand-made feasible plan: full speed, brake at -4 m/s^2 to
     # stop short of the line, wait, leave at +3 m/s^2 when green starts, cruise at the limit
-    free = solve(dataclasses.replace(red, stop_lines=(), offsets_ms=()), CFG, depart)
+    free = solve(red.first(0), CFG, depart)
     assert plan.cost > free.cost + 10.0
     v = _stop_and_go(corridor.x0, s, corridor.x_end, v_max, k)
     hand = float(energy_wh(v[:-1], v[1:], 1.0, CFG.ev).sum()) + CFG.reward.phi * (len(v) - 1)
@@ -167,7 +192,7 @@ def _stop_and_go(x0: float, s: float, x_end: float, v_max: float, k_go: int) -> 
 
 @pytest.mark.slow
 def test_refined_grid_moves_the_bound_little(corridor):
-    red = dataclasses.replace(corridor, stop_lines=corridor.stop_lines[:1], offsets_ms=corridor.offsets_ms[:1])
+    red = corridor.first(1)
     base = solve(red, CFG, 20.0)
     fine = solve(red, CFG, 20.0, grid=Grid().refine())
     assert fine.grid["dv"] == pytest.approx(base.grid["dv"] / 2)
