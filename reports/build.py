@@ -19,7 +19,7 @@ from bench.args import Parser, fail
 from bench.logs.mcaplog import LogError, resolve_log
 from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
-from . import experiments, figures, metrics, tables
+from . import experiments, figures, headline, metrics, tables
 from .html import Figure, Page, esc, experiment_caption, label, render
 from .load import RunError, component_sums, load_plan, load_run, load_steps, stop_lines
 
@@ -252,8 +252,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("run_dir", type=Path, help="a run folder written by ecodrive run")
     ap.add_argument("--out", type=Path, default=None, help="output folder (default reports/<run-id>)")
+    ap.add_argument("--readme", type=Path, default=None, metavar="README.md",
+                    help="also rewrite that file's headline block (between <!-- headline:start --> and "
+                         "<!-- headline:end -->) from this run's results")
     args = ap.parse_args(argv)
     out = args.out or Path("reports") / args.run_dir.name
+    if args.readme is not None and not args.readme.is_file():
+        return fail(ap.prog, f"--readme {args.readme}: no such file")
     created = not out.exists()
     try:
         index, warnings = build(args.run_dir, out)
@@ -264,6 +269,13 @@ def main(argv: list[str] | None = None) -> int:
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     print(f"report: {index} and {index.with_suffix('.html')}")
+    if args.readme is not None:
+        results, manifest = load_run(args.run_dir)
+        try:
+            headline.rewrite(args.readme, results, args.run_dir.name, manifest)
+        except ValueError as e:
+            return fail(ap.prog, str(e))
+        print(f"headline: {args.readme}")
     return 0
 
 

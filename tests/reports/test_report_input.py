@@ -75,3 +75,18 @@ def test_bad_input_is_one_line_and_leaves_nothing(damage, words, smoke, tmp_path
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0]
     assert not out.exists()
+
+
+def test_readme_headline_is_rewritten_from_the_run(smoke, tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text("# x\n<!-- headline:start -->\ntyped by hand\n<!-- headline:end -->\nrest\n")
+    assert main([str(smoke), "--out", str(tmp_path / "rep"), "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    assert "typed by hand" not in text and "| baseline (SUMO's driver) |" in text and text.endswith("rest\n")
+    bare = tmp_path / "BARE.md"
+    bare.write_text("no block\n")
+    assert main([str(smoke), "--out", str(tmp_path / "rep2"), "--readme", str(bare)]) == 2
+    assert bare.read_text() == "no block\n"
+    assert "no '<!-- headline:start -->'" in capsys.readouterr().err.splitlines()[-1]
+    assert main([str(smoke), "--out", str(tmp_path / "rep3"), "--readme", str(tmp_path / "missing.md")]) == 2
+    assert not (tmp_path / "rep3").exists()
