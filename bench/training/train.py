@@ -1,6 +1,6 @@
 """Train a learning method on one signal setting, resumably.
 
-    ecodrive train --method prl --signals uncoordinated --episodes 1000 --seed 0
+    ecodrive train --method prl --signals uncoordinated --seed 0   # the recipe's episodes and config
 
 Every ``--checkpoint-every`` episodes the run folder (``$ECODRIVE_RUNS`` or
 ``~/.cache/ecodrive-bench/runs/train``, then ``<method>-<signals>-s<seed>``)
@@ -13,11 +13,13 @@ least E_f + phi T_f, the cost part of eq. 11) is exported to ``models/<method>-<
 with a manifest (command, seed, git SHA, sha256, wall time, selection, validation and final
 metrics) and the run's per-episode ``metrics.parquet``.
 
-``--set FIELD=VALUE`` (repeatable) overrides a field of the method's agent config for an
-experiment (e.g. ``--set twin_q=true`` for PRL). Such a run gets its own folder
-(``<method>-<signals>-s<seed>+FIELD=VALUE``) and is never exported to the shipped ``models/``
-(those are the recipe's agents); give ``--models DIR`` to export it elsewhere, for example to
-evaluate it on the test cases with ``ecodrive run --models DIR``.
+A shipped reference agent is trained by its recipe (``bench.training.recipes``: the episode
+count and the agent-config fields that differ from the paper's Table 2). ``--set FIELD=VALUE``
+(repeatable) overrides a field on top of the recipe for an experiment (e.g. ``--set twin_q=true``
+for PRL). A run whose config is not the recipe's gets its own folder
+(``<method>-<signals>-s<seed>+FIELD=VALUE``) and is never exported to the shipped ``models/``;
+give ``--models DIR`` to export it elsewhere, for example to evaluate it on the test cases with
+``ecodrive run --models DIR``.
 """
 from __future__ import annotations
 
@@ -42,6 +44,7 @@ from bench.harness.policies import MODELS, CheckpointError, load_torch, policy_d
 from bench.harness.provenance import git_sha, package_versions
 from bench.io import Unwritable, atomic_parquet, atomic_torch_save, writable_dir
 from bench.logs.mcaplog import write_train_log
+from bench.training.recipes import is_recipe, recipe
 from envs.config import SIGNALS, added_values, backfill, flat
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
@@ -242,7 +245,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("--method", required=True, help=f"one of {', '.join(LEARNING)}")
     ap.add_argument("--signals", required=True, help=f"one of {', '.join(SIGNALS)}")
-    ap.add_argument("--episodes", type=int, default=1000, help="training episodes (1-100000)")
+    ap.add_argument("--episodes", type=int, default=None,
+                    help="training episodes (1-100000; default: the recipe's, bench.training.recipes)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the agent and of the episode draws (>= 0)")
     ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
@@ -252,12 +256,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
     ap.add_argument("--no-export", action="store_true", help="do not write <models>/<method>-<signals>/ at the end")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                    help="override an agent config field for an experiment (repeatable; exported only to an explicit --models DIR)")
+                    help="override an agent config field (repeatable); a run whose config is not the recipe's is an "
+                         "experiment, exported only to an explicit --models DIR")
     args = ap.parse_args(argv)
     if args.method not in LEARNING:
         ap.error(f"--method {args.method!r} is not accepted; choose one of {', '.join(LEARNING)}")
     if args.signals not in SIGNALS:
         ap.error(f"--signals {args.signals!r} is not accepted; choose one of {', '.join(SIGNALS)}")
+    args.episodes = recipe(args.method, args.signals).episodes if args.episodes is None else args.episodes
     if not 1 <= args.episodes <= 100_000:
         ap.error(f"--episodes {args.episodes} is out of range; accepted: 1..100000")
     if args.seed < 0 or args.checkpoint_every < 1:
@@ -265,12 +271,14 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 <= args.validation_cases <= 100:
         ap.error(f"--validation-cases {args.validation_cases} is out of range; accepted: 0..100")
     try:
-        overrides = agent_overrides(args.method, args.set)
+        given = agent_overrides(args.method, args.set)
     except ValueError as e:
         ap.error(str(e))
-    suffix = "".join(f"+{k}={v}" for k, v in sorted(overrides.items()))
+    base = recipe(args.method, args.signals).overrides
+    overrides = {**base, **given}
+    suffix = "".join(f"+{k}={v}" for k, v in sorted(overrides.items()) if k not in base or base[k] != v)
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
-    experiment_to_shipped = bool(overrides) and args.models.resolve() == MODELS.resolve()
+    experiment_to_shipped = not is_recipe(args.method, args.signals, overrides) and args.models.resolve() == MODELS.resolve()
     if experiment_to_shipped and not args.no_export:
         print(f"note: an experiment ({suffix[1:]}); it is not exported to the shipped models/"
               " (give --models DIR to export it elsewhere)", file=sys.stderr)

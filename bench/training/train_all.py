@@ -1,12 +1,13 @@
 """Train every learning method on both signal settings for several training seeds, two runs at a
 time, resumably; finished seeds are skipped, so seeds accumulate across sessions.
 
-    ecodrive train-all [--seeds 0 1 2 3 4] [--episodes 1000] [--parallel 2] [--methods prl mpdqn dqn ddpg]
+    ecodrive train-all [--seeds 0 1 2 3 4] [--parallel 2] [--methods prl mpdqn dqn ddpg]
 
-Each run is ``ecodrive train`` with its own log next to its run folder. A (method, setting,
-seed) is finished when ``models/<method>-<signals>/s<seed>/`` holds a policy from that seed and
-episode count, trained under today's scenario (see ``stale``); an unfinished one resumes from its
-last checkpoint. Started runs go first, then the lowest seeds, so that every method reaches a
+Each run is ``ecodrive train`` by the (method, setting)'s recipe (``bench.training.recipes``),
+with its own log next to its run folder. A (method, setting, seed) is finished when
+``models/<method>-<signals>/s<seed>/`` holds a policy from that seed, trained by the recipe (its
+episodes and agent config) under today's scenario (see ``stale``); an unfinished one resumes from
+its last checkpoint. Started runs go first, then the lowest seeds, so that every method reaches a
 seed before any gets the next one.
 """
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 from agents.registry import LEARNING
 from bench.args import Parser, int_in
 from bench.harness.policies import MODELS, policy_dir
+from bench.training.recipes import is_recipe, recipe
 from bench.training.train import RUNS
 from envs.config import SIGNALS
 
@@ -34,17 +36,20 @@ def stale(trained: dict, method: str, signals: str) -> list[str]:
     return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict())
 
 
-def _finished(method: str, signals: str, seed: int, episodes: int, models: Path = MODELS) -> bool:
-    """A policy in ``models`` from this seed and episode count, trained under today's scenario."""
+def _finished(method: str, signals: str, seed: int, episodes: int | None = None, models: Path = MODELS) -> bool:
+    """A policy in ``models`` from this seed, trained by the recipe (``episodes`` given: that
+    episode count instead of the recipe's) under today's scenario."""
     man = policy_dir(method, signals, models, seed) / "manifest.json"
     if not man.is_file():
         return False
     m = json.loads(man.read_text())
-    return (m.get("seed") == seed and m.get("episodes") == episodes
+    r = recipe(method, signals)
+    return (m.get("seed") == seed and m.get("episodes") == (r.episodes if episodes is None else episodes)
+            and is_recipe(method, signals, m.get("agent_config") or {})
             and not stale(m.get("scenario", {}), method, signals))
 
 
-def plan(methods: list[str], seeds: list[int], episodes: int, runs: Path = RUNS,
+def plan(methods: list[str], seeds: list[int], episodes: int | None = None, runs: Path = RUNS,
          models: Path = MODELS) -> list[tuple[str, str, int]]:
     """(method, signals, seed) still to train; runs with a checkpoint (started in an earlier
     session) come first, then by seed, then in the given method order."""
@@ -55,7 +60,8 @@ def plan(methods: list[str], seeds: list[int], episodes: int, runs: Path = RUNS,
 
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
-    ap.add_argument("--episodes", type=int_in(1, 100_000), default=1000, help="training episodes per run (1-100000)")
+    ap.add_argument("--episodes", type=int_in(1, 100_000), default=None,
+                    help="training episodes per run (1-100000; default: each recipe's)")
     ap.add_argument("--seeds", nargs="+", type=int_in(0), default=[0], help="training seeds, each >= 0 (default: 0)")
     ap.add_argument("--parallel", type=int_in(1), default=2, help="concurrent trainings, one core each (>= 1)")
     ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING), help="learning methods")
@@ -76,8 +82,9 @@ def main(argv: list[str] | None = None) -> int:
         while todo and len(running) < args.parallel:
             m, s, sd = todo.pop(0)
             log = open(RUNS / f"{m}-{s}-s{sd}.log", "a")
+            episodes = recipe(m, s).episodes if args.episodes is None else args.episodes
             cmd = [sys.executable, "-m", "bench.training.train", "--method", m, "--signals", s, "--episodes",
-                   str(args.episodes), "--seed", str(sd)]
+                   str(episodes), "--seed", str(sd)]
             running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}/s{sd}"))
             print(f"started {m}/{s}/s{sd}", flush=True)
         for p, name in list(running):

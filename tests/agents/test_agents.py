@@ -308,6 +308,42 @@ def test_train_all_resumes_started_runs_first_then_fills_seeds_in_order(tmp_path
     assert ("mpdqn", "coordinated", 0) in plan(["mpdqn", "ddpg"], seeds=[0], episodes=1000, runs=runs, models=models)
 
 
+def test_a_shipped_seed_is_finished_only_when_trained_by_its_recipe(tmp_path):
+    from bench.training.recipes import RECIPES, recipe
+    from bench.training.train_all import plan
+
+    (method, signals), r = next(iter(RECIPES.items()))
+    assert r.overrides and recipe("ddpg", "coordinated").overrides == {}
+    done = tmp_path / "models" / f"{method}-{signals}" / "s0"
+    done.mkdir(parents=True)
+    today = ScenarioConfig(signals=signals).to_dict()
+    man = {"seed": 0, "episodes": r.episodes, "scenario": today, "agent_config": {}}
+    (done / "manifest.json").write_text(json.dumps(man))  # the paper's config: not this recipe
+    assert (method, signals, 0) in plan([method], [0], runs=tmp_path / "runs", models=tmp_path / "models")
+    (done / "manifest.json").write_text(json.dumps({**man, "agent_config": r.overrides}))
+    assert (method, signals, 0) not in plan([method], [0], runs=tmp_path / "runs", models=tmp_path / "models")
+
+
+def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path, monkeypatch, capsys):
+    import bench.training.train as tr
+    from bench.training.recipes import RECIPES
+
+    (method, signals), r = next(iter(RECIPES.items()))
+    seen = {}
+
+    def fake_train(method, signals, episodes, seed, out, every, models=None, agent_config=None, **kw):
+        seen.update(episodes=episodes, models=models, agent_config=agent_config, out=out)
+        return pd.DataFrame({"energy": [1.0], "travel_time": [1.0]})
+
+    monkeypatch.setattr(tr, "train", fake_train)
+    args = ["--method", method, "--signals", signals, "--out", str(tmp_path / "o")]
+    assert tr.main(args) == 0
+    assert seen["episodes"] == r.episodes and seen["agent_config"] == r.overrides and seen["models"] == tr.MODELS
+    assert tr.main([*args, "--set", "n_step=5"]) == 0
+    assert seen["agent_config"] == {**r.overrides, "n_step": 5} and seen["models"] is None  # an experiment
+    assert "an experiment (n_step=5)" in capsys.readouterr().err
+
+
 def test_validation_cases_are_not_test_cases():
     from bench.harness.cases import load
     from bench.training.train import validation_cases
