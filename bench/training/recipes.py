@@ -23,8 +23,8 @@ class Recipe:
 PAPER = Recipe(episodes=1000)  # the paper's schedule and hyper-parameters
 RECIPES: dict[tuple[str, str], Recipe] = {
     ("prl", "uncoordinated"): Recipe(
-        episodes=300, overrides={"lr_q": 3e-5},
-        evidence="docs/notebook.md, 'PRL recipe: lr_q 3e-5 over 300 episodes' (validation cases, three "
+        episodes=300, overrides={"n_step": 5},
+        evidence="docs/notebook.md, 'PRL recipe: n-step 5 over 300 episodes' (validation cases, three "
                  "seeds per variant)"),
 }
 
