@@ -125,14 +125,16 @@ def load(path: Path = FAMILY_FILE) -> list[Variant]:
 
 
 def select(family: list[Variant], names: list[str] | None) -> list[Variant]:
-    """The variants named (all for None), in family order; an unknown name is a ``FamilyError``."""
+    """The variants named, in full or by their short name ``gN`` (all for None), in family order; an
+    unknown name is a ``FamilyError``."""
     if names is None:
         return family
     known = [v.name for v in family]
-    unknown = [n for n in names if n not in known]
+    unknown = [n for n in names if n not in known and n not in [k.split("-")[0] for k in known]]
     if unknown:
-        raise FamilyError(f"unknown variant {', '.join(map(repr, unknown))}; accepted: {', '.join(known)}")
-    return [v for v in family if v.name in names]
+        raise FamilyError(f"unknown variant {', '.join(map(repr, unknown))}; accepted: {', '.join(known)} "
+                          f"(or their short names g1..g{len(known)})")
+    return [v for v in family if v.name in names or v.name.split("-")[0] in names]
 
 
 def main(write: bool, path: Path = FAMILY_FILE) -> int:
