@@ -98,9 +98,10 @@ def text(data: dict | None = None) -> str:
     return json.dumps(generate() if data is None else data, indent=1) + "\n"
 
 
-def load(path: Path = FAMILY_FILE) -> list[Variant]:
+def load(path: Path | None = None) -> list[Variant]:
     """The family, verified: the file must be the generator's output of this ``VERSION`` (a
     tampered or stale file is a ``FamilyError``) and every variant a valid scenario."""
+    path = FAMILY_FILE if path is None else path
     try:
         raw = path.read_text()
         data = json.loads(raw)
@@ -137,8 +138,9 @@ def select(family: list[Variant], names: list[str] | None) -> list[Variant]:
     return [v for v in family if v.name in names or v.name.split("-")[0] in names]
 
 
-def main(write: bool, path: Path = FAMILY_FILE) -> int:
+def main(write: bool, path: Path | None = None) -> int:
     """``ecodrive cases --generalisation --write|--check``."""
+    path = FAMILY_FILE if path is None else path
     data = generate()
     if write:
         path.write_text(text(data))
