@@ -1,6 +1,6 @@
 """The benchmark harness: every method over the fixed test cases, one MCAP per episode.
 
-    ecodrive run [--profile smoke|paper|full] [--executor local|ray] [--address ADDR]
+    ecodrive run [--profile smoke|paper|full|generalisation] [--executor local|ray] [--address ADDR]
                         [--workers N] [--methods ...] [--signals ...] [--run-id ID] [--logs DIR]
                         [--agent MODULE:FACTORY | --sb3 MODEL.zip --sb3-algo ALGO] [--name NAME]
                         [--scenario FILE.json] [--set FIELD=VALUE ...] [--transfer] [--variants NAME ...]
@@ -65,7 +65,8 @@ def parser() -> Parser:
                          f"{ORACLE} included, on each held-out corridor of the family (docs/generalisation.md), "
                          "its cases, with --transfer implied, one sub-folder per variant")
     ap.add_argument("--variants", nargs="+", default=None, metavar="NAME",
-                    help="with --profile generalisation: only these variants of the family (default: all)")
+                    help="with --profile generalisation: only these variants of the family, by full or short name "
+                         "(g1, g2, ...; default: all)")
     users = registered()
     ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, ORACLE, *users],
                     help=f"among {', '.join([*METHODS, ORACLE, *users])} (default: every method with a shipped "

@@ -136,3 +136,12 @@ def test_the_report_of_a_generalisation_run(tiny, tmp_path):
     assert "## Generalisation: held-out corridors" in md and opts["family"][0].name in md
     assert (tmp_path / "r" / "generalisation.csv").is_file() and (tmp_path / "r" / "figures" / "generalisation-coordinated.png").is_file()
     assert "Generalisation" in (tmp_path / "r" / "index.html").read_text()
+
+
+def test_the_docs_list_the_family():
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[3] / "docs" / "generalisation.md").read_text()
+    assert f"version {generalisation.VERSION}" in doc and str(generalisation.MASTER_SEED) in doc
+    for v in load():
+        assert f"| {v.name} | {', '.join(f'{x:g}' for x in v.scenario['spacings'])} |" in doc
