@@ -149,7 +149,8 @@ def generalisation(per_variant: pd.DataFrame, methods: list[str], signals: str, 
         ax.set_yticks(range(grid.shape[0]), grid.index)
         for (i, j), v in np.ndenumerate(grid.to_numpy()):
             if not np.isnan(v):
-                ax.text(j, i, f"{v:+.0f}", ha="center", va="center", fontsize=8)
+                ax.text(j, i, f"{v:+.0f}", ha="center", va="center", fontsize=8,
+                        color="w" if abs(v) > 0.6 * lim else "k")
         ax.set_title(f"{title} vs baseline [%], {signals}")
         fig.colorbar(im, ax=ax)
     return save(fig, out, f"generalisation-{signals}")
