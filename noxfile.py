@@ -33,6 +33,14 @@ def benchmark(session: nox.Session) -> None:
         session.run("ecodrive", "mixed", *common)
         session.run("ecodrive", "sweep", "reward", *common)  # days on 2 cores: see docs/experiments.md
         session.run("ecodrive", "sweep", "heatmap", *common)
+        # zero-shot: every method on the held-out corridors (docs/generalisation.md), beside this run
+        gen = ["--executor", opts["executor"], "--workers", str(opts["workers"]), "--logs", str(opts["logs"]),
+               "--run-id", f"{opts['run_id']}-generalisation", "--signals", *opts["signals"]]
+        gen += ["--address", opts["address"]] if opts["address"] else []
+        session.run("ecodrive", "run", "--profile", "generalisation", *gen)
+        session.run("ecodrive", "report", str(opts["logs"] / opts["run_id"]),
+                    "--generalisation", str(opts["logs"] / f"{opts['run_id']}-generalisation"))
+        return
     session.run("ecodrive", "report", str(opts["logs"] / opts["run_id"]))
 
 

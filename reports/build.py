@@ -1,7 +1,11 @@
 """Build the report of a run folder: Table 4, statistics, violin and trajectory figures, and the
 sections of the further experiments found in it (reward study, heatmap, mixed traffic).
 
-    ecodrive report logs/<run-id> [--out reports/<run-id>]
+    ecodrive report logs/<run-id> [--out reports/<run-id>] [--generalisation logs/<gen-run-id>]
+
+A folder of ``ecodrive run --profile generalisation`` gets the generalisation section alone; a
+paper run's report gains it, with the in-distribution change beside it, with ``--generalisation``
+(``reports.generalisation``).
 
 Reads only ``results.parquet``, ``manifest.json`` and the step logs; writes ``index.md`` and
 ``index.html`` (which shows the figures) plus the tables and figures.
@@ -19,7 +23,7 @@ from bench.args import Parser, fail
 from bench.logs.mcaplog import LogError, resolve_log
 from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
-from . import experiments, figures, headline, metrics, tables
+from . import experiments, figures, generalisation, headline, metrics, tables
 from .html import Figure, Page, esc, experiment_caption, label, render
 from .load import RunError, component_sums, load_plan, load_run, load_steps, stop_lines
 
@@ -29,10 +33,18 @@ TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
 
 
-def build(run_dir: Path, out: Path) -> Path:
+def build(run_dir: Path, out: Path, gen_dir: Path | None = None) -> Path:
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: not a run folder (a directory written by `ecodrive run`)")
-    if not (run_dir / "results.parquet").is_file() and not experiments.present(run_dir):
+    if gen_dir is not None and not gen_dir.is_dir():
+        raise RunError(f"--generalisation {gen_dir}: not a run folder (written by `ecodrive run --profile "
+                       f"generalisation`)")
+    if gen_dir is None and generalisation.present(run_dir):
+        gen_dir = run_dir
+    if gen_dir is not None:
+        generalisation.load(gen_dir)  # a bad table is one line before anything is written
+    if (not (run_dir / "results.parquet").is_file() and not experiments.present(run_dir)
+            and not generalisation.present(run_dir)):
         raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
                        f"`ecodrive run`?)")
     out.mkdir(parents=True, exist_ok=True)
@@ -43,6 +55,10 @@ def build(run_dir: Path, out: Path) -> Path:
         md, warnings = [f"# Report: {run_dir.name}", ""], []
         page.manifest = _manifest(run_dir)
     emd, eimages, ewarnings = experiments.sections(run_dir, out)
+    if gen_dir is not None:
+        ind = load_run(run_dir)[0] if (run_dir / "results.parquet").is_file() else None
+        gmd, gimages = generalisation.section(gen_dir, out, METHOD_ORDER, ind)
+        emd, eimages = gmd + emd, gimages + eimages
     md, warnings = md + emd, warnings + ewarnings
     if warnings:
         md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
@@ -255,13 +271,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--readme", type=Path, default=None, metavar="README.md",
                     help="also rewrite that file's headline block (between <!-- headline:start --> and "
                          "<!-- headline:end -->) from this run's results")
+    ap.add_argument("--generalisation", type=Path, default=None, metavar="GEN_RUN",
+                    help="add the generalisation section of this `ecodrive run --profile generalisation` folder, "
+                         "each method's change on the held-out corridors beside its change in this run")
     args = ap.parse_args(argv)
     out = args.out or Path("reports") / args.run_dir.name
     if args.readme is not None and not args.readme.is_file():
         return fail(ap.prog, f"--readme {args.readme}: no such file")
     created = not out.exists()
     try:
-        index, warnings = build(args.run_dir, out)
+        index, warnings = build(args.run_dir, out, args.generalisation)
     except (RunError, LogError, OSError) as e:
         if created and out.exists():  # nothing is left behind
             shutil.rmtree(out)

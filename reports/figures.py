@@ -135,3 +135,22 @@ def lateral(trajs: dict[str, pd.DataFrame], scenario: str, out: Path) -> list[Pa
         ax.legend(fontsize=7)
     fig.suptitle(f"scenario {scenario} (grey: scripted HDVs)")
     return save(fig, out, f"lateral-{scenario}")
+
+
+def generalisation(per_variant: pd.DataFrame, methods: list[str], signals: str, out: Path) -> list[Path]:
+    """Energy and travel-time change against the baseline [%], variant x method, one setting."""
+    sub = per_variant[per_variant.signals == signals]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 0.5 * sub.variant.nunique() + 2.2))
+    for ax, col, title in zip(axes, ("energy_change", "time_change"), ("energy", "travel time")):
+        grid = 100 * sub.pivot_table(index="variant", columns="method", values=col).reindex(columns=methods)
+        lim = max(float(np.nanmax(np.abs(grid.to_numpy()))), 1.0) if grid.notna().any().any() else 1.0
+        im = ax.imshow(grid.to_numpy(), cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
+        ax.set_xticks(range(grid.shape[1]), grid.columns, rotation=45, ha="right")
+        ax.set_yticks(range(grid.shape[0]), grid.index)
+        for (i, j), v in np.ndenumerate(grid.to_numpy()):
+            if not np.isnan(v):
+                ax.text(j, i, f"{v:+.0f}", ha="center", va="center", fontsize=8,
+                        color="w" if abs(v) > 0.6 * lim else "k")
+        ax.set_title(f"{title} vs baseline [%], {signals}")
+        fig.colorbar(im, ax=ax)
+    return save(fig, out, f"generalisation-{signals}")

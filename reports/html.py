@@ -473,6 +473,11 @@ LATERAL = {"A": "HDV1 ahead brakes at \u22122 m/s\u00b2 for three steps, HDV2 in
 def experiment_caption(title: str) -> str:
     if title in EXPERIMENT_CAPTIONS:
         return EXPERIMENT_CAPTIONS[title]
+    m = re.fullmatch(r"generalisation, (\w+)", title)
+    if m:
+        return (f"<b>Generalisation, {esc(m.group(1))} signals.</b> Each method's mean energy (left) and travel time "
+                "(right) on each held-out corridor, as the change against SUMO's driver on the same corridor and "
+                "cases [%]: blue is less than the baseline, red more.")
     m = re.fullmatch(r"lateral scenario (\w+)", title)
     if m:
         what = LATERAL.get(m.group(1), "")

@@ -332,3 +332,48 @@ def return_parts(parts: pd.DataFrame) -> pd.DataFrame:
     out = parts.groupby(["method", "signals"], sort=False)[cols].mean()
     out.insert(0, "episodes", parts.groupby(["method", "signals"], sort=False).size())
     return out.reset_index()
+
+
+def changes_vs_baseline(results: pd.DataFrame, by: tuple[str, ...] = ("signals",)) -> pd.DataFrame:
+    """Per ``by`` + method: episodes, mean energy and travel time, and their change against SUMO's
+    driver (``baseline``) in the same group, ``mean / baseline mean - 1`` (negative: less than the
+    baseline; the opposite sign of Table 4's Imp.). Only the cases the baseline ran in the group
+    count, so both means are over the same cases; a group without baseline rows has no change."""
+    keys = list(by)
+    rows = []
+    for key, g in results.groupby(keys):
+        key = key if isinstance(key, tuple) else (key,)
+        base = g[g.method == "baseline"]
+        cases = set(base.case)
+        for method, m in g.groupby("method"):
+            row = dict(zip(keys, key), method=method)
+            mm = m[m.case.isin(cases)] if cases else m
+            row.update(episodes=len(mm), energy=mm.energy.mean(), travel_time=mm.travel_time.mean())
+            if cases and len(mm):
+                b = base[base.case.isin(set(mm.case))]
+                row["energy_change"] = row["energy"] / b.energy.mean() - 1
+                row["time_change"] = row["travel_time"] / b.travel_time.mean() - 1
+            else:
+                row["energy_change"] = row["time_change"] = np.nan
+            rows.append(row)
+    return pd.DataFrame(rows, columns=[*keys, "method", "episodes", "energy", "travel_time",
+                                       "energy_change", "time_change"])
+
+
+def generalisation_summary(per_variant: pd.DataFrame, in_distribution: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Per (signals, method) over the family (``changes_vs_baseline(..., by=("variant",
+    "signals"))``): the mean over variants of the energy and time change, and the worst variant's
+    (largest) change; beside them the in-distribution change (``changes_vs_baseline`` of the
+    paper run) where given, and the gap family mean - in-distribution (positive: the method's
+    edge over the baseline shrinks off its training corridor)."""
+    g = per_variant.dropna(subset=["energy_change"]).groupby(["signals", "method"])
+    out = pd.DataFrame({"variants": g.size(), "energy_change": g.energy_change.mean(),
+                        "energy_change_worst": g.energy_change.max(), "time_change": g.time_change.mean(),
+                        "time_change_worst": g.time_change.max()}).reset_index()
+    if in_distribution is not None:
+        ind = in_distribution[["signals", "method", "energy_change", "time_change"]].rename(
+            columns={"energy_change": "in_dist_energy_change", "time_change": "in_dist_time_change"})
+        out = out.merge(ind, on=["signals", "method"], how="left")
+        out["energy_gap"] = out.energy_change - out.in_dist_energy_change
+        out["time_gap"] = out.time_change - out.in_dist_time_change
+    return out

@@ -1,8 +1,11 @@
 """Fixed test cases: (SUMO seed, ego insertion time) pairs shared by every method.
 
+    ecodrive cases --write|--check [--generalisation]
+
 The list is generated from a documented master seed and stored in ``bench/harness/cases.json`` (a
 versioned file in the repo). ``ecodrive cases --write`` regenerates it; ``--check``
-verifies the stored file matches the generator.
+verifies the stored file matches the generator. With ``--generalisation`` both act on the
+family of held-out corridors (``bench/harness/generalisation.json``, ``bench.harness.generalisation``).
 """
 from __future__ import annotations
 
@@ -56,7 +59,14 @@ def main(argv: list[str] | None = None) -> int:
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--write", action="store_true", help="regenerate bench/harness/cases.json")
     g.add_argument("--check", action="store_true", help="check bench/harness/cases.json against the generator")
+    ap.add_argument("--generalisation", action="store_true",
+                    help="write or check the generalisation family instead (bench/harness/generalisation.json, "
+                         "bench.harness.generalisation)")
     args = ap.parse_args(argv)
+    if args.generalisation:
+        from bench.harness import generalisation
+
+        return generalisation.main(args.write)
     data = generate()
     text = json.dumps(data, indent=1) + "\n"
     if args.write:

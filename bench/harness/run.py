@@ -1,15 +1,17 @@
 """The benchmark harness: every method over the fixed test cases, one MCAP per episode.
 
-    ecodrive run [--profile smoke|paper|full] [--executor local|ray] [--address ADDR]
+    ecodrive run [--profile smoke|paper|full|generalisation] [--executor local|ray] [--address ADDR]
                         [--workers N] [--methods ...] [--signals ...] [--run-id ID] [--logs DIR]
                         [--agent MODULE:FACTORY | --sb3 MODEL.zip --sb3-algo ALGO] [--name NAME]
-                        [--scenario FILE.json] [--set FIELD=VALUE ...] [--transfer]
+                        [--scenario FILE.json] [--set FIELD=VALUE ...] [--transfer] [--variants NAME ...]
 
 Writes ``<logs>/<run-id>/<signals>/<method>/case-XXX.mcap``, ``results.parquet`` and
 ``manifest.json``. Rerunning the same command skips cases whose MCAP is complete and reruns the
 rest, so a killed run loses nothing that finished. Evaluation is greedy. ``--scenario`` and
 ``--set`` evaluate on another corridor (one per run folder and setting); a policy drives a
 scenario other than its training one only with ``--transfer`` (``bench.harness.scenarios``).
+``--profile generalisation`` runs over the held-out corridors of ``bench.harness.generalisation``
+instead, one sub-folder per variant (``bench.harness.generalisation_run``).
 """
 from __future__ import annotations
 
@@ -29,6 +31,7 @@ from bench.harness.bounds import attach
 from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
 from bench.harness.external import GROUP, AgentError, registered
+from bench.harness.generalisation import CASES_PER_VARIANT, FamilyError
 from bench.harness.oracle import NAME as ORACLE
 from bench.harness.policies import MODELS, CheckpointError, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import git_sha, package_versions
@@ -41,6 +44,7 @@ PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, 
     "smoke": 3,
     "paper": 100,
     "full": 100,
+    "generalisation": CASES_PER_VARIANT,  # per variant and setting, over bench.harness.generalisation's family
 }
 KEEP = ("method", "signals", "train_seed", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
         "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",
@@ -57,7 +61,12 @@ def parser() -> Parser:
     ap = Parser(description=__doc__)
     ap.add_argument("--profile", default="paper", choices=list(PROFILES),
                     help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
-                         "experiments (in `nox -s benchmark`)")
+                         "experiments (in `nox -s benchmark`); generalisation: every method with a policy, "
+                         f"{ORACLE} included, on each held-out corridor of the family (docs/generalisation.md), "
+                         "its cases, with --transfer implied, one sub-folder per variant")
+    ap.add_argument("--variants", nargs="+", default=None, metavar="NAME",
+                    help="with --profile generalisation: only these variants of the family, by full or short name "
+                         "(g1, g2, ...; default: all)")
     users = registered()
     ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, ORACLE, *users],
                     help=f"among {', '.join([*METHODS, ORACLE, *users])} (default: every method with a shipped "
@@ -108,6 +117,19 @@ def parse(argv: list[str]) -> dict[str, Any]:
         opts["agent_sha256"] = {label: opts.pop("sb3_sha256")} if "sb3_sha256" in opts else {}
     elif opts["name"]:
         ap.error("--name names an --agent or --sb3; give --agent package.module:factory or --sb3 MODEL.zip too")
+    if opts["profile"] == "generalisation":
+        if opts["scenario"] or opts["set_scenario"]:
+            ap.error("--profile generalisation evaluates on its family's corridors; --scenario and --set "
+                     "are for the other profiles")
+        from bench.harness import generalisation
+
+        try:
+            opts["family"] = generalisation.select(generalisation.load(), opts["variants"])
+        except FamilyError as e:
+            ap.error(str(e))
+        opts["transfer"] = True
+    elif opts["variants"]:
+        ap.error("--variants selects corridors of the generalisation family; give --profile generalisation too")
     try:
         opts["scenario"] = scenarios.parse_overrides(opts.pop("scenario"), opts.pop("set_scenario"), opts["signals"])
     except ValueError as e:
@@ -143,7 +165,8 @@ def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str, int]], l
     wanted = opts.get("train_seeds")
     runs, skipped = [], []
     factories = opts.get("factories", {})
-    named = [m for m in (opts["methods"] if explicit else METHODS) if m not in factories]
+    default = [*METHODS, ORACLE] if opts.get("profile") == "generalisation" else METHODS
+    named = [m for m in (opts["methods"] if explicit else default) if m not in factories]
     for m in [*named, *factories]:
         for s in opts["signals"]:
             if m not in LEARNING:
@@ -188,7 +211,7 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     where = {r: scenarios.evaluation(r[0], r[1], pdirs[r], overrides, transfer) for r in runs}
     one_scenario(run_dir, {s: c.digest() for s, c in evals.items()})
     check_writable(run_dir)
-    cases = load()[: PROFILES[opts["profile"]]]
+    cases = opts.get("cases") or load()[: PROFILES[opts["profile"]]]  # a variant's own (generalisation)
     rows, tasks = [], []
     shas = {}
     trained = {ev.train_hash: ev.train for ev in where.values() if ev.train_hash}
@@ -300,15 +323,22 @@ def main(argv: list[str] | None = None) -> int:
     opts = parse(argv)
     opts["argv"] = argv
     try:
-        df = run(opts)
+        if opts["profile"] == "generalisation":
+            from bench.harness.generalisation_run import run_family
+
+            df = run_family(opts)
+        else:
+            df = run(opts)
     except (UsageError, CheckpointError, AgentError) as e:
         return fail(parser().prog, str(e))
     except KeyboardInterrupt:
         print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)
         return 130
-    summary = df.groupby(["signals", "method"])[["energy", "travel_time", "collisions"]].mean().round(2)
+    by = ["variant", "signals", "method"] if "variant" in df.columns else ["signals", "method"]
+    summary = df.groupby(by)[["energy", "travel_time", "collisions"]].mean().round(2)
     print(summary.to_string())
-    print(f"results: {opts['logs'] / opts['run_id'] / 'results.parquet'}")
+    table = "generalisation.parquet" if "variant" in df.columns else "results.parquet"
+    print(f"results: {opts['logs'] / opts['run_id'] / table}")
     return 0
 
 

@@ -1,0 +1,63 @@
+"""``ecodrive run --profile generalisation``: every method over the held-out corridors.
+
+A run folder holds one scenario per signal setting, so the profile writes one sub-run per
+variant, each an ordinary run folder (``results.parquet``, ``manifest.json``, step logs; its
+own ``ecodrive report`` works), and beside them the family's table and manifest::
+
+    <logs>/<run-id>/<variant>/...            one `ecodrive run` per variant, --transfer implied
+    <logs>/<run-id>/generalisation.parquet   every variant's rows, column `variant`, mcap paths
+                                             relative to <run-id>
+    <logs>/<run-id>/manifest.json            the family (version, master seed, file sha256),
+                                             the variants and their scenarios, the command
+
+Rerunning the command skips finished episodes variant by variant (``bench.harness.run.run``);
+a rerun with ``--variants`` keeps the rows of the variants it does not name, so the table always
+covers every variant folder present.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import pandas as pd
+
+from bench.harness.generalisation import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
+from bench.harness.provenance import git_sha
+from bench.harness.run import UsageError, check_writable, run
+from bench.io import atomic_json, atomic_parquet, sha256
+
+TABLE = "generalisation.parquet"
+
+
+def run_family(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
+    """Run ``opts["family"]`` (the selected variants), then write the family's table and manifest."""
+    root = opts["logs"] / opts["run_id"]
+    if (root / "results.parquet").is_file():
+        raise UsageError(f"{root} holds a single-scenario run (results.parquet); the generalisation profile "
+                         f"writes one sub-folder per variant: use another --run-id")
+    check_writable(root)
+    family = load()
+    chosen = {v.name for v in opts["family"]}
+    for v in opts["family"]:
+        print(f"variant {v.name}: {len(v.cases)} cases per setting", flush=True)
+        run({**opts, "logs": root, "run_id": v.name, "scenario": v.scenario, "transfer": True,
+             "cases": list(v.cases)}, progress=progress)
+    frames = []
+    for v in family:  # every variant in the folder, this command's or an earlier one's
+        path = root / v.name / "results.parquet"
+        if v.name in chosen or path.is_file():
+            df = pd.read_parquet(path)
+            df.insert(0, "variant", v.name)
+            df["mcap"] = [f"{v.name}/{m}" for m in df.mcap]
+            frames.append(df)
+    table = pd.concat(frames, ignore_index=True)
+    atomic_parquet(table, root / TABLE)
+    present = [v for v in family if v.name in set(table.variant)]
+    atomic_json({
+        "command": " ".join(["ecodrive", "run", *opts.get("argv", [])]), "profile": "generalisation",
+        "family": {"file": FAMILY_FILE.name, "version": VERSION, "master_seed": MASTER_SEED,
+                   "sha256": sha256(FAMILY_FILE), "cases_per_variant": CASES_PER_VARIANT},
+        "variants": {v.name: v.scenario for v in present}, "signals": sorted(set(table.signals)),
+        "methods": list(dict.fromkeys(table.method)), "transfer": True, "git_sha": git_sha(),
+        "episodes": int(len(table)),
+    }, root / "manifest.json")
+    return table
