@@ -339,9 +339,13 @@ def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path
     args = ["--method", method, "--signals", signals, "--out", str(tmp_path / "o")]
     assert tr.main(args) == 0
     assert seen["episodes"] == r.episodes and seen["agent_config"] == r.overrides and seen["models"] == tr.MODELS
-    assert tr.main([*args, "--set", "n_step=5"]) == 0
-    assert seen["agent_config"] == {**r.overrides, "n_step": 5} and seen["models"] is None  # an experiment
-    assert "an experiment (n_step=5)" in capsys.readouterr().err
+    assert "batch_size" not in r.overrides
+    assert tr.main([*args, "--set", "batch_size=64"]) == 0
+    assert seen["agent_config"] == {**r.overrides, "batch_size": 64} and seen["models"] is None  # an experiment
+    assert "an experiment (batch_size=64)" in capsys.readouterr().err
+    field, value = next(iter(r.overrides.items()))  # the recipe's own field, spelled out: still the recipe
+    assert tr.main([*args, "--set", f"{field}={value}"]) == 0
+    assert seen["agent_config"] == r.overrides and seen["models"] == tr.MODELS
 
 
 def test_validation_cases_are_not_test_cases():
