@@ -141,6 +141,14 @@ def against_record(rows: list[tuple[str, str, str]], record: dict[str, str]) -> 
     return out
 
 
+def record_rows(now: list[tuple[str, str, str]], earlier: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
+    """The claims record to write: this run's checked claims, then the earlier record's rows for
+    the claims this run did not check (``--no-mixed`` keeps the recorded mixed-traffic claims)."""
+    checked = [r for r in now if r[1] != "NOT CHECKED"]
+    names = {r[0] for r in checked}
+    return checked + [r for r in earlier if r[0] not in names and r[1] != "NOT CHECKED"]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("--write-reference", action="store_true", help=f"write {REFERENCE} from this run")
@@ -165,7 +173,9 @@ def main(argv: list[str] | None = None) -> int:
              else regression_mixed.claims(regression_mixed.run_cells()))
     paper = claims(df)
     if args.write_reference:
-        pd.DataFrame(paper + mixed, columns=["claim", "status", "detail"]).to_csv(CLAIMS_RECORD, index=False)
+        earlier = pd.read_csv(CLAIMS_RECORD) if CLAIMS_RECORD.is_file() else None
+        rows = record_rows(paper + mixed, [] if earlier is None else [tuple(r) for r in earlier.values])
+        pd.DataFrame(rows, columns=["claim", "status", "detail"]).to_csv(CLAIMS_RECORD, index=False)
         print(f"wrote {CLAIMS_RECORD}")
     record = dict(pd.read_csv(CLAIMS_RECORD)[["claim", "status"]].values) if CLAIMS_RECORD.is_file() else {}
     paper, mixed = against_record(paper, record), against_record(mixed, record)

@@ -60,3 +60,12 @@ def test_ddpg_uncoordinated_travel_time_claim():
     rows = [{"method": "baseline", "signals": s, "energy": 1.0, "travel_time": 1.0, "collisions": 0}
             for s in ("coordinated", "uncoordinated")]
     assert {n: st for n, st, _ in claims(pd.DataFrame(rows))}[name] == "NOT CHECKED"
+
+
+def test_a_reference_written_without_the_mixed_cells_keeps_their_recorded_claims():
+    from bench.regression.check import record_rows
+
+    earlier = [("a", "PASS", "old"), ("mixed x", "FAIL", "stalls"), ("gone", "NOT CHECKED", "")]
+    now = [("a", "FAIL", "new"), ("mixed-traffic claims", "NOT CHECKED", "--no-mixed given")]
+    assert record_rows(now, earlier) == [("a", "FAIL", "new"), ("mixed x", "FAIL", "stalls")]
+    assert record_rows(now + [("mixed x", "PASS", "fixed")], earlier)[-1] == ("mixed x", "PASS", "fixed")
