@@ -1,4 +1,4 @@
-"""The generalisation family: held-out corridors for zero-shot evaluation (issue 21).
+"""The generalisation family: held-out corridors for zero-shot evaluation.
 
 Beside the 100 fixed cases on the paper's corridor, a small versioned family of corridors that no
 shipped policy saw in training, each a named scenario override dict (``ScenarioConfig`` fields)
