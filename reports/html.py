@@ -179,11 +179,16 @@ def claims_section(page: Page) -> str:
         c = page.claims
         counts = c.status.value_counts()
         summary = " \u00a0".join(f"{badge(s)}\u00a0{int(counts.get(s, 0))}" for s in ("PASS", "FAIL", "NOT IN THIS RUN"))
-        cases = int(page.results.groupby(["method", "signals"]).size().max()) if page.results is not None else 0
+        res = page.results
+        cases = int(res.groupby(["method", "signals"]).case.nunique().max()) if res is not None and "case" in res else 0
+        seeds = (int(res[res.train_seed >= 0].groupby(["method", "signals"]).train_seed.nunique().max())
+                 if res is not None and "train_seed" in res and (res.train_seed >= 0).any() else 1)
+        per = f"{cases} test case{'s' if cases != 1 else ''} per method and setting" + (
+            f", up to {seeds} training seeds each" if seeds > 1 else "")
         out.append(f"<p class='lead'><b>{len(c)} claims</b> from the paper: {summary}.</p>"
                    "<p>Section 5.3's and Table 4's claims, "
-                   f"checked on this run's own episodes ({cases} test case{'s' if cases != 1 else ''} per method "
-                   "and setting; the paper used 100) with the published numbers and tolerances of "
+                   f"checked on this run's own episodes ({per}; the paper used 100 cases) with the published "
+                   "numbers and tolerances of "
                    "<code>bench/paper.py</code>. A claim about a method or setting this run did not evaluate is "
                    "NOT IN THIS RUN, never a pass. <code>ecodrive regress</code> checks the same claims on 20 "
                    "cases against a recorded reference.</p>")
