@@ -4,7 +4,7 @@
 conv trunk as matmuls, pairwise max pools, explicit backward passes, fused Adam with the clip
 factor as its gradient scale). The references below are the updates as they were written before
 that (autograd through the losses, ``clip_grad_norm_``, the default Adam, one ``lerp_`` per
-tensor), kept here verbatim in logic. From the same initial state and the same replay draws, a few
+tensor); P-DQN's losses are the agent's own ``losses``, DQN's and DDPG's are written out here. From the same initial state and the same replay draws, a few
 updates must leave every online and target parameter equal up to float reassociation.
 No SUMO: the spaces are the env's, the replay is filled with synthetic transitions whose grids
 have vehicles several cells long, so pool windows tie as they do on real grids.
@@ -56,44 +56,8 @@ def _agent(method: str, grid_shape=(60, 5), n: int = 600, **config):
 
 
 # ---------------------------------------------------------------------------------------- references
-def _pdqn_q_values(agent, net, feats, x, frozen=False):
-    def mlp(inp):
-        if not frozen:
-            return net.mlp(inp)
-        return functional_call(net.mlp, {n: p.detach() for n, p in net.mlp.named_parameters()}, (inp,))
-
-    if not agent.cfg.multipass:
-        return mlp(torch.cat([feats, x], 1))
-    b = feats.shape[0]
-    eye = torch.eye(K, dtype=x.dtype)
-    xs = (x[None] * eye[:, None, :]).reshape(K * b, K)
-    out = mlp(torch.cat([feats.repeat(K, 1), xs], 1)).reshape(K, b, K)
-    return out[torch.arange(K), :, torch.arange(K)].T
-
-
-def _pdqn_losses(agent, b):
-    c = agent.cfg
-    with torch.no_grad():
-        g2, l2 = torch.as_tensor(b["next_grid"], dtype=torch.float32), torch.as_tensor(b["next_logic"])
-        f2 = features(g2, l2, [agent.q_target, agent.param_target] + ([agent.q2_target] if c.twin_q else []))
-        x2 = torch.tanh(agent.param_target.from_features(f2[1]))
-        q2 = _pdqn_q_values(agent, agent.q_target, f2[0], x2)
-        if c.twin_q:
-            q2 = torch.minimum(q2, _pdqn_q_values(agent, agent.q2_target, f2[2], x2))
-        q2 = q2.masked_fill(~torch.as_tensor(b["next_mask"]), -torch.inf)
-        discount = c.gamma if c.n_step == 1 else c.gamma ** torch.as_tensor(b["steps"])
-        y = torch.as_tensor(b["reward"]) + discount * (1.0 - torch.as_tensor(b["done"])) * q2.max(1).values
-    g, l = torch.as_tensor(b["grid"], dtype=torch.float32), torch.as_tensor(b["logic"])
-    act = torch.as_tensor(b["action"])
-    k, x_b = act[:, 0].long(), act[:, 1:]
-    f = features(g, l, [agent.q, agent.param] + ([agent.q2] if c.twin_q else []))
-    q_sa = _pdqn_q_values(agent, agent.q, f[0], x_b).gather(1, k[:, None]).squeeze(1)
-    loss_q = 0.5 * F.mse_loss(q_sa, y)
-    if c.twin_q:
-        loss_q = loss_q + 0.5 * F.mse_loss(_pdqn_q_values(agent, agent.q2, f[2], x_b).gather(1, k[:, None]).squeeze(1), y)
-    x = torch.tanh(agent.param.from_features(f[1]))
-    loss_p = -_pdqn_q_values(agent, agent.q, f[0].detach(), x, frozen=True).sum(1).mean()
-    return loss_q, loss_p
+# P-DQN's autograd formulation is the agent's own ``losses`` (eq. 7 and 8 through ``q_values``),
+# which ``update`` no longer calls; DQN's and DDPG's are written out below.
 
 
 class RefPDQN:
@@ -105,7 +69,7 @@ class RefPDQN:
 
     def update(self):
         a, c = self.a, self.a.cfg
-        loss_q, loss_p = _pdqn_losses(a, a.replay.sample(a.rng, c.batch_size))
+        loss_q, loss_p = a.losses(a.replay.sample(a.rng, c.batch_size))
         self.opt_q.zero_grad(set_to_none=True)
         self.opt_param.zero_grad(set_to_none=True)
         (loss_q + loss_p).backward()
