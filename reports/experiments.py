@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.logs.mcaplog import LogError, read_log
 from bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
 from bench.paper import HDV_TOL, SPEED_LOSS_TOL
 
@@ -125,17 +124,18 @@ def _budget(sweep: pd.DataFrame) -> str:
 
 
 def _train_logs(sweep: pd.DataFrame, warnings: list[str]) -> pd.DataFrame:
-    rows = []
+    """Per-episode training energy and travel time of every job, from the ``metrics.parquet`` in its
+    log folder (a job restored from the sweep store has no ``train.mcap``)."""
+    frames = []
     for r in sweep.itertuples():
-        path = Path(r.log_dir) / "train.mcap"
+        path = Path(r.log_dir) / "metrics.parquet"
         try:
-            log = read_log(path)
-        except LogError as e:
-            warnings.append(str(e))
+            m = pd.read_parquet(path, columns=["episode", "energy", "travel_time"])
+        except (OSError, ValueError, KeyError) as e:
+            warnings.append(f"{path}: no training metrics ({e})")
             continue
-        rows += [{"config": r.config, "seed": r.seed, "episode": m.episode, "energy": m.energy,
-                  "travel_time": m.travel_time} for m in log.train]
-    return pd.DataFrame(rows)
+        frames.append(m.assign(config=r.config, seed=r.seed))
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
 def _table(df: pd.DataFrame) -> str:

@@ -4,6 +4,7 @@
     ecodrive sweep heatmap [--values 10 20 30 40 50] [--seeds 0]
         common: [--signals uncoordinated] [--episodes 1000] [--cases 100]
                 [--executor local|ray] [--address A] [--workers 2] [--run-id paper] [--logs logs]
+                [--store results/sweeps]
 
 A job trains PRL with one reward configuration (``bench.training.train``, so it resumes from its own
 checkpoints under ``$ECODRIVE_RUNS/sweeps/<study>/``), copies its ``/train`` log into
@@ -13,6 +14,11 @@ greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it
 (episodes, cases, reward, ...) is refused, never overwritten. ``sweep.parquet`` (one row per
 finished job of the study folder, whatever command ran it) and ``episodes.parquet`` (one row per
 test episode) collect the results after every job; ``ecodrive report`` draws them.
+
+Every finished job's small results (its summary row, evaluation rows, training metrics and policy
+manifest; ``bench.experiments.store``) are also saved under ``--store``, which the repository keeps
+in git: a job found there is restored into the run folder instead of trained, so a sweep far longer
+than one session accumulates job by job, on any machine.
 """
 from __future__ import annotations
 
@@ -29,6 +35,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from bench.args import Parser, int_in, name
+from bench.experiments import store
 from bench.harness.executors import EXECUTORS, run_local, run_ray
 from bench.io import atomic_json, atomic_parquet
 from bench.logs.mcaplog import episode_summary
@@ -85,6 +92,7 @@ def run_job(job: Job) -> dict[str, Any]:
     log_dir.mkdir(parents=True, exist_ok=True)
     for fname in ("train.mcap", "metrics.parquet"):
         shutil.copyfile(run_dir / fname, log_dir / fname)
+    shutil.copyfile(folder / "manifest.json", log_dir / store.POLICY_MANIFEST)
     env = make_env("prl", job.signals, scenario)
     agent = make_agent("prl", env.observation_space, env.action_space)
     state, manifest = load_policy(folder, "prl", env.cfg.to_dict())
@@ -157,6 +165,13 @@ def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
 
 
 
+def _store(root: Path, job: Job) -> None:
+    try:
+        store.save(root, job.study, job.label, _identity(job), Path(job.log_dir))
+    except OSError as e:  # the results stay in the log folder; the next sweep stores them
+        print(f"warning: could not store {job.label} under {root}: {e}", file=sys.stderr)
+
+
 def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     """The job list of a study; every reward configuration is validated before anything runs."""
     from bench.training.train import RUNS
@@ -194,6 +209,9 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--workers", type=int_in(1), default=2, help="parallel jobs (>= 1)")
     ap.add_argument("--run-id", type=name, default="paper", help="run folder under --logs")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
+    ap.add_argument("--store", type=Path, default=store.STORE,
+                    help="finished jobs' small results, kept in git: found ones are restored, not trained; "
+                         "new ones are added (default: the repository's results/sweeps)")
     args = ap.parse_args(argv)
     for flag, value, accepted in (("study", args.study, STUDIES), ("--signals", args.signals, SIGNALS),
                                   ("--executor", args.executor, EXECUTORS)):
@@ -223,16 +241,27 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: cannot write {root}: {e.strerror}", file=sys.stderr)
         return 2
     try:
-        todo = [job for job in todo if not is_finished(job)]
+        done = [job for job in todo if is_finished(job)]
+        todo = [job for job in todo if job not in done]
+        restored = [job for job in todo if store.restore(args.store, job.study, job.label, _identity(job),
+                                                         Path(job.log_dir))]
     except ConfigError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    if restored:
+        print(f"{len(restored)} finished job(s) restored from {args.store / args.study}, not trained: "
+              f"{', '.join(j.label for j in restored)}", flush=True)
+        todo = [job for job in todo if job not in restored]
+    for job in done:  # finished in the log folder (this session, or a sweep stopped before storing it)
+        _store(args.store, job)
+    by_dir = {job.log_dir: job for job in todo}
     rows = finished(root)  # every finished job of the study, not only this command's
     write_tables(root, rows)
     it = (run_local(todo, args.workers, run_job) if args.executor == "local"
           else run_ray(todo, args.address, args.workers, run_job))
     for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
         rows[row["log_dir"]] = row
+        _store(args.store, by_dir[row["log_dir"]])
         write_tables(root, rows)  # a killed sweep leaves the tables of its finished jobs
     df = write_tables(root, rows)
     print(df[["config", "seed", "selected_episode", "energy", "travel_time", "collisions"]].round(2).to_string(index=False))

@@ -1,14 +1,22 @@
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
 
 import bench.training.train
-from bench.experiments import sweep
+from bench.experiments import store, sweep
 from bench.logs.mcaplog import is_complete
 from reports.build import build
 from reports.metrics import reward_curves, smooth
+
+
+@pytest.fixture(autouse=True)
+def _store(tmp_path, monkeypatch):
+    """Every sweep here keeps its finished jobs under tmp_path, never in the repository's store."""
+    monkeypatch.setattr(store, "STORE", tmp_path / "store")
 
 
 def test_heatmap_job_trains_evaluates_and_resumes(tmp_path, monkeypatch):
@@ -70,3 +78,43 @@ def test_sweep_table_keeps_earlier_jobs_and_refuses_a_mismatch(tmp_path, monkeyp
     assert sweep.main(["heatmap", "--values", "10"] + common) == 2
     assert "episodes 1 (asked 2)" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in (root / "s10-j10-s0").iterdir()} == before
+
+
+def test_a_stored_job_is_restored_not_trained(tmp_path, monkeypatch, capsys):
+    """A finished job's small results go to the store; a sweep on a machine without the run folder
+    or the logs (a new session) restores them instead of training, and the report is built from them.
+    A job asked with other values is not taken from the store; a broken stored job is one line, exit 2."""
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    common = ["--forms", "r", "--phi", "1", "--seeds", "0", "--episodes", "2", "--cases", "1",
+              "--validation-cases", "1", "--max-episode-time", "30", "--workers", "1", "--store", str(tmp_path / "kept")]
+    assert sweep.main(["reward", *common, "--logs", str(tmp_path / "a"), "--run-id", "t"]) == 0
+    (kept,) = (tmp_path / "kept" / "reward").iterdir()
+    assert kept.name.startswith("uncoordinated-r-phi1-s0-e2-")
+    assert sorted(p.name for p in kept.iterdir()) == ["episodes.parquet", "job.json", "manifest.json", "metrics.parquet"]
+    first = pd.read_parquet(tmp_path / "a" / "t" / "reward" / "sweep.parquet")
+    stored = {p.name: p.read_bytes() for p in kept.iterdir()}
+
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs-elsewhere")
+    assert sweep.main(["reward", *common, "--logs", str(tmp_path / "b"), "--run-id", "t"]) == 0
+    assert "1 finished job(s) restored" in capsys.readouterr().out
+    root = tmp_path / "b" / "t" / "reward"
+    again = pd.read_parquet(root / "sweep.parquet")
+    cols = ["config", "seed", "episodes", "selected_episode", "energy", "travel_time", "collisions"]
+    assert again[cols].equals(first[cols])
+    assert not (tmp_path / "runs-elsewhere").exists() and not list(root.glob("*/*.mcap"))
+    assert {p.name: p.read_bytes() for p in kept.iterdir()} == stored  # restoring writes nothing to the store
+    index, warnings = build(tmp_path / "b" / "t", tmp_path / "report")
+    assert "## Reward study" in index.read_text() and (tmp_path / "report" / "figures" / "reward-study.pdf").is_file()
+
+    # other values (one more test case): a different job, trained (a run folder appears), not restored
+    other = [("2" if i == common.index("--cases") + 1 else c) for i, c in enumerate(common)]
+    assert sweep.main(["reward", *other, "--logs", str(tmp_path / "c"), "--run-id", "t"]) == 0
+    assert (tmp_path / "runs-elsewhere").is_dir() and len(list((tmp_path / "kept" / "reward").iterdir())) == 2
+    assert "restored_from" not in json.loads((tmp_path / "c" / "t" / "reward" / "r-phi1-s0" / "job.json").read_text())["row"]
+
+    capsys.readouterr()
+    (kept / "job.json").write_text("{not json")
+    assert sweep.main(["reward", *common, "--logs", str(tmp_path / "d"), "--run-id", "t"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(kept) in err and "cannot be read" in err
+    assert not (tmp_path / "d" / "t" / "reward" / "r-phi1-s0" / "job.json").exists()
