@@ -2,8 +2,9 @@
 fields in which it departs from the paper's Table 2, with where the choice is argued.
 
 ``ecodrive train`` without ``--episodes`` trains for the recipe's episodes; its ``--set`` fields
-are added to the recipe's, and a run whose agent config is the recipe's is the reference agent
-(exported to the shipped ``models/``), any other is an experiment. ``ecodrive train-all`` trains
+are added to the recipe's, and a run with the recipe's episodes and agent config is the reference
+agent (exported to the shipped ``models/``), any other is an experiment. ``--paper`` trains by
+the paper's 1000 episodes and Table 2 instead. ``ecodrive train-all`` trains
 every (method, setting, seed) by its recipe and counts a shipped seed as finished only when its
 manifest has the recipe's episodes and agent config.
 """
@@ -29,9 +30,10 @@ RECIPES: dict[tuple[str, str], Recipe] = {
 }
 
 
-def recipe(method: str, signals: str) -> Recipe:
-    """The recipe of ``method`` on ``signals`` (the paper's where none is set)."""
-    return RECIPES.get((method, signals), PAPER)
+def recipe(method: str, signals: str, paper: bool = False) -> Recipe:
+    """The recipe of ``method`` on ``signals`` (the paper's where none is set); ``paper``: the
+    paper's schedule and Table 2 whatever the recipe (``ecodrive train --paper``)."""
+    return PAPER if paper else RECIPES.get((method, signals), PAPER)
 
 
 def is_recipe(method: str, signals: str, agent_config: dict[str, Any]) -> bool:

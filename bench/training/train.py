@@ -16,8 +16,9 @@ metrics) and the run's per-episode ``metrics.parquet``.
 A shipped reference agent is trained by its recipe (``bench.training.recipes``: the episode
 count and the agent-config fields that differ from the paper's Table 2). ``--set FIELD=VALUE``
 (repeatable) overrides a field on top of the recipe for an experiment (e.g. ``--set twin_q=true``
-for PRL). A run whose config is not the recipe's gets its own folder
-(``<method>-<signals>-s<seed>+FIELD=VALUE``) and is never exported to the shipped ``models/``;
+for PRL); ``--paper`` starts from the paper's 1000 episodes and Table 2 instead of the recipe. A
+run whose episodes or config are not the recipe's gets its own folder
+(``<method>-<signals>-s<seed>+FIELD=VALUE``, ``+paper``, ``+e<episodes>``) and is never exported to the shipped ``models/``;
 give ``--models DIR`` to export it elsewhere, for example to evaluate it on the test cases with
 ``ecodrive run --models DIR``.
 """
@@ -255,6 +256,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
     ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
     ap.add_argument("--no-export", action="store_true", help="do not write <models>/<method>-<signals>/ at the end")
+    ap.add_argument("--paper", action="store_true",
+                    help="the paper's schedule and Table 2 (1000 episodes, none of the recipe's departures); an "
+                         "experiment where the recipe departs from the paper")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override an agent config field (repeatable); a run whose config is not the recipe's is an "
                          "experiment, exported only to an explicit --models DIR")
@@ -263,7 +267,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--method {args.method!r} is not accepted; choose one of {', '.join(LEARNING)}")
     if args.signals not in SIGNALS:
         ap.error(f"--signals {args.signals!r} is not accepted; choose one of {', '.join(SIGNALS)}")
-    args.episodes = recipe(args.method, args.signals).episodes if args.episodes is None else args.episodes
+    rec, chosen = recipe(args.method, args.signals), recipe(args.method, args.signals, paper=args.paper)
+    args.episodes = chosen.episodes if args.episodes is None else args.episodes
     if not 1 <= args.episodes <= 100_000:
         ap.error(f"--episodes {args.episodes} is out of range; accepted: 1..100000")
     if args.seed < 0 or args.checkpoint_every < 1:
@@ -274,13 +279,16 @@ def main(argv: list[str] | None = None) -> int:
         given = agent_overrides(args.method, args.set)
     except ValueError as e:
         ap.error(str(e))
-    base = recipe(args.method, args.signals).overrides
+    base = chosen.overrides
     overrides = {**base, **given}
-    suffix = "".join(f"+{k}={v}" for k, v in sorted(overrides.items()) if k not in base or base[k] != v)
+    suffix = (("+paper" if chosen != rec else "")
+              + "".join(f"+{k}={v}" for k, v in sorted(overrides.items()) if k not in base or base[k] != v)
+              + (f"+e{args.episodes}" if args.episodes != chosen.episodes else ""))
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
-    experiment_to_shipped = not is_recipe(args.method, args.signals, overrides) and args.models.resolve() == MODELS.resolve()
+    reference = is_recipe(args.method, args.signals, overrides) and args.episodes == rec.episodes
+    experiment_to_shipped = not reference and args.models.resolve() == MODELS.resolve()
     if experiment_to_shipped and not args.no_export:
-        print(f"note: an experiment ({suffix[1:]}); it is not exported to the shipped models/"
+        print(f"note: an experiment ({', '.join(suffix.split('+')[1:])}); it is not exported to the shipped models/"
               " (give --models DIR to export it elsewhere)", file=sys.stderr)
     try:
         writable_dir(out)

@@ -2,6 +2,7 @@
 time, resumably; finished seeds are skipped, so seeds accumulate across sessions.
 
     ecodrive train-all [--seeds 0 1 2 3 4] [--parallel 2] [--methods prl mpdqn dqn ddpg]
+    ecodrive train-all --paper --models DIR   # the paper's 1000 episodes and Table 2, for comparison
 
 Each run is ``ecodrive train`` by the (method, setting)'s recipe (``bench.training.recipes``),
 with its own log next to its run folder. A (method, setting, seed) is finished when
@@ -21,7 +22,7 @@ from pathlib import Path
 from agents.registry import LEARNING
 from bench.args import Parser, int_in
 from bench.harness.policies import MODELS, policy_dir
-from bench.training.recipes import is_recipe, recipe
+from bench.training.recipes import recipe
 from bench.training.train import RUNS
 from envs.config import SIGNALS
 
@@ -36,25 +37,26 @@ def stale(trained: dict, method: str, signals: str) -> list[str]:
     return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict())
 
 
-def _finished(method: str, signals: str, seed: int, episodes: int | None = None, models: Path = MODELS) -> bool:
-    """A policy in ``models`` from this seed, trained by the recipe (``episodes`` given: that
-    episode count instead of the recipe's) under today's scenario."""
+def _finished(method: str, signals: str, seed: int, episodes: int | None = None, models: Path = MODELS,
+              paper: bool = False) -> bool:
+    """A policy in ``models`` from this seed, trained by the recipe (``paper``: the paper's;
+    ``episodes`` given: that episode count instead of the recipe's) under today's scenario."""
     man = policy_dir(method, signals, models, seed) / "manifest.json"
     if not man.is_file():
         return False
     m = json.loads(man.read_text())
-    r = recipe(method, signals)
+    r = recipe(method, signals, paper)
     return (m.get("seed") == seed and m.get("episodes") == (r.episodes if episodes is None else episodes)
-            and is_recipe(method, signals, m.get("agent_config") or {})
+            and (m.get("agent_config") or {}) == r.overrides
             and not stale(m.get("scenario", {}), method, signals))
 
 
 def plan(methods: list[str], seeds: list[int], episodes: int | None = None, runs: Path = RUNS,
-         models: Path = MODELS) -> list[tuple[str, str, int]]:
+         models: Path = MODELS, paper: bool = False) -> list[tuple[str, str, int]]:
     """(method, signals, seed) still to train; runs with a checkpoint (started in an earlier
     session) come first, then by seed, then in the given method order."""
     todo = [(m, s, sd) for sd in seeds for m in methods for s in SIGNALS
-            if not _finished(m, s, sd, episodes, models)]
+            if not _finished(m, s, sd, episodes, models, paper)]
     return sorted(todo, key=lambda t: not (runs / f"{t[0]}-{t[1]}-s{t[2]}" / "checkpoint.pt").is_file())
 
 
@@ -65,10 +67,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", nargs="+", type=int_in(0), default=[0], help="training seeds, each >= 0 (default: 0)")
     ap.add_argument("--parallel", type=int_in(1), default=2, help="concurrent trainings, one core each (>= 1)")
     ap.add_argument("--methods", nargs="+", default=list(LEARNING), choices=list(LEARNING), help="learning methods")
+    ap.add_argument("--paper", action="store_true",
+                    help="train by the paper's 1000 episodes and Table 2, not the recipes (needs --models DIR where "
+                         "a recipe departs from the paper)")
+    ap.add_argument("--models", type=Path, default=MODELS,
+                    help="folder the policies go to, as <method>-<signals>/s<seed>/ (default: the shipped models/)")
     args = ap.parse_args(argv)
-    todo = plan(args.methods, args.seeds, args.episodes)
+    if args.models.resolve() == MODELS.resolve():
+        off = [f"{m}/{s}" for m in args.methods for s in SIGNALS
+               if recipe(m, s, args.paper) != recipe(m, s)
+               or (args.episodes is not None and args.episodes != recipe(m, s).episodes)]
+        if off:
+            ap.error(f"{'--paper' if args.paper else f'--episodes {args.episodes}'} trains experiments, not the "
+                     f"recipe, for {', '.join(off)}; give --models DIR (they never go to the shipped models/)")
+    todo = plan(args.methods, args.seeds, args.episodes, models=args.models, paper=args.paper)
     for m, s, sd in todo:
-        man, diff = policy_dir(m, s, MODELS, sd) / "manifest.json", []
+        man, diff = policy_dir(m, s, args.models, sd) / "manifest.json", []
         if man.is_file():
             diff = stale(json.loads(man.read_text()).get("scenario", {}), m, s)
         if diff:  # a policy from another seed or episode count is not "older"
@@ -82,9 +96,9 @@ def main(argv: list[str] | None = None) -> int:
         while todo and len(running) < args.parallel:
             m, s, sd = todo.pop(0)
             log = open(RUNS / f"{m}-{s}-s{sd}.log", "a")
-            episodes = recipe(m, s).episodes if args.episodes is None else args.episodes
+            episodes = recipe(m, s, args.paper).episodes if args.episodes is None else args.episodes
             cmd = [sys.executable, "-m", "bench.training.train", "--method", m, "--signals", s, "--episodes",
-                   str(episodes), "--seed", str(sd)]
+                   str(episodes), "--seed", str(sd), "--models", str(args.models)] + (["--paper"] if args.paper else [])
             running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}/s{sd}"))
             print(f"started {m}/{s}/s{sd}", flush=True)
         for p, name in list(running):

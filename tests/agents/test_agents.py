@@ -346,6 +346,32 @@ def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path
     field, value = next(iter(r.overrides.items()))  # the recipe's own field, spelled out: still the recipe
     assert tr.main([*args, "--set", f"{field}={value}"]) == 0
     assert seen["agent_config"] == r.overrides and seen["models"] == tr.MODELS
+    assert tr.main([*args, "--episodes", str(r.episodes + 1)]) == 0  # another schedule: an experiment too
+    assert seen["models"] is None and f"an experiment (e{r.episodes + 1})" in capsys.readouterr().err
+    del args[-2:]  # the default run folder, named after what departs from the recipe
+    assert tr.main([*args, "--paper"]) == 0  # the paper's schedule and Table 2, for comparison
+    assert (seen["episodes"], seen["agent_config"], seen["models"]) == (1000, None, None)
+    assert seen["out"].name == f"{method}-{signals}-s0+paper"
+    assert tr.main(["--method", "ddpg", "--signals", "coordinated", "--paper"]) == 0  # the recipe is the paper's
+    assert seen["models"] == tr.MODELS and seen["out"].name == "ddpg-coordinated-s0"
+
+
+def test_train_all_paper_schedule_needs_its_own_models_folder(tmp_path, capsys):
+    from bench.training.recipes import PAPER, RECIPES
+    from bench.training.train_all import main, plan
+
+    (method, signals), r = next(iter(RECIPES.items()))
+    with pytest.raises(SystemExit) as e:
+        main(["--paper", "--methods", method])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.count("\n") == 1 and f"{method}/{signals}" in err and "--models DIR" in err
+    done = tmp_path / "models" / f"{method}-{signals}" / "s0"
+    done.mkdir(parents=True)
+    man = {"seed": 0, "episodes": PAPER.episodes, "scenario": ScenarioConfig(signals=signals).to_dict(), "agent_config": {}}
+    (done / "manifest.json").write_text(json.dumps(man))
+    kw = dict(runs=tmp_path / "runs", models=tmp_path / "models")
+    assert (method, signals, 0) not in plan([method], [0], paper=True, **kw)  # trained by the paper: finished
+    assert (method, signals, 0) in plan([method], [0], **kw)  # but not by the recipe
 
 
 def test_validation_cases_are_not_test_cases():
