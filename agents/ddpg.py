@@ -22,6 +22,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 
 from .base import check_config
+from .device import OnDevice, host
 from .nets import (
     ConvPass,
     Dense,
@@ -66,10 +67,12 @@ class DDPGConfig:
             raise ValueError(f"DDPGConfig.bound={self.bound!r}; accepted: 'invert', 'tanh'")
 
 
-class DDPGAgent:
+class DDPGAgent(OnDevice):
     name = "ddpg"
     action_interface = "longitudinal"
     env_overrides: dict[str, Any] = {"reward": {"lane_change_penalty": 0.0}}
+    NETS = ("actor", "critic", "actor_target", "critic_target")
+    OPTS = ("opt_actor", "opt_critic")
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, cfg: DDPGConfig | None = None):
         self.cfg = cfg = cfg or DDPGConfig()
@@ -88,17 +91,20 @@ class DDPGAgent:
         self.opt_critic = adam(self.critic.parameters(), lr=cfg.lr_critic)
         zero_grads(self.actor, self.critic)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
-        nfl = self._nf + self._nl
-        self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in (
-            "actor", "critic", "actor_target", "critic_target")}
+        self._views()
         self._soft = [([*t.parameters()], [*s.parameters()], tau) for t, s, tau in (
             (self.critic_target, self.critic, cfg.tau_critic), (self.actor_target, self.actor, cfg.tau_actor))]
-        self._ws = Workspace()  # buffers of the target pass, then of the online pass (done after it)
         self._critic_params, self._actor_params = [[*self.critic.parameters()]], [[*self.actor.parameters()]]
         self.rng = np.random.default_rng(cfg.seed)
         self.noise = OUNoise(1, cfg.ou_theta, cfg.ou_sigma, self.rng)
         self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1)
         self.updates = 0
+
+    def _views(self) -> None:
+        """What the update derives from the parameters and the device (``OnDevice.to``)."""
+        nfl = self._nf + self._nl
+        self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in self.NETS}
+        self._ws = Workspace(self.device)  # buffers of the target pass, then of the online pass (done after it)
 
     def begin_episode(self, episode: int) -> None:
         self.noise.reset()
@@ -109,9 +115,9 @@ class DDPGAgent:
 
     def act(self, obs, info, explore: bool = False) -> np.ndarray:
         with torch.no_grad():
-            g = torch.as_tensor(obs["grid"], dtype=torch.float32)[None]
-            l = torch.as_tensor(self.scaler.logic(obs["logic"]))[None]
-            x = self._bounded(self.actor(g, l))[0].numpy()
+            g = self.tensor(obs["grid"], dtype=torch.float32)[None]
+            l = self.tensor(self.scaler.logic(obs["logic"]))[None]
+            x = host(self._bounded(self.actor(g, l))[0])
         if explore:
             x = np.clip(x + self.noise.sample(), -1.0, 1.0)
         self._last = x.astype(np.float32)
@@ -131,18 +137,23 @@ class DDPGAgent:
         "invert"``, the inverted gradient of the module docstring), then the soft target updates.
         The gradients are computed by hand, as in ``PDQNAgent.update``
         (tests/agents/test_update_equivalence.py holds them to autograd's)."""
+        return {k: float(v) for k, v in self.step().items()}
+
+    @torch.no_grad()
+    def step(self) -> dict[str, torch.Tensor]:
+        """``update``, its losses left as 0-dim tensors on the agent's device (no read-back)."""
         c = self.cfg
-        with torch.no_grad():
-            loss_c, q_mean = self._gradients(self.replay.sample_torch(self.rng, c.batch_size))
-            clipped_adam_step(self.opt_critic, self._critic_params, c.grad_clip)
-            clipped_adam_step(self.opt_actor, self._actor_params, c.grad_clip)
-            for targets, sources, tau in self._soft:
-                soft_update_(targets, sources, tau)
+        loss_c, q_mean = self._gradients(self.batch(self.replay.sample_torch(self.rng, c.batch_size)))
+        clipped_adam_step(self.opt_critic, self._critic_params, c.grad_clip)
+        clipped_adam_step(self.opt_actor, self._actor_params, c.grad_clip)
+        for targets, sources, tau in self._soft:
+            soft_update_(targets, sources, tau)
         self.updates += 1
         return {"loss_q": loss_c, "loss_param": -q_mean}  # -Q(s, actor(s)), as eq. 8
 
-    def _gradients(self, b: dict[str, torch.Tensor]) -> tuple[float, float]:
-        """The gradients into critic's and actor's ``.grad``; returns (critic loss, mean Q(s, actor(s)))."""
+    def _gradients(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """The gradients into critic's and actor's ``.grad``; returns (critic loss, mean Q(s,
+        actor(s))), 0-dim tensors on the agent's device."""
         c = self.cfg
         nf, nfl = self._nf, self._nf + self._nl
         bsz = b["reward"].shape[0]
@@ -186,7 +197,7 @@ class DDPGAgent:
         dpre1 = mlp_tail_backward(ad, hp1, hp2, dout, rows=bsz)
         first_layer_backward(ad, z[1, :, :nfl], dpre1, dfeats[1])
         set_conv_grads([self.critic.conv, self.actor.conv], conv.backward(dfeats))
-        return float(loss_c), float(q.mean())
+        return loss_c, q.mean()
 
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:
         state = {"name": self.name, "config": asdict(self.cfg), "actor": self.actor.state_dict(),

@@ -14,6 +14,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 
 from .base import check_config
+from .device import OnDevice, host
 from .nets import (
     ConvPass,
     Dense,
@@ -56,10 +57,12 @@ class DQNConfig:
         check_config(self)
 
 
-class DQNAgent:
+class DQNAgent(OnDevice):
     name = "dqn"
     action_interface = "discrete27"
     env_overrides: dict[str, Any] = {}
+    NETS = ("q", "q_target")
+    OPTS = ("opt",)
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Discrete, cfg: DQNConfig | None = None):
         self.cfg = cfg = cfg or DQNConfig()
@@ -74,14 +77,18 @@ class DQNAgent:
         self.opt = adam(self.q.parameters(), lr=cfg.lr)
         zero_grads(self.q)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
-        self._dense = Dense(self.q, self._nf, self._nf + self._nl)
-        self._dense_target = Dense(self.q_target, self._nf, self._nf + self._nl)
         self._params, self._target_params = [*self.q.parameters()], [*self.q_target.parameters()]
-        self._ws = Workspace()  # buffers of the target pass, then of the online pass (done after it)
+        self._views()
         self.rng = np.random.default_rng(cfg.seed)
         self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1)
         self.epsilon = cfg.eps_init
         self.updates = 0
+
+    def _views(self) -> None:
+        """What the update derives from the parameters and the device (``OnDevice.to``)."""
+        self._dense = Dense(self.q, self._nf, self._nf + self._nl)
+        self._dense_target = Dense(self.q_target, self._nf, self._nf + self._nl)
+        self._ws = Workspace(self.device)  # buffers of the target pass, then of the online pass (done after it)
 
     def action_mask(self, lateral_mask: np.ndarray) -> np.ndarray:
         """The 27-action mask from the mask over k."""
@@ -96,9 +103,9 @@ class DQNAgent:
         if explore and self.rng.random() < self.epsilon:
             return int(self.rng.choice(np.flatnonzero(mask)))
         with torch.no_grad():
-            g = torch.as_tensor(obs["grid"], dtype=torch.float32)[None]
-            l = torch.as_tensor(self.scaler.logic(obs["logic"]))[None]
-            q = self.q(g, l)[0].numpy()
+            g = self.tensor(obs["grid"], dtype=torch.float32)[None]
+            l = self.tensor(self.scaler.logic(obs["logic"]))[None]
+            q = host(self.q(g, l)[0])
         return int(np.argmax(np.where(mask, q, -np.inf)))
 
     def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
@@ -113,16 +120,20 @@ class DQNAgent:
         """One step on 0.5 MSE of Q(s, a) against r + gamma (1 - done) max_a' Q'(s', a') over the
         allowed a', then the soft target update. The gradients are computed by hand, as in
         ``PDQNAgent.update`` (tests/agents/test_update_equivalence.py holds them to autograd's)."""
+        return {k: float(v) for k, v in self.step().items()}
+
+    @torch.no_grad()
+    def step(self) -> dict[str, torch.Tensor]:
+        """``update``, its losses left as 0-dim tensors on the agent's device (no read-back)."""
         c = self.cfg
-        with torch.no_grad():
-            loss = self._gradients(self.replay.sample_torch(self.rng, c.batch_size))
-            clipped_adam_step(self.opt, [self._params], c.grad_clip)
-            soft_update_(self._target_params, self._params, c.tau)
+        loss = self._gradients(self.batch(self.replay.sample_torch(self.rng, c.batch_size)))
+        clipped_adam_step(self.opt, [self._params], c.grad_clip)
+        soft_update_(self._target_params, self._params, c.tau)
         self.updates += 1
         return {"loss_q": loss}
 
-    def _gradients(self, b: dict[str, torch.Tensor]) -> float:
-        """The loss's gradient into ``self.q``'s ``.grad``; returns the loss."""
+    def _gradients(self, b: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The loss's gradient into ``self.q``'s ``.grad``; returns the loss (0-dim, on the agent's device)."""
         c = self.cfg
         nf, nfl = self._nf, self._nf + self._nl
         bsz = b["reward"].shape[0]
@@ -147,7 +158,7 @@ class DQNAgent:
         dfeats = self._ws("dfeats", (1, bsz, nf))
         first_layer_backward(d, z[0], dpre1, dfeats[0])
         set_conv_grads([self.q.conv], conv.backward(dfeats))
-        return float(loss)
+        return loss
 
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:
         state = {"name": self.name, "config": asdict(self.cfg), "q": self.q.state_dict()}

@@ -131,24 +131,25 @@ class Workspace:
     """Buffers an update reuses from one call to the next: the same memory every time, instead of
     a fresh allocation whose first touch costs more than the op that fills it."""
 
-    def __init__(self) -> None:
+    def __init__(self, device: torch.device | str = "cpu") -> None:
         self.bufs: dict[str, torch.Tensor] = {}
+        self.device = torch.device(device)
 
     def __call__(self, key: str, shape) -> torch.Tensor:
         t = self.bufs.get(key)
         if t is None or t.shape != tuple(shape):
-            t = self.bufs[key] = torch.empty(shape)
+            t = self.bufs[key] = torch.empty(shape, device=self.device)
         return t
 
     def typed(self, key: str, shape, dtype: torch.dtype) -> torch.Tensor:
         t = self.bufs.get(key)
         if t is None or t.shape != tuple(shape) or t.dtype != dtype:
-            t = self.bufs[key] = torch.empty(shape, dtype=dtype)
+            t = self.bufs[key] = torch.empty(shape, dtype=dtype, device=self.device)
         return t
 
 
-def _empty(ws: Workspace | None, key: str, shape) -> torch.Tensor:
-    return torch.empty(shape) if ws is None else ws(key, shape)
+def _empty(ws: Workspace | None, key: str, shape, like: torch.Tensor) -> torch.Tensor:
+    return torch.empty(shape, device=like.device) if ws is None else ws(key, shape)
 
 
 def _pool_dim(x: torch.Tensor, dim: int, pad: int, masks: list | None, ws: Workspace | None = None,
@@ -164,12 +165,12 @@ def _pool_dim(x: torch.Tensor, dim: int, pad: int, masks: list | None, ws: Works
         return x if out is None else out.copy_(x)
     shape = list(x.shape)
     shape[dim] = pad + p + tail
-    out = _empty(ws, "pool" + key, shape) if out is None else out
+    out = _empty(ws, "pool" + key, shape, x) if out is None else out
     pairs = x.narrow(dim, pad, 2 * p).unflatten(dim, (p, 2))
     a, b = pairs.select(dim + 1, 0), pairs.select(dim + 1, 1)
     torch.maximum(a, b, out=out.narrow(dim, pad, p))
     if masks is not None:  # float, not bool: CPU kernels on bool tensors are several times slower
-        masks.append(torch.ge(a, b, out=_empty(ws, "mask" + key, a.shape)))
+        masks.append(torch.ge(a, b, out=_empty(ws, "mask" + key, a.shape, x)))
     if pad:
         out.narrow(dim, 0, 1).copy_(x.narrow(dim, 0, 1))
     if tail:
@@ -185,7 +186,7 @@ def _unpool_dim(d: torch.Tensor, mask: torch.Tensor | None, dim: int, pad: int, 
     p, tail = _pairs(n, pad)
     shape = list(d.shape)
     shape[dim] = n
-    dx = _empty(ws, "unpool" + key, shape)
+    dx = _empty(ws, "unpool" + key, shape, d)
     pairs = dx.narrow(dim, pad, 2 * p).unflatten(dim, (p, 2))
     dp = d.narrow(dim, pad, p)
     first = pairs.select(dim + 1, 0)
@@ -220,22 +221,22 @@ class ConvPass:
         c1, c2 = (blocks[0].conv1.out_channels, blocks[0].conv2.out_channels)
         self.blocks, self.n, self.grad, self.ws = blocks, n, grad, ws
         self.shapes = (bsz, h1, w1, c1, c2)
-        gt = torch.empty(bsz, lanes, cells, dtype=grid.dtype) if ws is None else ws.typed("grid", (bsz, lanes, cells),
+        gt = torch.empty(bsz, lanes, cells, dtype=grid.dtype, device=grid.device) if ws is None else ws.typed("grid", (bsz, lanes, cells),
                                                                                           grid.dtype)
         gt.copy_(grid.transpose(1, 2))  # (B, lanes, cells), in the replay's dtype (uint8: 4x less to move)
         self.matmul1 = n * c1 >= 16  # MKL's matmul is slow below 16 output columns; oneDNN's conv is not
         if self.matmul1:
             # patches, K-major: row 3i + j holds grid[b, w + j, h + i] for every output (b, h, w);
             # row 9 holds ones, so the matmul adds the bias and its transpose sums the bias gradient
-            self.cols = _empty(ws, "cols", (10, bsz * h1 * w1))
+            self.cols = _empty(ws, "cols", (10, bsz * h1 * w1), grid)
             self.cols[:9].view(3, 3, bsz, h1, w1).copy_(gt.as_strided((3, 3, bsz, h1, w1),
                                                                       (cells, 1, lanes * cells, cells, 1)))
             self.cols[9].fill_(1.0)
             k1 = torch.cat([torch.cat([b.conv1.weight.view(c1, 9), b.conv1.bias[:, None]], 1) for b in blocks])
-            y = torch.mm(self.cols.t(), k1.t(), out=_empty(ws, "y1", (bsz * h1 * w1, n * c1)))
+            y = torch.mm(self.cols.t(), k1.t(), out=_empty(ws, "y1", (bsz * h1 * w1, n * c1), grid))
             y = y.view(bsz, h1, w1, n * c1)
         else:  # one input channel is one memory layout: flagged channels-last, oneDNN takes its fast path
-            self.x1 = _empty(ws, "x1", (bsz, lanes, cells)).copy_(gt).unsqueeze(1).as_strided(
+            self.x1 = _empty(ws, "x1", (bsz, lanes, cells), grid).copy_(gt).unsqueeze(1).as_strided(
                 (bsz, 1, lanes, cells), (lanes * cells, 1, cells, 1))
             self.w1 = torch.cat([b.conv1.weight for b in blocks]) if n > 1 else blocks[0].conv1.weight
             b1c = torch.cat([b.conv1.bias for b in blocks]) if n > 1 else blocks[0].conv1.bias
@@ -272,7 +273,7 @@ class ConvPass:
         m_w1, m_h1, m_w2, m_h2 = self.masks
         d = torch.ops.aten.threshold_backward(dfeats, self.out[:, :, :ch * h2 * w2], 0.0)  # (N, B, F)
         ws = self.ws
-        dp2 = _empty(ws, "dp2", (bsz, h2, w2, n, ch))
+        dp2 = _empty(ws, "dp2", (bsz, h2, w2, n, ch), dfeats)
         dp2.copy_(d.unflatten(2, (ch, h2, w2)).permute(1, 3, 4, 0, 2))
         zh, zw = self.z_hw
         dz = _unpool_dim(_unpool_dim(dp2, m_h2, 1, 1, zh, ws, "h2"), m_w2, 2, 1, zw, ws, "w2").view(bsz, zh, zw, -1)

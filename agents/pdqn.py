@@ -20,6 +20,7 @@ from gymnasium import spaces
 from torch.func import functional_call
 
 from .base import check_config
+from .device import OnDevice, host
 from .nets import (
     ConvPass,
     Dense,
@@ -71,11 +72,13 @@ class PDQNConfig:
         check_config(self)
 
 
-class PDQNAgent:
+class PDQNAgent(OnDevice):
     """PRL (``multipass=False``) or MP-DQN (``multipass=True``)."""
 
     action_interface = "parameterized"
     env_overrides: dict[str, Any] = {}
+    NETS = ("q", "param", "q_target", "param_target", "q2", "q2_target")
+    OPTS = ("opt_q", "opt_param")
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Tuple, cfg: PDQNConfig | None = None):
         self.cfg = cfg = cfg or PDQNConfig()
@@ -103,11 +106,7 @@ class PDQNAgent:
         self.opt_param = adam(self.param.parameters(), lr=cfg.lr_param)
         zero_grads(*critics, self.param)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
-        self._eye = torch.eye(K)
-        self._ws = Workspace()  # buffers of the target pass, then of the online pass (done after it)
-        nfl = self._nf + self._nl
-        self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in (
-            "q", "param", "q_target", "param_target", "q2", "q2_target") if getattr(self, name) is not None}
+        self._views()
         pairs = [(self.q_target, self.q), (self.param_target, self.param)] + (
             [(self.q2_target, self.q2)] if cfg.twin_q else [])
         self._soft = [([*t.parameters()], [*s.parameters()], tau) for (t, s), tau in zip(
@@ -121,10 +120,18 @@ class PDQNAgent:
         self.epsilon = cfg.eps_init
         self.updates = 0
 
+    def _views(self) -> None:
+        """What the update derives from the parameters and the device (``OnDevice.to``)."""
+        self._eye = torch.eye(K, device=self.device)
+        self._ws = Workspace(self.device)  # buffers of the target pass, then of the online pass (done after it)
+        nfl = self._nf + self._nl
+        self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in self.NETS
+                       if getattr(self, name) is not None}
+
     # ------------------------------------------------------------------ acting
     def _tensors(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
-        return (torch.as_tensor(obs["grid"], dtype=torch.float32)[None],
-                torch.as_tensor(self.scaler.logic(obs["logic"]))[None])
+        return (self.tensor(obs["grid"], dtype=torch.float32)[None],
+                self.tensor(self.scaler.logic(obs["logic"]))[None])
 
     def _params(self, net: Head, feats: torch.Tensor) -> torch.Tensor:
         return torch.tanh(net.from_features(feats))  # normalised accelerations in [-1, 1]
@@ -140,7 +147,7 @@ class PDQNAgent:
         if not self.cfg.multipass:
             return mlp(torch.cat([feats, x], 1))
         b = feats.shape[0]
-        eye = torch.eye(K, dtype=x.dtype)
+        eye = torch.eye(K, dtype=x.dtype, device=x.device)
         xs = (x[None] * eye[:, None, :]).reshape(K * b, K)  # pass k keeps only x_k
         out = mlp(torch.cat([feats.repeat(K, 1), xs], 1)).reshape(K, b, K)
         return out[torch.arange(K), :, torch.arange(K)].T  # Q_k from pass k
@@ -161,25 +168,25 @@ class PDQNAgent:
             fq, fp = features(g, l, [self.q, self.param])
             x = self._params(self.param, fp)
             if explore:
-                x = (x + torch.as_tensor(self.noise.sample(), dtype=torch.float32)).clamp(-1.0, 1.0)
+                x = (x + self.tensor(self.noise.sample(), dtype=torch.float32)).clamp(-1.0, 1.0)
             if explore and self.rng.random() < self.epsilon:
                 k = int(self.rng.choice(np.flatnonzero(mask)))
             else:
-                q = self.q_values(self.q, fq, x)[0].numpy()
+                q = host(self.q_values(self.q, fq, x)[0])
                 k = int(np.argmax(np.where(mask, q, -np.inf)))
-        xn = x[0].numpy()
+        xn = host(x[0])
         self._last = (k, xn)
         return k, self._to_accel(xn)
 
     def heads(self, grids: np.ndarray, logics: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(Q_k, acceleration x_k [m/s^2]) of every head k, each (B, 3), for raw observations."""
         with torch.no_grad():
-            g = torch.as_tensor(grids, dtype=torch.float32)
-            l = torch.as_tensor(logics * self.scaler.scale)
+            g = self.tensor(grids, dtype=torch.float32)
+            l = self.tensor(logics * self.scaler.scale)
             fq, fp = features(g, l, [self.q, self.param])
             x = self._params(self.param, fp)
-            q = self.q_values(self.q, fq, x).numpy()
-        return q, self._to_accel(x.numpy())
+            q = host(self.q_values(self.q, fq, x))
+        return q, self._to_accel(host(x))
 
     def act_batch(self, grids: np.ndarray, logics: np.ndarray, masks: np.ndarray) -> list:
         """Greedy actions for many vehicles in one forward pass (mixed traffic)."""
@@ -240,13 +247,17 @@ class PDQNAgent:
 
         The gradients are computed by hand (``_gradients``), not by autograd through ``losses``:
         the same math, in fewer and larger ops (tests/agents/test_update_equivalence.py)."""
+        return {k: float(v) for k, v in self.step().items()}
+
+    @torch.no_grad()
+    def step(self) -> dict[str, torch.Tensor]:
+        """``update``, its losses left as 0-dim tensors on the agent's device (no read-back)."""
         c = self.cfg
-        with torch.no_grad():
-            loss_q, loss_p = self._gradients(self.replay.sample_torch(self.rng, c.batch_size))
-            clipped_adam_step(self.opt_q, self._q_lists, c.grad_clip)
-            clipped_adam_step(self.opt_param, self._p_lists, c.grad_clip)
-            for targets, sources, tau in self._soft:
-                soft_update_(targets, sources, tau)
+        loss_q, loss_p = self._gradients(self.batch(self.replay.sample_torch(self.rng, c.batch_size)))
+        clipped_adam_step(self.opt_q, self._q_lists, c.grad_clip)
+        clipped_adam_step(self.opt_param, self._p_lists, c.grad_clip)
+        for targets, sources, tau in self._soft:
+            soft_update_(targets, sources, tau)
         self.updates += 1
         return {"loss_q": loss_q, "loss_param": loss_p}
 
@@ -303,8 +314,9 @@ class PDQNAgent:
             return loss_q, loss_p, torch.bmm(dpre1[bsz:].view(K, bsz, -1), d.w1t_x[:, :, None]).view(K, bsz).t()
         return loss_q, loss_p, torch.mm(dpre1[bsz:], d.w1_x)
 
-    def _gradients(self, b: dict[str, torch.Tensor]) -> tuple[float, float]:
-        """The gradients of ``losses`` into the online networks' ``.grad``; returns the losses."""
+    def _gradients(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """The gradients of ``losses`` into the online networks' ``.grad``; returns the losses
+        (0-dim tensors on the agent's device)."""
         c = self.cfg
         nf, nl, twin, mp = self._nf, self._nl, c.twin_q, c.multipass
         nfl = nf + nl
@@ -349,7 +361,7 @@ class PDQNAgent:
         first_layer_backward(pd, z[1, :, :nfl], dpre1, dfeats[1])
 
         set_conv_grads([n.conv for n in nets], conv.backward(dfeats))
-        return float(loss_q), float(loss_p)
+        return loss_q, loss_p
 
     # ------------------------------------------------------------------ state
     def state_dict(self, with_training: bool = True) -> dict[str, Any]:

@@ -37,6 +37,7 @@ import pandas as pd
 import torch
 from tqdm import tqdm
 
+from agents.device import parse as parse_device
 from agents.registry import LEARNING, make_agent
 from bench.args import Parser, fail
 from bench.harness.cases import Case
@@ -95,7 +96,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
           stop_after: int | None = None, progress: bool = True, validation_cases: int = 20,
-          select: str = "objective") -> pd.DataFrame:
+          select: str = "objective", device: str = "cpu") -> pd.DataFrame:
     """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
     after that many episodes of this call (used to test resumption).
 
@@ -103,13 +104,19 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     ``VALIDATION_SEED`` (never the test cases). The run keeps the best checkpoint under each
     criterion of ``SELECTION``; the one named by ``select`` is exported, with its episode and
     validation metrics in the manifest. Epsilon decays over the run's own ``episodes`` (eq. 12
-    with N = the training length) unless ``agent_config`` sets ``eps_decay_episodes``."""
+    with N = the training length) unless ``agent_config`` sets ``eps_decay_episodes``. ``device``
+    holds the networks (``agents.device``; the CPU unless given)."""
     if select not in SELECTION:
         raise ValueError(f"select {select!r} is not accepted; choose one of {', '.join(SELECTION)}")
     torch.set_num_threads(1)
     env = make_env(method, signals, scenario)
     decay = {} if method not in ("prl", "mpdqn", "dqn") else {"eps_decay_episodes": episodes}
     agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **{**decay, **(agent_config or {})})
+    dev = parse_device(device)
+    if dev.type == "cuda":  # cuBLAS needs this before its first call to run deterministically
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        torch.use_deterministic_algorithms(True)
+    agent.to(dev)  # before loading a checkpoint: the optimizers' state follows the parameters
     identity = {"method": method, "signals": signals, "seed": seed, "agent_config": agent_config or {},
                 "scenario": env.cfg.to_dict()}
     out.mkdir(parents=True, exist_ok=True)
@@ -193,7 +200,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         manifest = {
             "method": method, "signals": signals, "seed": seed, "episodes": episodes,
             "command": " ".join(command or sys.argv), "git_sha": git_sha(), "packages": package_versions(),
-            "training_wall_time_s": round(wall_total, 1), "agent_config": agent_config or {},
+            "training_wall_time_s": round(wall_total, 1), "device": str(dev), "agent_config": agent_config or {},
             "scenario": identity["scenario"],
             "final_metrics": {f"mean_last_{FINAL_WINDOW}_{k}": round(float(tail[k].mean()), 3)
                               for k in ("energy", "travel_time", "return_", "collisions", "lane_changes")},
@@ -256,6 +263,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
     ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
     ap.add_argument("--no-export", action="store_true", help="do not write <models>/<method>-<signals>/ at the end")
+    ap.add_argument("--device", default="cpu",
+                    help="where the networks train: cpu (default, the tested path), cuda or cuda:N where torch sees one")
     ap.add_argument("--paper", action="store_true",
                     help="the paper's schedule and Table 2 (1000 episodes, none of the recipe's departures); an "
                          "experiment where the recipe departs from the paper")
@@ -277,6 +286,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--validation-cases {args.validation_cases} is out of range; accepted: 0..100")
     try:
         given = agent_overrides(args.method, args.set)
+        parse_device(args.device)
     except ValueError as e:
         ap.error(str(e))
     base = chosen.overrides
@@ -298,7 +308,8 @@ def main(argv: list[str] | None = None) -> int:
         df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
                    models=None if args.no_export or experiment_to_shipped else args.models,
                    command=["ecodrive", "train", *(argv if argv is not None else sys.argv[1:])],
-                   validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select)
+                   validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select,
+                   device=args.device)
     except CheckpointError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

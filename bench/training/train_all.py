@@ -19,6 +19,7 @@ import sys
 import time
 from pathlib import Path
 
+from agents.device import parse as parse_device
 from agents.registry import LEARNING
 from bench.args import Parser, int_in
 from bench.harness.policies import MODELS, policy_dir
@@ -72,7 +73,12 @@ def main(argv: list[str] | None = None) -> int:
                          "a recipe departs from the paper)")
     ap.add_argument("--models", type=Path, default=MODELS,
                     help="folder the policies go to, as <method>-<signals>/s<seed>/ (default: the shipped models/)")
+    ap.add_argument("--device", default="cpu", help="where every run's networks train: cpu (default), cuda or cuda:N")
     args = ap.parse_args(argv)
+    try:
+        parse_device(args.device)
+    except ValueError as e:
+        ap.error(str(e))
     if args.models.resolve() == MODELS.resolve():
         off = [f"{m}/{s}" for m in args.methods for s in SIGNALS
                if recipe(m, s, args.paper) != recipe(m, s)
@@ -98,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
             log = open(RUNS / f"{m}-{s}-s{sd}.log", "a")
             episodes = recipe(m, s, args.paper).episodes if args.episodes is None else args.episodes
             cmd = [sys.executable, "-m", "bench.training.train", "--method", m, "--signals", s, "--episodes",
-                   str(episodes), "--seed", str(sd), "--models", str(args.models)] + (["--paper"] if args.paper else [])
+                   str(episodes), "--seed", str(sd), "--models", str(args.models), "--device", args.device] + (["--paper"] if args.paper else [])
             running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}/s{sd}"))
             print(f"started {m}/{s}/s{sd}", flush=True)
         for p, name in list(running):
