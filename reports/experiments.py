@@ -58,18 +58,26 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
     lateral = run_dir / "lateral" / "lateral.parquet"
     if lateral.is_file():
         summary = pd.read_parquet(lateral)
+        if "train_seed" not in summary:
+            summary["train_seed"] = pd.array([None] * len(summary), dtype="Int64")
         md += ["## Lateral scenarios (fig:scenario, fig:scenario_compare)", "",
                "A: HDV1 ahead brakes at -2 m/s^2 for three steps, HDV2 in the left lane. B: a platoon of five "
                "queues at a red light, two vehicles queue in the left lane. Policies are the shipped "
-               "uncoordinated ones.", "", _table(summary.set_index(["scenario", "method"])), ""]
+               "uncoordinated ones, every training seed; the figures draw each method's lowest seed.", "",
+               _table(summary.set_index(["scenario", "method", "train_seed"])), ""]
+        what = {"A": "leave HDV1's lane", "B": "end in the lane with the shortest queue"}
+        md += [f"- {r.method}, scenario {r.scenario}: {r.papers_behaviour} of {r.runs} runs show the paper's "
+               f"behaviour ({what.get(r.scenario, '?')}); {r.change_lanes} change lanes at all"
+               for r in metrics.lateral_behaviour(summary).itertuples()] + [""]
         for name, g in summary.groupby("scenario"):
             trajs = {}
-            for m in g.method:
-                path = run_dir / "lateral" / name / f"{m}.parquet"
+            for m, seed in g.groupby("method", sort=False).train_seed.first().items():
+                label, stem = (m, m) if pd.isna(seed) else (f"{m} s{seed}", f"{m}-s{seed}")
+                path = run_dir / "lateral" / name / f"{stem}.parquet"
                 if path.is_file():
-                    trajs[m] = pd.read_parquet(path)
+                    trajs[label] = pd.read_parquet(path)
                 else:
-                    warnings.append(f"{path}: missing; scenario {name} drawn without {m}")
+                    warnings.append(f"{path}: missing; scenario {name} drawn without {label}")
             if trajs:
                 p = figures.lateral(trajs, name, figs)
                 images.append((f"lateral scenario {name}", p[0]))

@@ -377,3 +377,19 @@ def generalisation_summary(per_variant: pd.DataFrame, in_distribution: pd.DataFr
         out["energy_gap"] = out.energy_change - out.in_dist_energy_change
         out["time_gap"] = out.time_change - out.in_dist_time_change
     return out
+
+
+LATERAL_CLAIM = {"A": "left_hdv1_lane", "B": "ended_in_shortest_queue_lane"}  # the paper's behaviour in each scenario
+
+
+def lateral_behaviour(summary: pd.DataFrame) -> pd.DataFrame:
+    """Per scenario and method: how many runs (training seeds) there are, how many change lanes at
+    all and how many show the paper's behaviour (A: leave HDV1's lane; B: end in the lane with the
+    fewest queued vehicles)."""
+    rows = []
+    for (scenario, method), g in summary.groupby(["scenario", "method"], sort=False):
+        col = LATERAL_CLAIM.get(scenario)
+        shown = int((g[col] == True).sum()) if col in g else 0  # noqa: E712 (object column: True, False or None)
+        rows.append({"scenario": scenario, "method": method, "runs": len(g),
+                     "change_lanes": int((g.lane_changes > 0).sum()), "papers_behaviour": shown})
+    return pd.DataFrame(rows)

@@ -6,7 +6,8 @@ B: the ego follows a platoon of HDVs that queues at the first intersection on re
    the left holds a shorter queue and the one to the right none.
 Both run on an empty corridor (no random demand) with uncoordinated signals, so every method
 sees exactly the same situation. ``run_scenario`` returns the trajectories of the ego and the
-scripted vehicles; the lateral behaviour is judged from them.
+scripted vehicles; the lateral behaviour is judged from them. ``ecodrive lateral`` drives every
+shipped training seed of a learning method (``<method>-s<seed>.mcap``; one row per seed).
 """
 from __future__ import annotations
 
@@ -115,7 +116,7 @@ def left_lane_of(df: pd.DataFrame, vid: str) -> bool:
     """Whether the ego ever drove in a lane other than ``vid``'s while behind it."""
     ego = df[df.vehicle == "ego"].set_index("time")
     other = df[df.vehicle == vid].set_index("time")
-    both = ego.join(other, lsuffix="_ego", rsuffix="_o", how="inner")
+    both = ego.join(other, suffixes=("_ego", "_o"), how="inner")
     behind = both[both.x_ego < both.x_o]
     return bool((behind.lane_ego != behind.lane_o).any())
 
@@ -157,6 +158,7 @@ class LateralTask:
     method: str
     policy_dir: str  # "" for rule-based methods
     path: str  # MCAP of the ego's steps; the trajectories go next to it as .parquet
+    train_seed: int | None = None  # the shipped training seed (learning methods)
 
 
 def run_task(task: LateralTask) -> dict[str, Any]:
@@ -177,7 +179,7 @@ def run_task(task: LateralTask) -> dict[str, Any]:
         sha = manifest["sha256"]
     df = run_scenario(task.scenario, agent, task.method, log_path=Path(task.path), agent_sha256=sha, env=env)
     atomic_parquet(df, Path(task.path).with_suffix(".parquet"))
-    return _flat(summary(df, task.scenario))
+    return {**_flat(summary(df, task.scenario)), "train_seed": task.train_seed}
 
 
 def _flat(s: dict[str, Any]) -> dict[str, Any]:
@@ -189,11 +191,12 @@ def main(argv: list[str] | None = None) -> int:
 
     from agents.registry import LEARNING, METHODS
     from bench.harness.executors import EXECUTORS, run_local, run_ray
-    from bench.harness.policies import MODELS, policy_dir
+    from bench.harness.policies import MODELS, policy_dir, shipped_seeds
     from bench.io import sha256
     from bench.logs.mcaplog import episode_summary
 
-    ap = Parser(description="Run the lateral scenarios A and B (section 5.4) for each method.")
+    ap = Parser(description="Run the lateral scenarios A and B (section 5.4) for each method, every shipped "
+                            "training seed of a learning method.")
     ap.add_argument("--methods", nargs="+", default=list(LATERAL_METHODS), help=f"among {', '.join(METHODS)}")
     ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
@@ -209,8 +212,8 @@ def main(argv: list[str] | None = None) -> int:
     if error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    missing = [m for m in args.methods if m in LEARNING
-               and not (policy_dir(m, "uncoordinated", args.models) / "manifest.json").is_file()]
+    seeds = {m: shipped_seeds(m, "uncoordinated", args.models) if m in LEARNING else [None] for m in args.methods}
+    missing = [m for m in args.methods if not seeds[m]]
     if missing:
         print(f"note: no shipped uncoordinated policy for {', '.join(missing)}; skipped", file=sys.stderr)
     root = args.logs / args.run_id / "lateral"
@@ -218,9 +221,9 @@ def main(argv: list[str] | None = None) -> int:
         writable_dir(root)
     except Unwritable as e:
         return fail(ap.prog, str(e))
-    tasks = [LateralTask(name, m, str(policy_dir(m, "uncoordinated", args.models)) if m in LEARNING else "",
-                         str(root / name / f"{m}.mcap"))
-             for name in SCENARIO_NAMES for m in args.methods if m not in missing]
+    tasks = [LateralTask(name, m, "" if sd is None else str(policy_dir(m, "uncoordinated", args.models, sd)),
+                         str(root / name / (f"{m}.mcap" if sd is None else f"{m}-s{sd}.mcap")), sd)
+             for name in SCENARIO_NAMES for m in args.methods for sd in seeds[m]]
     for t in tasks:
         Path(t.path).parent.mkdir(parents=True, exist_ok=True)
     rows, todo = [], []
@@ -228,12 +231,13 @@ def main(argv: list[str] | None = None) -> int:
         traj = Path(t.path).with_suffix(".parquet")
         sha = sha256(Path(t.policy_dir) / "policy.pt") if t.policy_dir else ""  # another policy's log is rerun
         if episode_summary(t.path, agent_sha256=sha) is not None and traj.is_file():
-            rows.append(_flat(summary(pd.read_parquet(traj), t.scenario)))
+            rows.append({**_flat(summary(pd.read_parquet(traj), t.scenario)), "train_seed": t.train_seed})
         else:
             todo.append(t)
     it = run_local(todo, args.workers, run_task) if args.executor == "local" else run_ray(todo, args.address, args.workers, run_task)
     rows += list(it)
-    out = pd.DataFrame(rows).sort_values(["scenario", "method"], ignore_index=True)
+    out = pd.DataFrame(rows).astype({"train_seed": "Int64"}).sort_values(["scenario", "method", "train_seed"],
+                                                                        ignore_index=True)
     atomic_parquet(out, root / "lateral.parquet")
     print(out.to_string(index=False))
     return 0

@@ -1,8 +1,9 @@
 """The scripted lateral scenarios happen as the paper describes (checked with SUMO's driver), and
-whether the shipped PRL policy shows the paper's lateral behaviour (section 5.4; today it does not)."""
+whether the shipped PRL seeds show the paper's lateral behaviour (section 5.4: in B most do, in A none)."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from agents import BaselineAgent
@@ -47,21 +48,56 @@ def test_lateral_command_logs_resumes_and_reports(tmp_path, capsys):
     assert main(["--methods", "prl2"]) == 2 and "--methods prl2 is not accepted" in capsys.readouterr().err
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known failure (docs/results.md, lateral scenarios): the shipped uncoordinated PRL never changes "
-    "lanes in A or B; it brakes behind HDV1 and queues behind the platoon in lane 0"))
-def test_shipped_prl_shows_the_papers_lateral_behaviour():
-    """A: PRL leaves HDV1's lane; B: it ends in a lane with the fewest queued vehicles (the paper's
-    section 5.4). Strict: when a shipped policy starts to behave so, this fails until the mark goes."""
+def _shipped_prl(name: str) -> list[dict]:
+    """The scenario's summary for every shipped uncoordinated PRL seed."""
     from agents.registry import make_agent
     from bench.experiments.lateral import scenario_env
-    from bench.harness.policies import load_policy, policy_dir
+    from bench.harness.policies import load_policy, policy_dir, shipped_seeds
 
-    env = scenario_env("prl")
-    agent = make_agent("prl", env.observation_space, env.action_space)
-    state, _ = load_policy(policy_dir("prl", "uncoordinated"), "prl")
-    agent.load_state_dict(state)
-    a = summary(run_scenario("A", agent, "prl", env=env), "A")
-    b = summary(run_scenario("B", agent, "prl"), "B")
-    assert a["left_hdv1_lane"] is True
-    assert b["ended_in_shortest_queue_lane"] is True
+    out = []
+    for seed in shipped_seeds("prl", "uncoordinated"):
+        env = scenario_env("prl")
+        agent = make_agent("prl", env.observation_space, env.action_space)
+        agent.load_state_dict(load_policy(policy_dir("prl", "uncoordinated", seed=seed), "prl")[0])
+        out.append(summary(run_scenario(name, agent, "prl", env=env), name))
+    return out
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "known failure (docs/results.md, lateral scenarios): no shipped uncoordinated PRL seed leaves "
+    "HDV1's lane in A; they brake behind it (some change lanes later, away from the event)"))
+def test_shipped_prl_leaves_the_braking_vehicles_lane():
+    """A (section 5.4): PRL leaves HDV1's lane, judged over the shipped seeds (at least half).
+    Strict: when the shipped policies start to behave so, this fails until the mark goes."""
+    runs = _shipped_prl("A")
+    assert sum(r["left_hdv1_lane"] is True for r in runs) >= len(runs) / 2
+
+
+def test_shipped_prl_ends_in_the_lane_with_the_shortest_queue():
+    """B (section 5.4): PRL ends in a lane with the fewest queued vehicles, judged over the shipped
+    seeds (at least half), and does so by changing lanes (it starts behind the platoon)."""
+    runs = _shipped_prl("B")
+    shown = [r for r in runs if r["ended_in_shortest_queue_lane"] is True]
+    assert len(runs) >= 3 and len(shown) >= len(runs) / 2 and all(r["lane_changes"] > 0 for r in shown)
+
+
+def test_lateral_command_drives_every_shipped_seed(tmp_path):
+    import shutil
+
+    from bench.experiments.lateral import main
+    from bench.harness.policies import policy_dir
+    from reports.build import build
+
+    models = tmp_path / "models"
+    for seed in (0, 1):
+        shutil.copytree(policy_dir("prl", "uncoordinated", seed=seed), policy_dir("prl", "uncoordinated", models, seed))
+    assert main(["--methods", "prl", "baseline", "--models", str(models), "--logs", str(tmp_path), "--run-id", "t",
+                 "--workers", "1"]) == 0
+    root = tmp_path / "t" / "lateral"
+    df = pd.read_parquet(root / "lateral.parquet")
+    prl = df[df.method == "prl"]
+    assert sorted(zip(prl.scenario, prl.train_seed)) == [("A", 0), ("A", 1), ("B", 0), ("B", 1)]
+    assert df[df.method == "baseline"].train_seed.isna().all()
+    assert sorted(p.name for p in (root / "B").glob("*.mcap")) == ["baseline.mcap", "prl-s0.mcap", "prl-s1.mcap"]
+    text = build(tmp_path / "t", tmp_path / "report")[0].read_text()
+    assert "- prl, scenario B: " in text and " of 2 runs show the paper's behaviour" in text
