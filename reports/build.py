@@ -136,7 +136,16 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
           f"{len(results)} episodes, methods: {', '.join(methods)}.", ""]
     if manifest.get("skipped_methods"):
         md += [f"Not in this run (no shipped policy): {', '.join(manifest['skipped_methods'])}.", ""]
-    md += ["## Table 4", "", tables.table4_markdown(t4), "## Statistics", "",
+    phis = {s: manifest.get("scenario", {}).get(s, {}).get("reward", {}).get("phi", 1.0) for s in set(results.signals)}
+    costs = metrics.paper_costs(t4, phis)
+    md += ["## Table 4", "", tables.table4_markdown(t4)]
+    if not costs.empty:
+        md += ["Table 4 compares energy and travel time apart; the reward's cost, E + phi T (eq. 11, the criterion "
+               "the learning methods' checkpoints are selected by), weighs them together. Ours against the cost "
+               "that the paper's Table 4 implies:", ""]
+        md += [f"- {r.method}, {r.signals}: {r.cost:.1f} against {r.paper_cost:.1f} (phi = {r.phi:g} Wh/s; "
+               f"{100 * r.cost_vs_paper:+.1f}%)" for r in costs.itertuples()] + [""]
+    md += ["## Statistics", "",
            f"Bootstrap (BCa, {metrics.BOOTSTRAP_RESAMPLES} resamples) {int(metrics.CI_LEVEL * 100)}% CIs; IQM = "
            "25% trimmed mean; P(improve) = chance an episode of the method uses less than one of the baseline.",
            "", tables.stats_markdown(st), "## Across training seeds", "",

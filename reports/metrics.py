@@ -60,6 +60,20 @@ def table4(results: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def paper_costs(t4: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
+    """The cost E + phi T (eq. 11's cost part, the checkpoint-selection objective) of every Table 4
+    row that the paper also reports: ours against the one its Table 4 implies, and the ratio - 1."""
+    rows = []
+    for r in t4.itertuples():
+        if pd.isna(getattr(r, "paper_energy", np.nan)) or r.signals not in phis:
+            continue
+        phi = phis[r.signals]
+        ours, paper = r.energy + phi * r.travel_time, r.paper_energy + phi * r.paper_time
+        rows.append({"method": r.method, "signals": r.signals, "phi": phi, "cost": ours, "paper_cost": paper,
+                     "cost_vs_paper": ours / paper - 1})
+    return pd.DataFrame(rows, columns=["method", "signals", "phi", "cost", "paper_cost", "cost_vs_paper"])
+
+
 def statistics(results: pd.DataFrame) -> pd.DataFrame:
     """Per (method, signals, metric): mean with bootstrap CI, IQM with bootstrap CI, and the
     probability of improvement over the baseline."""

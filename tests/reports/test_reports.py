@@ -26,6 +26,11 @@ def test_table4_against_the_paper():
     assert t4.loc["prl", "energy_imp"] == pytest.approx((255 - 185) / 255)
     assert t4.loc["prl", "paper_energy_imp"] == pytest.approx(0.2713, abs=1e-4)
     assert t4.loc["baseline", "energy_vs_paper"] == pytest.approx(255 / 253.79 - 1)
+    costs = metrics.paper_costs(t4.reset_index(), {"uncoordinated": 2.0}).set_index("method")
+    assert costs.loc["prl", "cost"] == pytest.approx(185 + 2 * 290)
+    assert costs.loc["prl", "paper_cost"] == pytest.approx(184.93 + 2 * 289.82)  # Table 4's PRL row
+    assert costs.loc["prl", "cost_vs_paper"] == pytest.approx(765 / (184.93 + 2 * 289.82) - 1)
+    assert metrics.paper_costs(t4.reset_index(), {"coordinated": 1.0}).empty  # no row of that setting
 
 
 def test_signal_bands():
@@ -43,6 +48,7 @@ def test_report_from_a_run(tmp_path):
     index, _ = build(tmp_path / "logs" / "smoke", tmp_path / "report")
     text = index.read_text()
     assert "## Table 4" in text and "231.13" in text and "253.79" in text  # published values beside ours
+    assert "- baseline, uncoordinated: " in text and f"against {253.79 + 260.21:.1f} (phi = 1 Wh/s; " in text
     for name in ("table4.md", "table4.tex", "statistics.md", "index.html"):
         assert (tmp_path / "report" / name).is_file()
     figs = sorted(p.name for p in (tmp_path / "report" / "figures").iterdir())
