@@ -31,6 +31,10 @@ RECIPES: dict[tuple[str, str], Recipe] = {
         episodes=300, overrides={"n_step": 5},
         evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
                  "three seeds against the 1000-episode Table 2 seed)"),
+    ("mpdqn", "coordinated"): Recipe(
+        episodes=300, overrides={"n_step": 5},
+        evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
+                 "three seeds against the 1000-episode Table 2 seed)"),
     ("mpdqn", "uncoordinated"): Recipe(
         episodes=300, overrides={"n_step": 5},
         evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
