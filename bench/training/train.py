@@ -297,13 +297,13 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
     reference = is_recipe(args.method, args.signals, overrides) and args.episodes == rec.episodes
     experiment_to_shipped = not reference and args.models.resolve() == MODELS.resolve()
-    if experiment_to_shipped and not args.no_export:
-        print(f"note: an experiment ({', '.join(suffix.split('+')[1:])}); it is not exported to the shipped models/"
-              " (give --models DIR to export it elsewhere)", file=sys.stderr)
     try:
         writable_dir(out)
     except Unwritable as e:
         return fail(ap.prog, str(e))
+    if experiment_to_shipped and not args.no_export:
+        print(f"note: an experiment ({', '.join(suffix.split('+')[1:])}); it is not exported to the shipped models/"
+              " (give --models DIR to export it elsewhere)", file=sys.stderr)
     try:
         df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
                    models=None if args.no_export or experiment_to_shipped else args.models,

@@ -287,25 +287,25 @@ def test_train_all_resumes_started_runs_first_then_fills_seeds_in_order(tmp_path
     runs, models = tmp_path / "runs", tmp_path / "models"
     (runs / "ddpg-uncoordinated-s1").mkdir(parents=True)
     (runs / "ddpg-uncoordinated-s1" / "checkpoint.pt").write_bytes(b"x")
-    todo = plan(["mpdqn", "ddpg"], seeds=[0, 1], episodes=1000, runs=runs, models=models)
+    todo = plan(["dqn", "ddpg"], seeds=[0, 1], episodes=1000, runs=runs, models=models)
     assert todo[0] == ("ddpg", "uncoordinated", 1)
-    assert todo[1:5] == [("mpdqn", "coordinated", 0), ("mpdqn", "uncoordinated", 0), ("ddpg", "coordinated", 0),
+    assert todo[1:5] == [("dqn", "coordinated", 0), ("dqn", "uncoordinated", 0), ("ddpg", "coordinated", 0),
                          ("ddpg", "uncoordinated", 0)]  # every method gets seed 0 before any gets seed 1
     assert len(todo) == 8
     today = ScenarioConfig(signals="coordinated").to_dict()
-    done = models / "mpdqn-coordinated" / "s0"
+    done = models / "dqn-coordinated" / "s0"
     done.mkdir(parents=True)  # shipped from this seed, episode count, scenario: done
     (done / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": today}))
-    todo = plan(["mpdqn", "ddpg"], seeds=[0, 1], episodes=1000, runs=runs, models=models)
-    assert ("mpdqn", "coordinated", 0) not in todo and ("mpdqn", "coordinated", 1) in todo
-    assert ("mpdqn", "coordinated", 0) in plan(["mpdqn"], seeds=[0], episodes=300, runs=runs, models=models)
+    todo = plan(["dqn", "ddpg"], seeds=[0, 1], episodes=1000, runs=runs, models=models)
+    assert ("dqn", "coordinated", 0) not in todo and ("dqn", "coordinated", 1) in todo
+    assert ("dqn", "coordinated", 0) in plan(["dqn"], seeds=[0], episodes=300, runs=runs, models=models)
     # trained before the lane-change charging fix: stale for a method with r_p^c, not for DDPG (no r_p^c)
     old = {**today, "reward": {k: v for k, v in today["reward"].items() if k != "lane_change_charge"}}
-    assert stale(old, "mpdqn", "coordinated") == ["reward.lane_change_charge"]
+    assert stale(old, "dqn", "coordinated") == ["reward.lane_change_charge"]
     assert stale({**old, "reward": {**old["reward"], "lane_change_penalty": 0.0}}, "ddpg", "coordinated") == []
-    assert stale({**today, "spacing": 500.0}, "mpdqn", "coordinated") == ["spacing"]
+    assert stale({**today, "spacing": 500.0}, "dqn", "coordinated") == ["spacing"]
     (done / "manifest.json").write_text(json.dumps({"seed": 0, "episodes": 1000, "scenario": old}))
-    assert ("mpdqn", "coordinated", 0) in plan(["mpdqn", "ddpg"], seeds=[0], episodes=1000, runs=runs, models=models)
+    assert ("dqn", "coordinated", 0) in plan(["dqn", "ddpg"], seeds=[0], episodes=1000, runs=runs, models=models)
 
 
 def test_a_shipped_seed_is_finished_only_when_trained_by_its_recipe(tmp_path):

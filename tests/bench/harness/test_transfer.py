@@ -29,7 +29,7 @@ def transferred(tmp_path_factory):
     scenario = tmp / "narrow.json"
     scenario.write_text(json.dumps(NARROW))
     argv = ["--profile", "smoke", "--logs", str(tmp), "--methods", "prl", "baseline", "--signals", "coordinated",
-            "--workers", "2", "--scenario", str(scenario), "--transfer"]
+            "--train-seeds", "0", "--workers", "2", "--scenario", str(scenario), "--transfer"]
     return run(parse(argv), progress=False), tmp / "smoke", argv
 
 
