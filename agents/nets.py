@@ -221,8 +221,8 @@ class ConvPass:
         c1, c2 = (blocks[0].conv1.out_channels, blocks[0].conv2.out_channels)
         self.blocks, self.n, self.grad, self.ws = blocks, n, grad, ws
         self.shapes = (bsz, h1, w1, c1, c2)
-        gt = torch.empty(bsz, lanes, cells, dtype=grid.dtype, device=grid.device) if ws is None else ws.typed("grid", (bsz, lanes, cells),
-                                                                                          grid.dtype)
+        gt = (torch.empty(bsz, lanes, cells, dtype=grid.dtype, device=grid.device) if ws is None
+              else ws.typed("grid", (bsz, lanes, cells), grid.dtype))
         gt.copy_(grid.transpose(1, 2))  # (B, lanes, cells), in the replay's dtype (uint8: 4x less to move)
         self.matmul1 = n * c1 >= 16  # MKL's matmul is slow below 16 output columns; oneDNN's conv is not
         if self.matmul1:

@@ -179,11 +179,13 @@ def run_task(task: LateralTask) -> dict[str, Any]:
         sha = manifest["sha256"]
     df = run_scenario(task.scenario, agent, task.method, log_path=Path(task.path), agent_sha256=sha, env=env)
     atomic_parquet(df, Path(task.path).with_suffix(".parquet"))
-    return {**_flat(summary(df, task.scenario)), "train_seed": task.train_seed}
+    return _row(df, task)
 
 
-def _flat(s: dict[str, Any]) -> dict[str, Any]:
-    return {k: (str(v) if isinstance(v, (dict, list)) else v) for k, v in s.items()}
+def _row(df: pd.DataFrame, task: LateralTask) -> dict[str, Any]:
+    """The ``lateral.parquet`` row of a task's trajectories: its summary, flat, and its seed."""
+    s = summary(df, task.scenario)
+    return {**{k: (str(v) if isinstance(v, (dict, list)) else v) for k, v in s.items()}, "train_seed": task.train_seed}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -231,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         traj = Path(t.path).with_suffix(".parquet")
         sha = sha256(Path(t.policy_dir) / "policy.pt") if t.policy_dir else ""  # another policy's log is rerun
         if episode_summary(t.path, agent_sha256=sha) is not None and traj.is_file():
-            rows.append({**_flat(summary(pd.read_parquet(traj), t.scenario)), "train_seed": t.train_seed})
+            rows.append(_row(pd.read_parquet(traj), t))
         else:
             todo.append(t)
     it = run_local(todo, args.workers, run_task) if args.executor == "local" else run_ray(todo, args.address, args.workers, run_task)

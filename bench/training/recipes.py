@@ -22,23 +22,18 @@ class Recipe:
 
 
 PAPER = Recipe(episodes=1000)  # the paper's schedule and hyper-parameters
+N_STEP_300 = Recipe(  # PRL uncoordinated's recipe, extended to the other P-DQN settings
+    episodes=300, overrides={"n_step": 5},
+    evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
+             "three seeds against the 1000-episode Table 2 seed)")
 RECIPES: dict[tuple[str, str], Recipe] = {
     ("prl", "uncoordinated"): Recipe(
         episodes=300, overrides={"n_step": 5},
         evidence="docs/notebook.md, 'PRL recipe: n-step 5 over 300 episodes' (validation cases, three "
                  "seeds per variant)"),
-    ("prl", "coordinated"): Recipe(
-        episodes=300, overrides={"n_step": 5},
-        evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
-                 "three seeds against the 1000-episode Table 2 seed)"),
-    ("mpdqn", "coordinated"): Recipe(
-        episodes=300, overrides={"n_step": 5},
-        evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
-                 "three seeds against the 1000-episode Table 2 seed)"),
-    ("mpdqn", "uncoordinated"): Recipe(
-        episodes=300, overrides={"n_step": 5},
-        evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
-                 "three seeds against the 1000-episode Table 2 seed)"),
+    ("prl", "coordinated"): N_STEP_300,
+    ("mpdqn", "coordinated"): N_STEP_300,
+    ("mpdqn", "uncoordinated"): N_STEP_300,
 }
 
 
@@ -48,6 +43,7 @@ def recipe(method: str, signals: str, paper: bool = False) -> Recipe:
     return PAPER if paper else RECIPES.get((method, signals), PAPER)
 
 
-def is_recipe(method: str, signals: str, agent_config: dict[str, Any]) -> bool:
-    """Whether ``agent_config`` (the fields a run overrides) is exactly the recipe's."""
-    return dict(agent_config) == recipe(method, signals).overrides
+def is_recipe(method: str, signals: str, agent_config: dict[str, Any], paper: bool = False) -> bool:
+    """Whether ``agent_config`` (the fields a run overrides) is exactly the recipe's (``paper``:
+    the paper's, no fields)."""
+    return dict(agent_config) == recipe(method, signals, paper).overrides

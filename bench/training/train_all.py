@@ -23,7 +23,7 @@ from agents.device import parse as parse_device
 from agents.registry import LEARNING
 from bench.args import Parser, int_in
 from bench.harness.policies import MODELS, policy_dir
-from bench.training.recipes import recipe
+from bench.training.recipes import is_recipe, recipe
 from bench.training.train import RUNS
 from envs.config import SIGNALS
 
@@ -48,7 +48,7 @@ def _finished(method: str, signals: str, seed: int, episodes: int | None = None,
     m = json.loads(man.read_text())
     r = recipe(method, signals, paper)
     return (m.get("seed") == seed and m.get("episodes") == (r.episodes if episodes is None else episodes)
-            and (m.get("agent_config") or {}) == r.overrides
+            and is_recipe(method, signals, m.get("agent_config") or {}, paper)
             and not stale(m.get("scenario", {}), method, signals))
 
 
@@ -104,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
             log = open(RUNS / f"{m}-{s}-s{sd}.log", "a")
             episodes = recipe(m, s, args.paper).episodes if args.episodes is None else args.episodes
             cmd = [sys.executable, "-m", "bench.training.train", "--method", m, "--signals", s, "--episodes",
-                   str(episodes), "--seed", str(sd), "--models", str(args.models), "--device", args.device] + (["--paper"] if args.paper else [])
+                   str(episodes), "--seed", str(sd), "--models", str(args.models), "--device", args.device,
+                   *(["--paper"] if args.paper else [])]
             running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}/s{sd}"))
             print(f"started {m}/{s}/s{sd}", flush=True)
         for p, name in list(running):

@@ -50,6 +50,9 @@ def test_an_update_step_runs_wholly_on_the_agents_device(method):
 def test_cpu_is_the_default_and_moving_to_it_changes_nothing(method):
     a, b = _agent(method, n=200), _agent(method, n=200)
     assert a.device == device.CPU and b.to("cpu") is b
+    batch = a.replay.sample_torch(np.random.default_rng(0), 8)  # on the CPU the host tensors are used as they are
+    assert a.batch(batch) is batch and a.tensor(batch["logic"]) is batch["logic"]
+    assert np.shares_memory(device.host(batch["logic"]), batch["logic"].numpy())
     for _ in range(3):
         assert a.update() == b.update()
     for (na, ta), (nb, tb) in zip(_tensors(a), _tensors(b)):

@@ -4,8 +4,9 @@
 conv trunk as matmuls, pairwise max pools, explicit backward passes, fused Adam with the clip
 factor as its gradient scale). The references below are the updates as they were written before
 that (autograd through the losses, ``clip_grad_norm_``, the default Adam, one ``lerp_`` per
-tensor); P-DQN's losses are the agent's own ``losses``, DQN's and DDPG's are written out here. From the same initial state and the same replay draws, a few
-updates must leave every online and target parameter equal up to float reassociation.
+tensor); P-DQN's losses are the agent's own ``losses``, DQN's and DDPG's are written out here.
+From the same initial state and the same replay draws, a few updates must leave every online and
+target parameter equal up to float reassociation.
 No SUMO: the spaces are the env's, the replay is filled with synthetic transitions whose grids
 have vehicles several cells long, so pool windows tie as they do on real grids.
 """
