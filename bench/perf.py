@@ -14,6 +14,7 @@ from bench.args import Parser, fail
 
 STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes run longer than greedy ones)
 LEARNERS = ("prl", "mpdqn", "dqn", "ddpg")  # test_learner_update[...] benchmarks
+CONV_PARTS = ("forward", "backward")  # test_prl_conv_pass[...]: the conv blocks' share of a PRL update
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
@@ -61,6 +62,19 @@ def ratios(path: Path) -> dict[str, float]:
                 out[f"update_gflop_{m}"] = flops / 1e9
                 out[f"update_over_floor_{m}"] = med[name] * rate / flops
                 out[f"updates_per_s_{m}"] = 1.0 / med[name]  # median: one update's typical time
+        for part in CONV_PARTS:
+            name = f"test_prl_conv_pass[{part}]"
+            flops = extra.get(name, {}).get("flops")
+            if name in med and flops:
+                out[f"conv_{part}_over_floor"] = med[name] * rate / flops
+                if "test_learner_update[prl]" in med:
+                    out[f"conv_{part}_share"] = med[name] / med["test_learner_update[prl]"]
+        parts = [f"test_prl_conv_pass[{p}]" for p in CONV_PARTS]
+        upd = "test_learner_update[prl]"
+        if all(n in med and extra[n].get("flops") for n in parts) and extra.get(upd, {}).get("flops") and upd in med:
+            rest_s = med[upd] - sum(med[n] for n in parts)
+            rest_flops = extra[upd]["flops"] - sum(extra[n]["flops"] for n in parts)
+            out["dense_over_floor"] = rest_s * rate / rest_flops  # the update less its conv blocks
     return out
 
 
@@ -108,6 +122,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{m.upper() + ' update / its FLOP floor':40s} {r[f'update_over_floor_{m}']:6.2f}x  "
                   f"(target <= {FLOOR_LIMIT}x; {r[f'update_gflop_{m}']:.3f} GFLOP, "
                   f"{r[f'updates_per_s_{m}']:.0f} updates/s) {'ok' if good else 'MISSED'}")
+    for part in CONV_PARTS:
+        if f"conv_{part}_over_floor" in r:
+            share = r.get(f"conv_{part}_share")
+            print(f"{'PRL conv blocks ' + part + ' / its floor':40s} {r[f'conv_{part}_over_floor']:6.2f}x  "
+                  + (f"(alone: {share:.0%} of an update's time)" if share is not None else ""))
+    if "dense_over_floor" in r:
+        print(f"{'PRL update less its conv blocks / floor':40s} {r['dense_over_floor']:6.2f}x  "
+              "(dense layers, losses, Adam, target updates, sampling)")
     return 0 if ok else 1
 
 

@@ -29,6 +29,24 @@ def test_flop_floor_and_projection(tmp_path, capsys):
     assert "FLOP floor" in capsys.readouterr().out
 
 
+def test_conv_share_and_floor(tmp_path, capsys):
+    data = {"benchmarks": [
+        _bench("test_learner_update[prl]", 0.010, flops=400_000_000),
+        _bench("test_prl_conv_pass[forward]", 0.003, flops=50_000_000),
+        _bench("test_prl_conv_pass[backward]", 0.002, flops=100_000_000),
+        _bench("test_matmul_rate", 0.001, flops=100_000_000),  # 100 GFLOP/s
+    ]}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    r = ratios(path)
+    assert r["conv_forward_over_floor"] == pytest.approx(0.003 / 0.0005)
+    assert r["conv_backward_over_floor"] == pytest.approx(0.002 / 0.001)
+    assert r["conv_forward_share"] == pytest.approx(0.3)
+    assert r["dense_over_floor"] == pytest.approx(0.005 / 0.0025)  # 5 ms for 250 MFLOP at 100 GFLOP/s
+    main([str(path)])
+    assert "PRL conv blocks backward / its floor" in capsys.readouterr().out
+
+
 def test_not_a_benchmark_file(tmp_path, capsys):
     bad = tmp_path / "x.json"
     bad.write_text("{}")

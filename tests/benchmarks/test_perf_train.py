@@ -16,6 +16,7 @@ import torch
 from gymnasium import spaces
 from torch.utils.flop_counter import FlopCounterMode
 
+from agents.nets import ConvPass, Workspace
 from agents.registry import LEARNING, make_agent
 from agents.replay import Replay
 
@@ -72,6 +73,36 @@ def test_learner_update(benchmark, filled, method):
         agent.update()
     benchmark.extra_info["flops"] = int(fc.get_total_flops())
     benchmark.pedantic(agent.update, rounds=200, iterations=1, warmup_rounds=5)
+
+
+@pytest.mark.parametrize("part", ["forward", "backward"])
+def test_prl_conv_pass(benchmark, filled, part):
+    """The conv blocks' share of a PRL update, alone: the target and online passes (forward) or
+    the online pass's backward, on one replay batch. Alone, their data stays warmer in cache than
+    inside the update, so this is a lower bound on their time there."""
+    env, src = filled
+    agent = _learner("prl", env, src)
+    torch.set_grad_enabled(False)
+    try:
+        b = agent.replay.sample_torch(np.random.default_rng(0), agent.cfg.batch_size)
+        online, target = [agent.q.conv, agent.param.conv], [agent.q_target.conv, agent.param_target.conv]
+        ws = Workspace()
+        width = agent._nf + agent._nl + 3
+        z = torch.empty(2, agent.cfg.batch_size, width)
+
+        def forward():
+            ConvPass(b["next_grid"], target, z, grad=False, ws=ws)
+            return ConvPass(b["grid"], online, z, grad=True, ws=ws)
+
+        conv = forward()
+        dfeats = torch.randn(2, agent.cfg.batch_size, agent._nf, generator=torch.Generator().manual_seed(0))
+        run = forward if part == "forward" else (lambda: conv.backward(dfeats))
+        with FlopCounterMode(display=False) as fc:
+            run()
+        benchmark.extra_info["flops"] = int(fc.get_total_flops())
+        benchmark.pedantic(run, rounds=200, iterations=1, warmup_rounds=5)
+    finally:
+        torch.set_grad_enabled(True)
 
 
 def test_matmul_rate(benchmark):
