@@ -352,8 +352,9 @@ def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path
     assert tr.main([*args, "--paper"]) == 0  # the paper's schedule and Table 2, for comparison
     assert (seen["episodes"], seen["agent_config"], seen["models"]) == (1000, None, None)
     assert seen["out"].name == f"{method}-{signals}-s0+paper"
-    assert tr.main(["--method", "ddpg", "--signals", "coordinated", "--paper"]) == 0  # the recipe is the paper's
-    assert seen["models"] == tr.MODELS and seen["out"].name == "ddpg-coordinated-s0"
+    monkeypatch.delitem(RECIPES, (method, signals))  # a setting whose recipe is the paper's
+    assert tr.main([*args, "--paper"]) == 0
+    assert seen["models"] == tr.MODELS and seen["out"].name == f"{method}-{signals}-s0"
 
 
 def test_train_all_paper_schedule_needs_its_own_models_folder(tmp_path, capsys):
