@@ -251,17 +251,19 @@ class ConvPass:
         h2, w2 = 1 + sum(_pairs(zh, 1)), 1 + sum(_pairs(zw, 1))
         self.f_shape = (c2, h2, w2)
         nf = c2 * h2 * w2
-        self.out = out
-        # the last pool writes into ``out`` viewed as (B, h2, w2, N, c2): each block's (channel, lane, cell)
-        feats = out[:, :, :nf].unflatten(2, (c2, h2, w2)).permute(1, 3, 4, 0, 2)
+        # the last pool runs in the conv layout (B, h2, w2, N, c2), contiguous; one copy then puts
+        # each block's features into ``out`` in (channel, lane, cell) order (a pool or ReLU written
+        # straight through that strided view costs several times the copy)
         z = z.view(bsz, zh, zw, n, c2)
+        p2 = _pool_dim(z, 2, 1, self.masks, ws, "w2")
         if _pairs(zh, 1)[0]:
-            _pool_dim(_pool_dim(z, 2, 1, self.masks, ws, "w2"), 1, 1, self.masks, out=feats)
-        else:  # no lane pairs (the 5-lane grid): pooling along the lanes keeps every row
-            _pool_dim(z, 2, 1, self.masks, ws, "w2", out=feats)
-            if self.masks is not None:
-                self.masks.append(None)
-        out[:, :, :nf].relu_()
+            p2 = _pool_dim(p2, 1, 1, self.masks, ws, "h2")
+        elif self.masks is not None:  # no lane pairs (the 5-lane grid): pooling along the lanes keeps every row
+            self.masks.append(None)
+        if p2 is z:  # nothing pooled: keep the convolution's output intact
+            p2 = _empty(ws, "p2", z.shape, z).copy_(z)
+        self.p2 = p2.relu_()
+        out[:, :, :nf].unflatten(2, (c2, h2, w2)).permute(1, 3, 4, 0, 2).copy_(p2)
 
     @torch.no_grad()
     def backward(self, dfeats: torch.Tensor) -> list[list[torch.Tensor]]:
@@ -271,10 +273,10 @@ class ConvPass:
         n = self.n
         ch, h2, w2 = self.f_shape
         m_w1, m_h1, m_w2, m_h2 = self.masks
-        d = torch.ops.aten.threshold_backward(dfeats, self.out[:, :, :ch * h2 * w2], 0.0)  # (N, B, F)
         ws = self.ws
         dp2 = _empty(ws, "dp2", (bsz, h2, w2, n, ch), dfeats)
-        dp2.copy_(d.unflatten(2, (ch, h2, w2)).permute(1, 3, 4, 0, 2))
+        dp2.copy_(dfeats.unflatten(2, (ch, h2, w2)).permute(1, 3, 4, 0, 2))
+        torch.ops.aten.threshold_backward.grad_input(dp2, self.p2, 0.0, grad_input=dp2)  # the last ReLU
         zh, zw = self.z_hw
         dz = _unpool_dim(_unpool_dim(dp2, m_h2, 1, 1, zh, ws, "h2"), m_w2, 2, 1, zw, ws, "w2").view(bsz, zh, zw, -1)
         x2 = self.p1.permute(0, 3, 1, 2)

@@ -15,6 +15,7 @@ from bench.args import Parser, fail
 STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes run longer than greedy ones)
 LEARNERS = ("prl", "mpdqn", "dqn", "ddpg")  # test_learner_update[...] benchmarks
 CONV_PARTS = ("forward", "backward")  # test_prl_conv_pass[...]: the conv blocks' share of a PRL update
+KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind: a PRL update's op time by kind
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
@@ -75,6 +76,12 @@ def ratios(path: Path) -> dict[str, float]:
             rest_s = med[upd] - sum(med[n] for n in parts)
             rest_flops = extra[upd]["flops"] - sum(extra[n]["flops"] for n in parts)
             out["dense_over_floor"] = rest_s * rate / rest_flops  # the update less its conv blocks
+        by_kind = extra.get("test_prl_update_by_kind", {})
+        if all(f"{k}_s" in by_kind for k in KINDS) and extra.get(upd, {}).get("flops") and upd in med:
+            for k in KINDS:
+                out[f"prl_{k}_ms"] = by_kind[f"{k}_s"] * 1e3
+            out["prl_between_ops_ms"] = med[upd] * 1e3 - sum(out[f"prl_{k}_ms"] for k in KINDS)
+            out["prl_matmul_over_floor"] = by_kind["matmul_s"] * rate / extra[upd]["flops"]  # every FLOP is theirs
     return out
 
 
@@ -130,6 +137,11 @@ def main(argv: list[str] | None = None) -> int:
     if "dense_over_floor" in r:
         print(f"{'PRL update less its conv blocks / floor':40s} {r['dense_over_floor']:6.2f}x  "
               "(dense layers, losses, Adam, target updates, sampling)")
+    if "prl_matmul_over_floor" in r:
+        print(f"{'PRL update by kind of op':40s} " + ", ".join(
+            f"{k} {r[f'prl_{k}_ms']:.2f} ms" for k in (*KINDS, "between_ops")))
+        print(f"{'PRL matmuls and convolutions / floor':40s} {r['prl_matmul_over_floor']:6.2f}x  "
+              "(the update if every other op, view and line of Python were free)")
     return 0 if ok else 1
 
 

@@ -9,11 +9,15 @@ within 1.5x of it).
 """
 from __future__ import annotations
 
+import time
+from collections import Counter
+
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 from gymnasium import spaces
+from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils.flop_counter import FlopCounterMode
 
 from agents.nets import ConvPass, Workspace
@@ -103,6 +107,54 @@ def test_prl_conv_pass(benchmark, filled, part):
         benchmark.pedantic(run, rounds=200, iterations=1, warmup_rounds=5)
     finally:
         torch.set_grad_enabled(True)
+
+
+MATMULS = {"mm", "addmm", "bmm", "baddbmm", "convolution", "convolution_backward"}  # the ops whose FLOPs are counted
+KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind's extra_info: <kind>_s
+
+
+def _kind(func) -> str:
+    name = func.__name__.split(".")[0]
+    if name in MATMULS:
+        return "matmul"
+    if func.is_view:
+        return "view"
+    return "optimizer" if name.startswith(("_fused_adam", "_foreach")) else "elementwise"
+
+
+class _OpTimer(TorchDispatchMode):
+    """Each aten op's own time (the call into its kernel), summed by kind of op."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seconds: Counter[str] = Counter()
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        t0 = time.perf_counter()
+        out = func(*args, **(kwargs or {}))
+        self.seconds[_kind(func)] += time.perf_counter() - t0
+        return out
+
+
+def test_prl_update_by_kind(benchmark, filled):
+    """Where a PRL update's time goes by kind of op: matmuls and convolutions (every counted FLOP),
+    elementwise ops and copies, views, the optimizer and target updates; each the median over
+    rounds of one update's summed op times. The timer's own cost falls between the ops, so this
+    benchmark's wall time is not the update's; ``ecodrive perf`` takes the time between ops from
+    ``test_learner_update[prl]`` less these sums."""
+    env, src = filled
+    agent = _learner("prl", env, src)
+    agent.update()
+    rounds: list[Counter[str]] = []
+
+    def run():
+        with _OpTimer() as timer:
+            agent.update()
+        rounds.append(timer.seconds)
+
+    benchmark.pedantic(run, rounds=100, iterations=1, warmup_rounds=5)
+    for kind in KINDS:
+        benchmark.extra_info[f"{kind}_s"] = float(np.median([r[kind] for r in rounds[5:]]))
 
 
 def test_matmul_rate(benchmark):
