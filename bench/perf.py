@@ -77,10 +77,10 @@ def ratios(path: Path) -> dict[str, float]:
             rest_flops = extra[upd]["flops"] - sum(extra[n]["flops"] for n in parts)
             out["dense_over_floor"] = rest_s * rate / rest_flops  # the update less its conv blocks
         by_kind = extra.get("test_prl_update_by_kind", {})
-        if all(f"{k}_s" in by_kind for k in KINDS) and extra.get(upd, {}).get("flops") and upd in med:
+        if all(f"{k}_s" in by_kind for k in (*KINDS, "update")) and extra.get(upd, {}).get("flops"):
             for k in KINDS:
                 out[f"prl_{k}_ms"] = by_kind[f"{k}_s"] * 1e3
-            out["prl_between_ops_ms"] = med[upd] * 1e3 - sum(out[f"prl_{k}_ms"] for k in KINDS)
+            out["prl_between_ops_ms"] = by_kind["update_s"] * 1e3 - sum(out[f"prl_{k}_ms"] for k in KINDS)
             out["prl_matmul_over_floor"] = by_kind["matmul_s"] * rate / extra[upd]["flops"]  # every FLOP is theirs
     return out
 

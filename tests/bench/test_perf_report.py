@@ -53,17 +53,17 @@ def test_update_by_kind_of_op(tmp_path, capsys):
         _bench("test_prl_conv_pass[forward]", 0.003, flops=50_000_000),
         _bench("test_prl_conv_pass[backward]", 0.002, flops=100_000_000),
         _bench("test_prl_update_by_kind", 0.015, matmul_s=0.006, elementwise_s=0.002, view_s=0.0005,
-               optimizer_s=0.0005),
+               optimizer_s=0.0005, update_s=0.0095),
         _bench("test_matmul_rate", 0.001, flops=100_000_000),  # 100 GFLOP/s
     ]}
     path = tmp_path / "perf.json"
     path.write_text(json.dumps(data))
     r = ratios(path)
     assert r["prl_matmul_over_floor"] == pytest.approx(0.006 / 0.004)  # 400 MFLOP at 100 GFLOP/s = 4 ms
-    assert r["prl_between_ops_ms"] == pytest.approx(10.0 - 6.0 - 2.0 - 0.5 - 0.5)
+    assert r["prl_between_ops_ms"] == pytest.approx(9.5 - 6.0 - 2.0 - 0.5 - 0.5)
     main([str(path)])
     out = capsys.readouterr().out
-    assert "matmul 6.00 ms" in out and "between_ops 1.00 ms" in out
+    assert "matmul 6.00 ms" in out and "between_ops 0.50 ms" in out
 
 
 def test_not_a_benchmark_file(tmp_path, capsys):
