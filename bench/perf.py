@@ -31,6 +31,17 @@ def ratios(path: Path) -> dict[str, float]:
     out = {k: med[n] / med[d] for k, (n, d, _, _) in TARGETS.items() if n in med and d in med}
 
     extra = {b["name"]: b.get("extra_info", {}) for b in data["benchmarks"]}
+    mean = {b["name"]: b["stats"]["mean"] for b in data["benchmarks"]}
+    for name, e in extra.items():  # paired with the reference matmul (round by round): the op's own time
+        if "time_s" in e:
+            med[name] = mean[name] = e["time_s"]
+    overall = extra["test_matmul_rate"]["flops"] / med["test_matmul_rate"] if "test_matmul_rate" in med else None
+
+    def rate(name: str) -> float | None:
+        """The core's matmul rate [FLOP/s] while ``name`` ran: from its own rounds where paired."""
+        e = extra.get(name, {})
+        return e["matmul_flops"] / e["matmul_s"] if "matmul_s" in e else overall
+
     if "step_over_sim" in extra.get("test_env_step", {}):
         out["env_step_over_sim_in_run"] = extra["test_env_step"]["step_over_sim"]
     if "log_overhead" in extra.get("test_episode_logged", {}):
@@ -41,47 +52,48 @@ def ratios(path: Path) -> dict[str, float]:
     if "test_env_reset" in med:
         out["reset_ms"] = med["test_env_reset"] * 1e3
     if "test_learner_update[prl]" in med and "test_training_env_step" in med:
-        mean = {b["name"]: b["stats"]["mean"] for b in data["benchmarks"]}
         per_step = mean["test_learner_update[prl]"] + mean["test_training_env_step"]
         out["updates_per_s"] = 1.0 / mean["test_learner_update[prl]"]
         out["env_steps_per_s"] = 1.0 / mean["test_training_env_step"]
         out["prl_1000_episodes_min"] = per_step * STEPS_PER_EPISODE * 1000 / 60
         flops = extra.get("test_learner_update[prl]", {}).get("flops")
-        if flops and "test_matmul_rate" in med:
-            rate = extra["test_matmul_rate"]["flops"] / med["test_matmul_rate"]  # FLOP/s of one core
-            floor = flops / rate  # [s] the update at the matmul rate, no overhead
+        if flops and rate("test_learner_update[prl]"):
+            floor = flops / rate("test_learner_update[prl]")  # [s] the update at the matmul rate, no overhead
             out["update_gflop"] = flops / 1e9
-            out["matmul_gflops"] = rate / 1e9
+            out["matmul_gflops"] = rate("test_learner_update[prl]") / 1e9
             out["update_over_floor"] = med["test_learner_update[prl]"] / floor
             out["prl_1000_episodes_floor_min"] = floor * STEPS_PER_EPISODE * 1000 / 60
-    if "test_matmul_rate" in med:
-        rate = extra["test_matmul_rate"]["flops"] / med["test_matmul_rate"]
+    if overall or any("matmul_s" in e for e in extra.values()):
         for m in LEARNERS:
             name = f"test_learner_update[{m}]"
             flops = extra.get(name, {}).get("flops")
-            if name in med and flops:
+            if name in med and flops and rate(name):
                 out[f"update_gflop_{m}"] = flops / 1e9
-                out[f"update_over_floor_{m}"] = med[name] * rate / flops
+                out[f"update_over_floor_{m}"] = med[name] * rate(name) / flops
                 out[f"updates_per_s_{m}"] = 1.0 / med[name]  # median: one update's typical time
         for part in CONV_PARTS:
             name = f"test_prl_conv_pass[{part}]"
             flops = extra.get(name, {}).get("flops")
-            if name in med and flops:
-                out[f"conv_{part}_over_floor"] = med[name] * rate / flops
+            if name in med and flops and rate(name):
+                out[f"conv_{part}_over_floor"] = med[name] * rate(name) / flops
                 if "test_learner_update[prl]" in med:
                     out[f"conv_{part}_share"] = med[name] / med["test_learner_update[prl]"]
         parts = [f"test_prl_conv_pass[{p}]" for p in CONV_PARTS]
         upd = "test_learner_update[prl]"
-        if all(n in med and extra[n].get("flops") for n in parts) and extra.get(upd, {}).get("flops") and upd in med:
+        if (all(n in med and extra[n].get("flops") for n in parts) and extra.get(upd, {}).get("flops") and upd in med
+                and rate(upd)):
             rest_s = med[upd] - sum(med[n] for n in parts)
             rest_flops = extra[upd]["flops"] - sum(extra[n]["flops"] for n in parts)
-            out["dense_over_floor"] = rest_s * rate / rest_flops  # the update less its conv blocks
-        by_kind = extra.get("test_prl_update_by_kind", {})
-        if all(f"{k}_s" in by_kind for k in (*KINDS, "update")) and extra.get(upd, {}).get("flops"):
+            out["dense_over_floor"] = rest_s * rate(upd) / rest_flops  # the update less its conv blocks
+        kinds = "test_prl_update_by_kind"
+        by_kind = extra.get(kinds, {})
+        if (all(f"ops_{k}_s" in by_kind for k in KINDS) and "update_s" in by_kind and extra.get(upd, {}).get("flops")
+                and rate(kinds)):
             for k in KINDS:
-                out[f"prl_{k}_ms"] = by_kind[f"{k}_s"] * 1e3
+                out[f"prl_{k}_ms"] = by_kind[f"ops_{k}_s"] * 1e3
             out["prl_between_ops_ms"] = by_kind["update_s"] * 1e3 - sum(out[f"prl_{k}_ms"] for k in KINDS)
-            out["prl_matmul_over_floor"] = by_kind["matmul_s"] * rate / extra[upd]["flops"]  # every FLOP is theirs
+            # every counted FLOP is a matmul's or a convolution's
+            out["prl_matmul_over_floor"] = by_kind["ops_matmul_s"] * rate(kinds) / extra[upd]["flops"]
     return out
 
 

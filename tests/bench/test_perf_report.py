@@ -52,18 +52,35 @@ def test_update_by_kind_of_op(tmp_path, capsys):
         _bench("test_learner_update[prl]", 0.010, flops=400_000_000),
         _bench("test_prl_conv_pass[forward]", 0.003, flops=50_000_000),
         _bench("test_prl_conv_pass[backward]", 0.002, flops=100_000_000),
-        _bench("test_prl_update_by_kind", 0.015, matmul_s=0.006, elementwise_s=0.002, view_s=0.0005,
-               optimizer_s=0.0005, update_s=0.0095),
+        _bench("test_prl_update_by_kind", 0.015, ops_matmul_s=0.006, ops_elementwise_s=0.002, ops_view_s=0.0005,
+               ops_optimizer_s=0.0005, update_s=0.0095, matmul_s=0.0005, matmul_flops=25_000_000),  # 50 GFLOP/s
         _bench("test_matmul_rate", 0.001, flops=100_000_000),  # 100 GFLOP/s
     ]}
     path = tmp_path / "perf.json"
     path.write_text(json.dumps(data))
     r = ratios(path)
-    assert r["prl_matmul_over_floor"] == pytest.approx(0.006 / 0.004)  # 400 MFLOP at 100 GFLOP/s = 4 ms
+    assert r["prl_matmul_over_floor"] == pytest.approx(0.006 / 0.008)  # 400 MFLOP at its own 50 GFLOP/s = 8 ms
     assert r["prl_between_ops_ms"] == pytest.approx(9.5 - 6.0 - 2.0 - 0.5 - 0.5)
     main([str(path)])
     out = capsys.readouterr().out
     assert "matmul 6.00 ms" in out and "between_ops 0.50 ms" in out
+
+
+def test_paired_rounds_take_their_own_matmul_rate(tmp_path):
+    """A benchmark timed beside the reference matmul in the same rounds is judged at that rate and by
+    its own time, not by the run's separate matmul benchmark or its stats (which include the matmul)."""
+    data = {"benchmarks": [
+        _bench("test_learner_update[dqn]", 0.0101, flops=200_000_000, time_s=0.010, matmul_s=0.0005,
+               matmul_flops=25_000_000),  # 50 GFLOP/s in its own rounds
+        _bench("test_learner_update[ddpg]", 0.010, flops=200_000_000),  # not paired: the run's rate
+        _bench("test_matmul_rate", 0.001, flops=100_000_000),  # 100 GFLOP/s
+    ]}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    r = ratios(path)
+    assert r["update_over_floor_dqn"] == pytest.approx(0.010 / 0.004)
+    assert r["updates_per_s_dqn"] == pytest.approx(100.0)
+    assert r["update_over_floor_ddpg"] == pytest.approx(0.010 / 0.002)
 
 
 def test_not_a_benchmark_file(tmp_path, capsys):

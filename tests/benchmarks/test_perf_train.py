@@ -3,9 +3,9 @@ thread, as in training).
 
 ``nox -s perf`` reports updates/s and env steps/s; ``bench.perf`` turns them into the projected
 wall time of a 1000-episode run (target: 30 minutes on one core). Each update's floating-point
-operations (counted by torch's FlopCounterMode) over this core's measured matmul rate give the
-fastest any implementation of the same update could run here: the FLOP floor (target: an update
-within 1.5x of it).
+operations (counted by torch's FlopCounterMode) over this core's measured matmul rate, taken in
+the same rounds as the update, give the fastest any implementation of the same update could run
+here: the FLOP floor (target: an update within 1.5x of it).
 """
 from __future__ import annotations
 
@@ -68,6 +68,30 @@ def _learner(method: str, env, src):
     return agent
 
 
+def _paired(benchmark, fn, rounds: int = 200) -> None:
+    """Benchmark ``fn`` with the reference matmul (``MATMUL``, warm as in ``test_matmul_rate``)
+    timed just before it in every round: ``extra_info`` gets the medians ``time_s`` (``fn`` alone)
+    and ``matmul_s``, so its ratio to the FLOP floor is taken at the rate the core had in the same
+    rounds, not minutes apart (the shared machines' speed drifts by tens of percent between
+    benchmarks)."""
+    b, i, o = MATMUL
+    g = torch.Generator().manual_seed(0)
+    x, w = torch.randn(b, i, generator=g), torch.randn(i, o, generator=g)
+    times: list[tuple[float, float]] = []
+
+    def run():
+        torch.mm(x, w)  # its operands back in cache: the rate of test_matmul_rate, at this moment
+        t0 = time.perf_counter()
+        torch.mm(x, w)
+        t1 = time.perf_counter()
+        fn()
+        times.append((t1 - t0, time.perf_counter() - t1))
+
+    benchmark.pedantic(run, rounds=rounds, iterations=1, warmup_rounds=5)
+    mm, op = np.median(np.array(times[5:]), axis=0)
+    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=2 * b * i * o, time_s=float(op))
+
+
 @pytest.mark.parametrize("method", LEARNING)
 def test_learner_update(benchmark, filled, method):
     env, src = filled
@@ -76,7 +100,7 @@ def test_learner_update(benchmark, filled, method):
     with FlopCounterMode(display=False) as fc:
         agent.update()
     benchmark.extra_info["flops"] = int(fc.get_total_flops())
-    benchmark.pedantic(agent.update, rounds=200, iterations=1, warmup_rounds=5)
+    _paired(benchmark, agent.update)
 
 
 @pytest.mark.parametrize("part", ["forward", "backward"])
@@ -104,13 +128,13 @@ def test_prl_conv_pass(benchmark, filled, part):
         with FlopCounterMode(display=False) as fc:
             run()
         benchmark.extra_info["flops"] = int(fc.get_total_flops())
-        benchmark.pedantic(run, rounds=200, iterations=1, warmup_rounds=5)
+        _paired(benchmark, run)
     finally:
         torch.set_grad_enabled(True)
 
 
 MATMULS = {"mm", "addmm", "bmm", "baddbmm", "convolution", "convolution_backward"}  # the ops whose FLOPs are counted
-KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind's extra_info: <kind>_s
+KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind's extra_info: ops_<kind>_s
 
 
 def _kind(func) -> str:
@@ -139,26 +163,34 @@ class _OpTimer(TorchDispatchMode):
 def test_prl_update_by_kind(benchmark, filled):
     """Where a PRL update's time goes by kind of op: matmuls and convolutions (every counted FLOP),
     elementwise ops and copies, views, the optimizer and target updates; each the median over
-    rounds of one update's summed op times. The timer's own cost falls between the ops, so each
-    round also times a plain update (``update_s``, its median): the time between the ops (Python,
-    dispatch) is that less the sums."""
+    rounds of one update's summed op times (``ops_<kind>_s``). The timer's own cost falls between
+    the ops, so each round also times the reference matmul and a plain update (``matmul_s``,
+    ``update_s``): the time between the ops (Python, dispatch) is the plain update less the sums."""
     env, src = filled
     agent = _learner("prl", env, src)
     agent.update()
+    b, i, o = MATMUL
+    x, w = torch.randn(b, i), torch.randn(i, o)
     rounds: list[Counter[str]] = []
+    reference: list[tuple[float, float]] = []  # (the reference matmul, a plain update) of each round
 
-    def run():  # a plain update (its wall time), then one under the op timer
+    def run():
+        torch.mm(x, w)  # as in _paired
         t0 = time.perf_counter()
+        torch.mm(x, w)
+        t1 = time.perf_counter()
         agent.update()
-        wall = time.perf_counter() - t0
+        t2 = time.perf_counter()
         with _OpTimer() as timer:
             agent.update()
-        timer.seconds["update"] = wall
         rounds.append(timer.seconds)
+        reference.append((t1 - t0, t2 - t1))
 
     benchmark.pedantic(run, rounds=100, iterations=1, warmup_rounds=5)
-    for kind in (*KINDS, "update"):
-        benchmark.extra_info[f"{kind}_s"] = float(np.median([r[kind] for r in rounds[5:]]))
+    for kind in KINDS:
+        benchmark.extra_info[f"ops_{kind}_s"] = float(np.median([r[kind] for r in rounds[5:]]))
+    mm, plain = np.median(np.array(reference[5:]), axis=0)
+    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=2 * b * i * o, update_s=float(plain))
 
 
 def test_matmul_rate(benchmark):
