@@ -26,6 +26,10 @@ N_STEP_300 = Recipe(  # PRL uncoordinated's recipe, extended to the other P-DQN 
     episodes=300, overrides={"n_step": 5},
     evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
              "three seeds against the 1000-episode Table 2 seed)")
+TABLE2_300 = Recipe(  # DQN's and DDPG+LC2013's: Table 2 as it is, over 300 episodes
+    episodes=300,
+    evidence="docs/notebook.md, 'DQN and DDPG+LC2013 coordinated over 300 episodes' (validation cases, three "
+             "seeds against the 1000-episode Table 2 seed)")
 RECIPES: dict[tuple[str, str], Recipe] = {
     ("prl", "uncoordinated"): Recipe(
         episodes=300, overrides={"n_step": 5},
@@ -34,6 +38,8 @@ RECIPES: dict[tuple[str, str], Recipe] = {
     ("prl", "coordinated"): N_STEP_300,
     ("mpdqn", "coordinated"): N_STEP_300,
     ("mpdqn", "uncoordinated"): N_STEP_300,
+    ("dqn", "coordinated"): TABLE2_300,
+    ("ddpg", "coordinated"): TABLE2_300,
 }
 
 
