@@ -5,7 +5,8 @@
 rewrites the block between ``<!-- headline:start -->`` and ``<!-- headline:end -->``: per method,
 the mean energy and travel time over every training seed and case in each signal setting, the
 improvement against the run's own baseline (positive = less than the baseline), the number of
-training seeds, and the paper's PRL row beside them (from ``bench.paper``). The block names the
+training seeds (``3 / 1``: coordinated / uncoordinated, where they differ), and the paper's PRL
+row beside them (from ``bench.paper``). The block names the
 run, its profile and git SHA, so a reader can tell where the numbers come from.
 """
 from __future__ import annotations
@@ -40,8 +41,9 @@ def table(results: pd.DataFrame) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     methods = [m for m in ORDER if m in set(results.method)] + sorted(set(results.method) - set(ORDER))
     for m in methods:
-        n = sorted({int(seeds[(m, s)]) for s, _ in SETTINGS if (m, s) in seeds.index})
-        cells = [LABELS.get(m, m), "/".join(map(str, n)) if n else "-"]
+        n = [int(seeds[(m, s)]) if (m, s) in seeds.index else 0 for s, _ in SETTINGS]
+        # one count where the settings agree, else "coord. / non-coord." in the columns' order
+        cells = [LABELS.get(m, m), "-" if not any(n) else str(n[0]) if len(set(n)) == 1 else " / ".join(map(str, n))]
         for s, _ in SETTINGS:
             if (m, s) not in means.index:
                 cells += ["", "", "", ""]

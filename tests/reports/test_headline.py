@@ -27,6 +27,16 @@ def test_table_takes_means_over_seeds_and_improvements_against_the_run_baseline(
     assert "| paper: PRL (Table 4) |  | 221.8 | +4.1% |" in md  # from bench.paper, beside ours
 
 
+def test_seed_counts_that_differ_by_setting_are_given_per_setting():
+    df = results()
+    df = df[~((df.signals == "uncoordinated") & (df.train_seed == 1))]  # one seed uncoordinated
+    prl = next(line for line in table(df).splitlines() if line.startswith("| PRL |"))
+    assert [c.strip() for c in prl.strip("|").split("|")][1] == "2 / 1"  # coordinated / uncoordinated
+    only = df[~((df.method == "prl") & (df.signals == "coordinated"))]  # no coordinated run at all
+    prl = next(line for line in table(only).splitlines() if line.startswith("| PRL |"))
+    assert [c.strip() for c in prl.strip("|").split("|")][1] == "0 / 1"
+
+
 def test_rewrite_replaces_only_the_block(tmp_path):
     readme = tmp_path / "README.md"
     readme.write_text(f"# title\n\nbefore\n{START}\nold\n{END}\nafter\n")
