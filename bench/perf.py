@@ -34,7 +34,7 @@ def ratios(path: Path) -> dict[str, float]:
     mean = {b["name"]: b["stats"]["mean"] for b in data["benchmarks"]}
     for name, e in extra.items():  # paired with the reference matmul (round by round): the op's own time
         if "time_s" in e:
-            med[name] = mean[name] = e["time_s"]
+            med[name], mean[name] = e["time_s"], e.get("mean_s", e["time_s"])
     overall = extra["test_matmul_rate"]["flops"] / med["test_matmul_rate"] if "test_matmul_rate" in med else None
 
     def rate(name: str) -> float | None:
@@ -82,9 +82,10 @@ def ratios(path: Path) -> dict[str, float]:
         upd = "test_learner_update[prl]"
         if (all(n in med and extra[n].get("flops") for n in parts) and extra.get(upd, {}).get("flops") and upd in med
                 and rate(upd)):
-            rest_s = med[upd] - sum(med[n] for n in parts)
+            # the update less its conv blocks, each time in matmul-equivalent FLOPs at its own rounds' rate
+            rest = med[upd] * rate(upd) - sum(med[n] * rate(n) for n in parts)
             rest_flops = extra[upd]["flops"] - sum(extra[n]["flops"] for n in parts)
-            out["dense_over_floor"] = rest_s * rate(upd) / rest_flops  # the update less its conv blocks
+            out["dense_over_floor"] = rest / rest_flops
         kinds = "test_prl_update_by_kind"
         by_kind = extra.get(kinds, {})
         if (all(f"ops_{k}_s" in by_kind for k in KINDS) and "update_s" in by_kind and extra.get(upd, {}).get("flops")

@@ -42,8 +42,13 @@ def table(results: pd.DataFrame) -> str:
     methods = [m for m in ORDER if m in set(results.method)] + sorted(set(results.method) - set(ORDER))
     for m in methods:
         n = [int(seeds[(m, s)]) if (m, s) in seeds.index else 0 for s, _ in SETTINGS]
-        # one count where the settings agree, else "coord. / non-coord." in the columns' order
-        cells = [LABELS.get(m, m), "-" if not any(n) else str(n[0]) if len(set(n)) == 1 else " / ".join(map(str, n))]
+        if not any(n):
+            count = "-"  # not a learning method
+        elif len(set(n)) == 1:
+            count = str(n[0])
+        else:  # "coord. / non-coord.", in the columns' order
+            count = " / ".join(map(str, n))
+        cells = [LABELS.get(m, m), count]
         for s, _ in SETTINGS:
             if (m, s) not in means.index:
                 cells += ["", "", "", ""]

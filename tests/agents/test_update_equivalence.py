@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from torch.func import functional_call
 
-from agents.nets import ConvBlock, ConvPass, clipped_adam_step, features, soft_update, trunk_dim, trunks
+from agents.nets import ConvBlock, ConvPass, Workspace, clipped_adam_step, features, soft_update, trunk_dim, trunks
 from agents.registry import make_agent
 
 K = 3
@@ -190,11 +190,13 @@ def test_update_equals_the_autograd_reference(method, config):
 
 
 @pytest.mark.parametrize(("grid_shape", "n_blocks"), [((60, 5), 1), ((60, 5), 2), ((61, 4), 3), ((40, 3), 2),
-                                                     ((59, 6), 3)])
-def test_conv_pass_is_the_trunk_with_its_gradients(grid_shape, n_blocks):
+                                                     ((59, 6), 3), ((60, 7), 2)])
+@pytest.mark.parametrize("shared", [False, True])
+def test_conv_pass_is_the_trunk_with_its_gradients(grid_shape, n_blocks, shared):
     """Features of ``ConvPass`` equal ``trunks`` (the acting path); its backward equals autograd
     through ``trunks``, with the pools' winners as max_pool2d's (ties included: binary grids).
-    One block takes oneDNN's first convolution, more the patch matmul."""
+    One block takes oneDNN's first convolution, more the patch matmul. ``shared``: as in an
+    update, a target pass (other blocks, other grids) runs first in the same ``Workspace``."""
     torch.manual_seed(0)
     rng = np.random.default_rng(1)
     blocks = [ConvBlock() for _ in range(n_blocks)]
@@ -202,7 +204,12 @@ def test_conv_pass_is_the_trunk_with_its_gradients(grid_shape, n_blocks):
     ref = trunks(grid, blocks)
     nf = trunk_dim(grid_shape)
     out = torch.zeros(len(blocks), 32, nf + 4)
-    cp = ConvPass(grid.to(torch.uint8), blocks, out, grad=True)
+    ws = Workspace() if shared else None
+    if shared:
+        other = torch.as_tensor(np.stack([_grid(rng, grid_shape) for _ in range(32)]))
+        ConvPass(other.to(torch.uint8), [ConvBlock() for _ in range(n_blocks)], torch.zeros_like(out), grad=False,
+                 ws=ws)
+    cp = ConvPass(grid.to(torch.uint8), blocks, out, grad=True, ws=ws)
     for i, r in enumerate(ref):
         torch.testing.assert_close(out[i, :, :nf], r, rtol=1e-6, atol=1e-6)
     dfeats = torch.randn(len(blocks), 32, nf)

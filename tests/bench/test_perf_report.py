@@ -70,7 +70,7 @@ def test_paired_rounds_take_their_own_matmul_rate(tmp_path):
     """A benchmark timed beside the reference matmul in the same rounds is judged at that rate and by
     its own time, not by the run's separate matmul benchmark or its stats (which include the matmul)."""
     data = {"benchmarks": [
-        _bench("test_learner_update[dqn]", 0.0101, flops=200_000_000, time_s=0.010, matmul_s=0.0005,
+        _bench("test_learner_update[dqn]", 0.0101, flops=200_000_000, time_s=0.010, mean_s=0.011, matmul_s=0.0005,
                matmul_flops=25_000_000),  # 50 GFLOP/s in its own rounds
         _bench("test_learner_update[ddpg]", 0.010, flops=200_000_000),  # not paired: the run's rate
         _bench("test_matmul_rate", 0.001, flops=100_000_000),  # 100 GFLOP/s

@@ -71,9 +71,12 @@ def _learner(method: str, env, src):
 def _paired(benchmark, fn, rounds: int = 200) -> None:
     """Benchmark ``fn`` with the reference matmul (``MATMUL``, warm as in ``test_matmul_rate``)
     timed just before it in every round: ``extra_info`` gets the medians ``time_s`` (``fn`` alone)
-    and ``matmul_s``, so its ratio to the FLOP floor is taken at the rate the core had in the same
-    rounds, not minutes apart (the shared machines' speed drifts by tens of percent between
+    and ``matmul_s`` (and ``mean_s``, ``fn``'s mean), so its ratio to the FLOP floor is taken at
+    the rate the core had in the same rounds, not minutes apart (the shared machines' speed drifts by tens of percent between
     benchmarks)."""
+    if not benchmark.enabled:  # --benchmark-disable: one plain call, nothing to record
+        fn()
+        return
     b, i, o = MATMUL
     g = torch.Generator().manual_seed(0)
     x, w = torch.randn(b, i, generator=g), torch.randn(i, o, generator=g)
@@ -89,7 +92,8 @@ def _paired(benchmark, fn, rounds: int = 200) -> None:
 
     benchmark.pedantic(run, rounds=rounds, iterations=1, warmup_rounds=5)
     mm, op = np.median(np.array(times[5:]), axis=0)
-    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=2 * b * i * o, time_s=float(op))
+    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=2 * b * i * o, time_s=float(op),
+                                mean_s=float(np.mean(np.array(times[5:])[:, 1])))
 
 
 @pytest.mark.parametrize("method", LEARNING)
@@ -169,8 +173,11 @@ def test_prl_update_by_kind(benchmark, filled):
     env, src = filled
     agent = _learner("prl", env, src)
     agent.update()
+    if not benchmark.enabled:
+        return
     b, i, o = MATMUL
-    x, w = torch.randn(b, i), torch.randn(i, o)
+    g = torch.Generator().manual_seed(0)
+    x, w = torch.randn(b, i, generator=g), torch.randn(i, o, generator=g)
     rounds: list[Counter[str]] = []
     reference: list[tuple[float, float]] = []  # (the reference matmul, a plain update) of each round
 
