@@ -260,9 +260,7 @@ class ConvPass:
             p2 = _pool_dim(p2, 1, 1, self.masks, ws, "h2")
         elif self.masks is not None:  # no lane pairs (the 5-lane grid): pooling along the lanes keeps every row
             self.masks.append(None)
-        if p2 is z:  # nothing pooled: keep the convolution's output intact
-            p2 = _empty(ws, "p2", z.shape, z).copy_(z)
-        self.p2 = p2.relu_()
+        self.p2 = p2.relu_()  # (the convolution's own output where nothing was pooled; backward does not read it)
         out[:, :, :nf].unflatten(2, (c2, h2, w2)).permute(1, 3, 4, 0, 2).copy_(p2)
 
     @torch.no_grad()

@@ -23,6 +23,7 @@ from torch.utils.flop_counter import FlopCounterMode
 from agents.nets import ConvPass, Workspace
 from agents.registry import LEARNING, make_agent
 from agents.replay import Replay
+from bench.perf import KINDS  # test_prl_update_by_kind's extra_info: ops_<kind>_s
 
 MATMUL = (128, 512, 256)  # (batch, in, out): about the size of the networks' first dense layers
 
@@ -68,32 +69,45 @@ def _learner(method: str, env, src):
     return agent
 
 
+def _reference_matmul():
+    """(timed, flops): ``timed()`` runs the reference matmul (``MATMUL``) once to bring its operands
+    back into cache, then times a second run: the rate of ``test_matmul_rate``, at this moment."""
+    b, i, o = MATMUL
+    g = torch.Generator().manual_seed(0)
+    x, w = torch.randn(b, i, generator=g), torch.randn(i, o, generator=g)
+
+    def timed() -> float:
+        torch.mm(x, w)
+        t0 = time.perf_counter()
+        torch.mm(x, w)
+        return time.perf_counter() - t0
+
+    return timed, 2 * b * i * o
+
+
 def _paired(benchmark, fn, rounds: int = 200) -> None:
-    """Benchmark ``fn`` with the reference matmul (``MATMUL``, warm as in ``test_matmul_rate``)
-    timed just before it in every round: ``extra_info`` gets the medians ``time_s`` (``fn`` alone)
-    and ``matmul_s`` (and ``mean_s``, ``fn``'s mean), so its ratio to the FLOP floor is taken at
-    the rate the core had in the same rounds, not minutes apart (the shared machines' speed drifts by tens of percent between
+    """Benchmark ``fn`` with the reference matmul timed just before it in every round:
+    ``extra_info`` gets the medians ``time_s`` (``fn`` alone) and ``matmul_s``, and ``fn``'s mean
+    ``mean_s``, so its ratio to the FLOP floor is taken at the rate the core had in the same
+    rounds, not minutes apart (the shared machines' speed drifts by tens of percent between
     benchmarks)."""
     if not benchmark.enabled:  # --benchmark-disable: one plain call, nothing to record
         fn()
         return
-    b, i, o = MATMUL
-    g = torch.Generator().manual_seed(0)
-    x, w = torch.randn(b, i, generator=g), torch.randn(i, o, generator=g)
+    reference, flops = _reference_matmul()
     times: list[tuple[float, float]] = []
 
     def run():
-        torch.mm(x, w)  # its operands back in cache: the rate of test_matmul_rate, at this moment
+        mm = reference()
         t0 = time.perf_counter()
-        torch.mm(x, w)
-        t1 = time.perf_counter()
         fn()
-        times.append((t1 - t0, time.perf_counter() - t1))
+        times.append((mm, time.perf_counter() - t0))
 
     benchmark.pedantic(run, rounds=rounds, iterations=1, warmup_rounds=5)
-    mm, op = np.median(np.array(times[5:]), axis=0)
-    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=2 * b * i * o, time_s=float(op),
-                                mean_s=float(np.mean(np.array(times[5:])[:, 1])))
+    kept = np.array(times[5:])
+    mm, op = np.median(kept, axis=0)
+    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=flops, time_s=float(op),
+                                mean_s=float(kept[:, 1].mean()))
 
 
 @pytest.mark.parametrize("method", LEARNING)
@@ -138,7 +152,6 @@ def test_prl_conv_pass(benchmark, filled, part):
 
 
 MATMULS = {"mm", "addmm", "bmm", "baddbmm", "convolution", "convolution_backward"}  # the ops whose FLOPs are counted
-KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind's extra_info: ops_<kind>_s
 
 
 def _kind(func) -> str:
@@ -175,29 +188,25 @@ def test_prl_update_by_kind(benchmark, filled):
     agent.update()
     if not benchmark.enabled:
         return
-    b, i, o = MATMUL
-    g = torch.Generator().manual_seed(0)
-    x, w = torch.randn(b, i, generator=g), torch.randn(i, o, generator=g)
+    timed, flops = _reference_matmul()
     rounds: list[Counter[str]] = []
     reference: list[tuple[float, float]] = []  # (the reference matmul, a plain update) of each round
 
     def run():
-        torch.mm(x, w)  # as in _paired
+        mm = timed()
         t0 = time.perf_counter()
-        torch.mm(x, w)
-        t1 = time.perf_counter()
         agent.update()
-        t2 = time.perf_counter()
+        plain = time.perf_counter() - t0
         with _OpTimer() as timer:
             agent.update()
         rounds.append(timer.seconds)
-        reference.append((t1 - t0, t2 - t1))
+        reference.append((mm, plain))
 
     benchmark.pedantic(run, rounds=100, iterations=1, warmup_rounds=5)
     for kind in KINDS:
         benchmark.extra_info[f"ops_{kind}_s"] = float(np.median([r[kind] for r in rounds[5:]]))
     mm, plain = np.median(np.array(reference[5:]), axis=0)
-    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=2 * b * i * o, update_s=float(plain))
+    benchmark.extra_info.update(matmul_s=float(mm), matmul_flops=flops, update_s=float(plain))
 
 
 def test_matmul_rate(benchmark):
