@@ -16,6 +16,7 @@ STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes ru
 LEARNERS = ("prl", "mpdqn", "dqn", "ddpg")  # test_learner_update[...] benchmarks
 CONV_PARTS = ("forward", "backward")  # test_prl_conv_pass[...]: the conv blocks' share of a PRL update
 KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind: a PRL update's op time by kind
+COMPILED = "test_prl_update_compiled"  # the autograd formulation under torch.compile: the alternative
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
@@ -78,6 +79,10 @@ def ratios(path: Path) -> dict[str, float]:
                 out[f"conv_{part}_over_floor"] = med[name] * rate(name) / flops
                 if "test_learner_update[prl]" in med:
                     out[f"conv_{part}_share"] = med[name] / med["test_learner_update[prl]"]
+        flops = extra.get(COMPILED, {}).get("flops")
+        if COMPILED in med and flops and rate(COMPILED):
+            out["prl_compiled_over_floor"] = med[COMPILED] * rate(COMPILED) / flops
+            out["prl_compiled_gflop"] = flops / 1e9
         parts = [f"test_prl_conv_pass[{p}]" for p in CONV_PARTS]
         upd = "test_learner_update[prl]"
         if (all(n in med and extra[n].get("flops") for n in parts) and extra.get(upd, {}).get("flops") and upd in med
@@ -142,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{m.upper() + ' update / its FLOP floor':40s} {r[f'update_over_floor_{m}']:6.2f}x  "
                   f"(target <= {FLOOR_LIMIT}x; {r[f'update_gflop_{m}']:.3f} GFLOP, "
                   f"{r[f'updates_per_s_{m}']:.0f} updates/s) {'ok' if good else 'MISSED'}")
+    if "prl_compiled_over_floor" in r:
+        print(f"{'PRL update, compiled autograd / floor':40s} {r['prl_compiled_over_floor']:6.2f}x  "
+              f"(torch.compile of the autograd formulation, not used in training; {r['prl_compiled_gflop']:.3f} GFLOP)")
     for part in CONV_PARTS:
         if f"conv_{part}_over_floor" in r:
             share = r.get(f"conv_{part}_share")

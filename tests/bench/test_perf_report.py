@@ -83,6 +83,21 @@ def test_paired_rounds_take_their_own_matmul_rate(tmp_path):
     assert r["update_over_floor_ddpg"] == pytest.approx(0.010 / 0.002)
 
 
+def test_compiled_alternative_is_reported_not_judged(tmp_path, capsys):
+    """The torch.compile'd autograd update gets its own ratio at its own rounds' rate; it is not a
+    target, so a slow one does not fail the run."""
+    data = {"benchmarks": [
+        _bench("test_prl_update_compiled", 0.0201, flops=400_000_000, time_s=0.020, matmul_s=0.0005,
+               matmul_flops=25_000_000),  # 50 GFLOP/s in its own rounds: floor 8 ms
+        _bench("test_matmul_rate", 0.001, flops=100_000_000),
+    ]}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    assert ratios(path)["prl_compiled_over_floor"] == pytest.approx(0.020 / 0.008)
+    assert main([str(path)]) == 0
+    assert "PRL update, compiled autograd / floor      2.50x" in capsys.readouterr().out
+
+
 def test_not_a_benchmark_file(tmp_path, capsys):
     bad = tmp_path / "x.json"
     bad.write_text("{}")

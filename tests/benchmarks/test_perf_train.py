@@ -9,6 +9,7 @@ here: the FLOP floor (target: an update within 1.5x of it).
 """
 from __future__ import annotations
 
+import shutil
 import time
 from collections import Counter
 
@@ -149,6 +150,51 @@ def test_prl_conv_pass(benchmark, filled, part):
         _paired(benchmark, run)
     finally:
         torch.set_grad_enabled(True)
+
+
+def test_prl_update_compiled(benchmark, filled):
+    """The alternative to the hand-written update: P-DQN's autograd formulation (the agent's own
+    ``losses``, eq. 7 and 8), with ``clip_grad_norm_``, fused Adam and ``_foreach_lerp_`` target
+    updates, compiled by ``torch.compile`` (inductor: fused C++ kernels for the elementwise ops).
+    Its ratio to the FLOP floor is printed beside the hand-written update's. Needs a C++ compiler
+    at run time; skipped without one."""
+    if not (shutil.which("g++") or shutil.which("c++")):
+        pytest.skip("torch.compile (inductor) needs a C++ compiler at run time; none on PATH")
+    env, src = filled
+    agent = _learner("prl", env, src)
+    c = agent.cfg
+    q, p = [*agent.q.parameters()], [*agent.param.parameters()]
+    q_t, p_t = [*agent.q_target.parameters()], [*agent.param_target.parameters()]
+    opt_q = torch.optim.Adam(q, lr=c.lr_q, fused=True)
+    opt_p = torch.optim.Adam(p, lr=c.lr_param, fused=True)
+
+    def loss(b):
+        loss_q, loss_p = agent.losses(b)
+        return loss_q + loss_p
+
+    def step():
+        torch.nn.utils.clip_grad_norm_(q, c.grad_clip, foreach=True)
+        torch.nn.utils.clip_grad_norm_(p, c.grad_clip, foreach=True)
+        opt_q.step()
+        opt_p.step()
+        with torch.no_grad():
+            torch._foreach_lerp_(q_t, q, c.tau_q)
+            torch._foreach_lerp_(p_t, p, c.tau_param)
+
+    def update(loss, step):
+        for t in q + p:
+            t.grad = None
+        loss(agent.replay.sample(agent.rng, c.batch_size)).backward()
+        step()
+
+    with FlopCounterMode(display=False) as fc:
+        update(loss, step)  # eager: the formulation's own FLOPs, and the optimizers' state
+    benchmark.extra_info["flops"] = int(fc.get_total_flops())
+    if not benchmark.enabled:
+        return
+    compiled = torch.compile(loss, dynamic=False), torch.compile(step, dynamic=False)
+    update(*compiled)  # compiles (a minute on a busy core), outside the timed rounds
+    _paired(benchmark, lambda: update(*compiled))
 
 
 MATMULS = {"mm", "addmm", "bmm", "baddbmm", "convolution", "convolution_backward"}  # the ops whose FLOPs are counted
