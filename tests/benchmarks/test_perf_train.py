@@ -159,8 +159,8 @@ def test_prl_update_compiled(benchmark, filled):
     updates, compiled by ``torch.compile`` (inductor: fused C++ kernels for the elementwise ops),
     the losses as one whole graph. ``ecodrive perf`` prints its time against the hand-written
     update's floor. Its batches come from ``Replay.sample`` (numpy arrays, as ``losses`` takes
-    them), about 0.06 ms slower per update than the hand-written update's ``sample_torch``. Needs inductor's C++ compiler (``$CXX``, else ``g++``) at run time; skipped
-    without one."""
+    them), about 0.06 ms slower per update than the hand-written update's ``sample_torch``. Needs
+    inductor's C++ compiler (``$CXX``, else ``g++``) at run time; skipped without one."""
     env, src = filled
     agent = _learner("prl", env, src)
     c = agent.cfg
