@@ -125,9 +125,13 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
 def _budget(sweep: pd.DataFrame) -> str:
     """The training length of a sweep's jobs, flagged when shorter than the paper's."""
     episodes = int(sweep.episodes.max())
+    agent = [c for c in sweep.columns if c.startswith("agent_")]
+    recipe = (" by PRL's recipe (" + ", ".join(
+        f"{c.removeprefix('agent_')} " + "/".join(map(str, sorted(set(sweep[c].dropna().tolist())))) for c in agent) + " beside Table 2)"
+              if agent else "")
     if episodes >= PAPER_TRAINING_EPISODES:
-        return f"{episodes} training episodes"
-    return (f"{episodes} training episodes (shorter than the paper's {PAPER_TRAINING_EPISODES}, epsilon "
+        return f"{episodes} training episodes{recipe}"
+    return (f"{episodes} training episodes{recipe} (shorter than the paper's {PAPER_TRAINING_EPISODES}, epsilon "
             f"decaying over {episodes}: a short-budget variant)")
 
 

@@ -2,11 +2,14 @@
 
     ecodrive sweep reward  [--forms r1 r2 r] [--phi 0.5 1 2] [--seeds 0 1 2]
     ecodrive sweep heatmap [--values 10 20 30 40 50] [--seeds 0]
-        common: [--signals uncoordinated] [--episodes 1000] [--cases 100]
+        common: [--signals uncoordinated] [--episodes N] [--paper] [--cases 100]
                 [--executor local|ray] [--address A] [--workers 2] [--run-id paper] [--logs logs]
                 [--store results/sweeps]
 
-A job trains PRL with one reward configuration (``bench.training.train``, so it resumes from its own
+A job trains PRL with one reward configuration by PRL's recipe for ``--signals``
+(``bench.training.recipes``: its episodes and its departures from Table 2, as the shipped PRL seeds
+were trained; ``--paper``: the paper's 1000 episodes and Table 2), through ``bench.training.train``,
+so it resumes from its own
 checkpoints under ``$ECODRIVE_RUNS/sweeps/<study>/``), copies its ``/train`` log into
 ``<logs>/<run-id>/<study>/<name>/train.mcap``, then runs the exported (validation-selected) policy
 greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it, and writes
@@ -58,6 +61,7 @@ class Job:
     run_dir: str  # training folder (checkpoints, replay)
     log_dir: str  # <logs>/<run-id>/<study>/<name>-s<seed>
     reward: dict[str, Any] = field(default_factory=dict)
+    agent_config: dict[str, Any] = field(default_factory=dict)  # PRL config fields departing from Table 2 (the recipe's)
     validation_cases: int = 20  # validation cases scored at every training checkpoint
     max_episode_time: float | None = None  # [s] episode truncation; None = the scenario default
 
@@ -87,7 +91,7 @@ def run_job(job: Job) -> dict[str, Any]:
     if not (folder / "manifest.json").is_file():
         # epsilon decays over the job's own episodes (eq. 12 with N = the training length)
         train("prl", job.signals, job.episodes, job.seed, run_dir, models=models, scenario=scenario, progress=False,
-              agent_config={"eps_decay_episodes": job.episodes}, validation_cases=job.validation_cases,
+              agent_config={"eps_decay_episodes": job.episodes, **job.agent_config}, validation_cases=job.validation_cases,
               command=["ecodrive", "sweep", job.study, f"# job {job.label}"])
     log_dir.mkdir(parents=True, exist_ok=True)
     for fname in ("train.mcap", "metrics.parquet"):
@@ -108,7 +112,8 @@ def run_job(job: Job) -> dict[str, Any]:
     ep = pd.DataFrame(rows)
     atomic_parquet(ep, log_dir / "episodes.parquet")
     row = {"study": job.study, "config": job.name, "seed": job.seed, "signals": job.signals,
-           **{f"reward_{k}": v for k, v in job.reward.items()}, "episodes": job.episodes,
+           **{f"reward_{k}": v for k, v in job.reward.items()},
+           **{f"agent_{k}": v for k, v in job.agent_config.items()}, "episodes": job.episodes,
            "selected_episode": manifest.get("selected_episode"), "cases": len(ep),
            "energy": ep.energy.mean(), "travel_time": ep.travel_time.mean(),
            "collisions": int(ep.collisions.sum()), "lane_changes": ep.lane_changes_applied.mean(),
@@ -118,9 +123,13 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def _identity(job: Job) -> dict[str, Any]:
-    """What makes a job's results: a finished log folder made with other values is not reused."""
-    return {"signals": job.signals, "seed": job.seed, "episodes": job.episodes, "cases": job.cases,
-            "reward": job.reward, "validation_cases": job.validation_cases, "max_episode_time": job.max_episode_time}
+    """What makes a job's results: a finished log folder made with other values is not reused. The
+    agent config is listed only where it departs from Table 2 (a ``--paper`` job has none)."""
+    identity = {"signals": job.signals, "seed": job.seed, "episodes": job.episodes, "cases": job.cases,
+                "reward": job.reward, "validation_cases": job.validation_cases, "max_episode_time": job.max_episode_time}
+    if job.agent_config:
+        identity["agent_config"] = job.agent_config
+    return identity
 
 
 def finished(root: Path) -> dict[str, dict[str, Any]]:
@@ -174,7 +183,13 @@ def _store(root: Path, job: Job) -> None:
 
 def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     """The job list of a study; every reward configuration is validated before anything runs."""
+    from bench.training.recipes import recipe
     from bench.training.train import RUNS
+
+    rec = recipe("prl", args.signals, paper=args.paper)
+    episodes = rec.episodes if args.episodes is None else args.episodes
+    agent_config = dict(rec.overrides)
+    tag = "".join(f"-{k}{v}" for k, v in sorted(agent_config.items()))  # its own run folder: checkpoints differ
 
     if study == "reward":
         configs = [(f"{form}-phi{phi:g}", {"form": form, "phi": phi}) for form in args.forms for phi in args.phi]
@@ -186,9 +201,9 @@ def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     if args.max_episode_time is not None:
         ScenarioConfig(max_episode_time=args.max_episode_time)
     root = Path(args.logs) / args.run_id / study
-    return [Job(study, name, args.signals, seed, args.episodes, args.cases,
-                str(RUNS / "sweeps" / study / f"{args.signals}-{name}-s{seed}-e{args.episodes}"),
-                str(root / f"{name}-s{seed}"), reward, args.validation_cases, args.max_episode_time)
+    return [Job(study, name, args.signals, seed, episodes, args.cases,
+                str(RUNS / "sweeps" / study / f"{args.signals}-{name}-s{seed}-e{episodes}{tag}"),
+                str(root / f"{name}-s{seed}"), reward, agent_config, args.validation_cases, args.max_episode_time)
             for name, reward in configs for seed in args.seeds]
 
 
@@ -200,7 +215,10 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--phi", nargs="+", type=float, default=list(PHIS), help="reward study: phi values [Wh/s]")
     ap.add_argument("--values", nargs="+", type=float, default=list(HEATMAP_VALUES), help="heatmap: |r_p^s| = |r_p^j| grid")
     ap.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (reward: 0 1 2; heatmap: 0)")
-    ap.add_argument("--episodes", type=int, default=1000, help="training episodes per job (1-100000)")
+    ap.add_argument("--episodes", type=int, default=None,
+                    help="training episodes per job (1-100000; default: PRL's recipe's, or 1000 with --paper)")
+    ap.add_argument("--paper", action="store_true",
+                    help="train by the paper's Table 2 and 1000 episodes instead of PRL's recipe")
     ap.add_argument("--cases", type=int, default=100, help="fixed test cases evaluated per job (0-100)")
     ap.add_argument("--validation-cases", type=int, default=20, help="validation cases per training checkpoint (1-100)")
     ap.add_argument("--max-episode-time", type=float, default=None, help="episode truncation [s] (default: the scenario's)")
@@ -219,7 +237,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
             ap.error(f"{flag} {value!r} is not accepted; choose one of {', '.join(accepted)}")
     if args.seeds is None:
         args.seeds = [0, 1, 2] if args.study == "reward" else [0]
-    if (not 1 <= args.episodes <= 100_000 or not 0 <= args.cases <= 100 or args.workers < 1 or min(args.seeds) < 0
+    if (args.episodes is not None and not 1 <= args.episodes <= 100_000 or not 0 <= args.cases <= 100 or args.workers < 1 or min(args.seeds) < 0
             or not 1 <= args.validation_cases <= 100):
         ap.error(f"out of range: --episodes {args.episodes} (1-100000), --cases {args.cases} (0-100), "
                  f"--workers {args.workers} (>= 1), --seeds {args.seeds} (>= 0), "

@@ -41,9 +41,27 @@ def test_heatmap_job_trains_evaluates_and_resumes(tmp_path, monkeypatch):
     text = index.read_text()
     assert "## Reward study" in text and "## Sensitivity heatmap" in text
     assert "Lowest energy at |r_p^s| = 20, |r_p^j| = 20" in text
-    assert text.count("2 training episodes (shorter than the paper's 1000") == 2  # both sections say so
+    # both sections name the recipe and the short schedule
+    assert text.count("2 training episodes by PRL's recipe (n_step 5 beside Table 2) (shorter than the paper's 1000") == 2
     assert (tmp_path / "report" / "figures" / "heatmap.png").is_file()
     assert (tmp_path / "report" / "figures" / "reward-study.pdf").is_file()
+
+
+def test_jobs_follow_prls_recipe_unless_paper():
+    """By default a job trains as the shipped PRL seeds were (the recipe's episodes and departures
+    from Table 2); ``--paper`` gives the paper's 1000 episodes and Table 2, a different job with its
+    own run folder and identity; ``--episodes`` shortens either."""
+    from bench.training.recipes import recipe
+
+    rec = recipe("prl", "uncoordinated")
+    (job,) = sweep.jobs("reward", sweep.parse(["reward", "--forms", "r", "--phi", "1", "--seeds", "0"]))
+    assert job.episodes == rec.episodes and job.agent_config == rec.overrides and rec.overrides
+    (paper,) = sweep.jobs("reward", sweep.parse(["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--paper"]))
+    assert paper.episodes == 1000 and paper.agent_config == {} and "agent_config" not in sweep._identity(paper)
+    (short,) = sweep.jobs("reward", sweep.parse(["reward", "--forms", "r", "--phi", "1", "--seeds", "0",
+                                                 "--paper", "--episodes", str(rec.episodes)]))
+    assert short.episodes == job.episodes and short.run_dir != job.run_dir
+    assert sweep._identity(short) != sweep._identity(job) and short.log_dir == job.log_dir
 
 
 def test_smoothing_is_the_papers():
@@ -91,6 +109,9 @@ def test_a_stored_job_is_restored_not_trained(tmp_path, monkeypatch, capsys):
     (kept,) = (tmp_path / "kept" / "reward").iterdir()
     assert kept.name.startswith("uncoordinated-r-phi1-s0-e2-")
     assert sorted(p.name for p in kept.iterdir()) == ["episodes.parquet", "job.json", "manifest.json", "metrics.parquet"]
+    # trained by PRL's uncoordinated recipe (n-step 5), which the job's identity names
+    assert json.loads((kept / "job.json").read_text())["job"]["agent_config"] == {"n_step": 5}
+    assert json.loads((kept / "manifest.json").read_text())["agent_config"]["n_step"] == 5
     first = pd.read_parquet(tmp_path / "a" / "t" / "reward" / "sweep.parquet")
     stored = {p.name: p.read_bytes() for p in kept.iterdir()}
 
