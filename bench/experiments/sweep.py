@@ -85,9 +85,16 @@ def run_job(job: Job) -> dict[str, Any]:
     scenario: dict[str, Any] = {"reward": job.reward}
     if job.max_episode_time is not None:
         scenario["max_episode_time"] = job.max_episode_time
+    env = make_env("prl", job.signals, scenario)
     models = run_dir / "export"
     folder = policy_dir("prl", job.signals, models, job.seed)
     t0 = time.perf_counter()
+    shipped = None if (folder / "manifest.json").is_file() else shipped_training(job, env.cfg.to_dict())
+    if shipped is not None:  # this job is a shipped reference seed's training: its policy, not a retraining
+        folder.mkdir(parents=True, exist_ok=True)
+        for name in ("policy.pt", "metrics.parquet", "manifest.json"):
+            shutil.copyfile(shipped / name, folder / name)
+        shutil.copyfile(shipped / "metrics.parquet", run_dir / "metrics.parquet")
     if not (folder / "manifest.json").is_file():
         # epsilon decays over the job's own episodes (eq. 12 with N = the training length)
         train("prl", job.signals, job.episodes, job.seed, run_dir, models=models, scenario=scenario, progress=False,
@@ -95,9 +102,9 @@ def run_job(job: Job) -> dict[str, Any]:
               command=["ecodrive", "sweep", job.study, f"# job {job.label}"])
     log_dir.mkdir(parents=True, exist_ok=True)
     for fname in ("train.mcap", "metrics.parquet"):
-        shutil.copyfile(run_dir / fname, log_dir / fname)
+        if (run_dir / fname).is_file():  # a shipped seed's training log is not kept, its metrics are
+            shutil.copyfile(run_dir / fname, log_dir / fname)
     shutil.copyfile(folder / "manifest.json", log_dir / store.POLICY_MANIFEST)
-    env = make_env("prl", job.signals, scenario)
     agent = make_agent("prl", env.observation_space, env.action_space)
     state, manifest = load_policy(folder, "prl", env.cfg.to_dict())
     agent.load_state_dict(state)
@@ -117,9 +124,31 @@ def run_job(job: Job) -> dict[str, Any]:
            "selected_episode": manifest.get("selected_episode"), "cases": len(ep),
            "energy": ep.energy.mean(), "travel_time": ep.travel_time.mean(),
            "collisions": int(ep.collisions.sum()), "lane_changes": ep.lane_changes_applied.mean(),
+           "policy_from": "" if shipped is None else f"models/{shipped.parent.name}/{shipped.name}",
            "job_wall_s": time.perf_counter() - t0, "log_dir": str(log_dir)}
     atomic_json({"job": _identity(job), "row": row}, log_dir / "job.json", default=float)  # last: present = finished
     return row
+
+
+def shipped_training(job: Job, scenario: dict[str, Any], models: Path | None = None) -> Path | None:
+    """The shipped PRL policy folder that is this job's training, or None. A shipped reference seed
+    was trained by the recipe on the default scenario; a job with the same seed, episodes, agent
+    config, validation cases and scenario (the reward study's r, phi = 1 cell; the heatmap's
+    (40, 30)) would train it again, so it takes the shipped policy and its training metrics."""
+    from bench.harness.policies import MODELS, CheckpointError, policy_dir, trained_scenario
+
+    folder = policy_dir("prl", job.signals, MODELS if models is None else models, job.seed)
+    try:
+        m = json.loads((folder / "manifest.json").read_text())
+        trained = trained_scenario(folder, m).to_dict()  # fields added since read as their absence meant
+    except (OSError, ValueError, CheckpointError):
+        return None
+    decay = {"eps_decay_episodes": job.episodes}
+    same = (m.get("method") == "prl" and m.get("seed") == job.seed and m.get("episodes") == job.episodes
+            and m.get("selection") == "objective" and m.get("validation", {}).get("cases") == job.validation_cases
+            and {**decay, **(m.get("agent_config") or {})} == {**decay, **job.agent_config}
+            and json.dumps(trained, sort_keys=True, default=float) == json.dumps(scenario, sort_keys=True, default=float))
+    return folder if same and all((folder / f).is_file() for f in ("policy.pt", "metrics.parquet")) else None
 
 
 def _identity(job: Job) -> dict[str, Any]:

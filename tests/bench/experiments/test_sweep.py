@@ -64,6 +64,31 @@ def test_jobs_follow_prls_recipe_unless_paper():
     assert sweep._identity(short) != sweep._identity(job) and short.log_dir == job.log_dir
 
 
+def test_a_job_that_is_a_shipped_seeds_training_takes_its_policy(tmp_path, monkeypatch):
+    """The reward study's (r, phi = 1) cell by the recipe is how the shipped PRL seeds were trained:
+    the job evaluates the shipped policy and keeps its training metrics instead of training again.
+    Any other value (here the episode truncation) makes it a job of its own."""
+    from bench.harness.episode import make_env
+    from bench.harness.policies import policy_dir
+
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--cases", "1", "--workers", "1",
+            "--logs", str(tmp_path / "logs"), "--run-id", "t"]
+    assert sweep.main(argv) == 0
+    shipped = policy_dir("prl", "uncoordinated", seed=0)
+    manifest = json.loads((shipped / "manifest.json").read_text())
+    row = pd.read_parquet(tmp_path / "logs" / "t" / "reward" / "sweep.parquet").iloc[0]
+    assert row.policy_from == "models/prl-uncoordinated/s0" and row.selected_episode == manifest["selected_episode"]
+    assert not list((tmp_path / "runs").rglob("checkpoint.pt"))  # nothing was trained
+    log_dir = tmp_path / "logs" / "t" / "reward" / "r-phi1-s0"
+    assert json.loads((log_dir / store.POLICY_MANIFEST).read_text())["sha256"] == manifest["sha256"]
+    assert pd.read_parquet(log_dir / "metrics.parquet").equals(pd.read_parquet(shipped / "metrics.parquet"))
+    (job,) = sweep.jobs("reward", sweep.parse(argv + ["--max-episode-time", "60"]))
+    env = make_env("prl", job.signals, {"reward": job.reward, "max_episode_time": 60.0})
+    assert sweep.shipped_training(job, env.cfg.to_dict()) is None
+    env.close()
+
+
 def test_smoothing_is_the_papers():
     x = np.array([10.0, 0.0, 0.0])
     assert smooth(x).tolist() == pytest.approx([10.0, 9.8, 9.604])
