@@ -8,9 +8,9 @@
 
 A job trains PRL with one reward configuration by PRL's recipe for ``--signals``
 (``bench.training.recipes``: its episodes and its departures from Table 2, as the shipped PRL seeds
-were trained; ``--paper``: the paper's 1000 episodes and Table 2), through ``bench.training.train``,
-so it resumes from its own
-checkpoints under ``$ECODRIVE_RUNS/sweeps/<study>/``), copies its ``/train`` log into
+were trained; ``--paper``: the paper's 1000 episodes and Table 2), through ``bench.training.train``
+(so it resumes from its own checkpoints under ``$ECODRIVE_RUNS/sweeps/<study>/``); a job that is a
+shipped seed's training takes that policy instead (``shipped_training``). It copies its ``/train`` log into
 ``<logs>/<run-id>/<study>/<name>/train.mcap``, then runs the exported (validation-selected) policy
 greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it, and writes
 ``job.json`` there last. A rerun skips what is finished; a finished folder made with other values
