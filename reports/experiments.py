@@ -30,8 +30,10 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
     warnings: list[str] = []
     figs = out / "figures"
     reward = run_dir / "reward" / "sweep.parquet"
-    if reward.is_file():
-        sweep = pd.read_parquet(reward)
+    sweep = pd.read_parquet(reward) if reward.is_file() else pd.DataFrame()
+    if reward.is_file() and sweep.empty:  # a sweep started, no job finished yet
+        md += ["## Reward study (fig:rwd_compare)", "", "No job of the reward study has finished yet.", ""]
+    if not sweep.empty:
         train = _train_logs(sweep, warnings)
         md += ["## Reward study (fig:rwd_compare)", "",
                f"{sweep.config.nunique()} configurations x {sweep.seed.nunique()} seeds, "
@@ -44,8 +46,10 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         md += [_table(sweep.groupby("config")[["energy", "travel_time", "lane_changes", "collisions",
                                                "selected_episode"]].mean()), ""]
     heat = run_dir / "heatmap" / "sweep.parquet"
-    if heat.is_file():
-        sweep = pd.read_parquet(heat)
+    sweep = pd.read_parquet(heat) if heat.is_file() else pd.DataFrame()
+    if heat.is_file() and sweep.empty:
+        md += ["## Sensitivity heatmap (fig:heatmap)", "", "No cell of the heatmap has finished yet.", ""]
+    if not sweep.empty:
         grids = {m: metrics.heatmap_grid(sweep, m) for m in ("energy", "travel_time")}
         p = figures.heatmaps(grids, figs)
         images.append(("sensitivity heatmap", p[0]))

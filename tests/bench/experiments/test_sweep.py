@@ -89,6 +89,16 @@ def test_a_job_that_is_a_shipped_seeds_training_takes_its_policy(tmp_path, monke
     env.close()
 
 
+def test_a_sweep_without_a_finished_job_is_reported_as_such(tmp_path):
+    """A sweep writes its (empty) tables before its first job finishes; the report says so."""
+    for study in sweep.STUDIES:
+        (tmp_path / "run" / study).mkdir(parents=True)
+        assert sweep.write_tables(tmp_path / "run" / study, {}).empty
+    index, _ = build(tmp_path / "run", tmp_path / "report")
+    text = index.read_text()
+    assert "No job of the reward study has finished yet." in text and "No cell of the heatmap has finished yet." in text
+
+
 def test_smoothing_is_the_papers():
     x = np.array([10.0, 0.0, 0.0])
     assert smooth(x).tolist() == pytest.approx([10.0, 9.8, 9.604])
