@@ -210,6 +210,13 @@ def _store(root: Path, job: Job) -> None:
         print(f"warning: could not store {job.label} under {root}: {e}", file=sys.stderr)
 
 
+def order(todo: list[Job]) -> list[Job]:
+    """Started jobs first (their checkpoints resume), then the lowest seeds: every configuration gets
+    seed 0 before any gets seed 1, so a sweep cut short by a session's end leaves a whole grid."""
+    started = [(Path(j.run_dir) / "checkpoint.pt").is_file() for j in todo]
+    return [j for _, _, _, j in sorted((not s, j.seed, i, j) for i, (s, j) in enumerate(zip(started, todo)))]
+
+
 def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     """The job list of a study; every reward configuration is validated before anything runs."""
     from bench.training.recipes import recipe
@@ -301,6 +308,7 @@ def main(argv: list[str] | None = None) -> int:
         todo = [job for job in todo if job not in restored]
     for job in done:  # finished in the log folder (this session, or a sweep stopped before storing it)
         _store(args.store, job)
+    todo = order(todo)
     by_dir = {job.log_dir: job for job in todo}
     rows = finished(root)  # every finished job of the study, not only this command's
     write_tables(root, rows)

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -87,6 +88,16 @@ def test_a_job_that_is_a_shipped_seeds_training_takes_its_policy(tmp_path, monke
     env = make_env("prl", job.signals, {"reward": job.reward, "max_episode_time": 60.0})
     assert sweep.shipped_training(job, env.cfg.to_dict()) is None
     env.close()
+
+
+def test_jobs_run_started_first_then_lowest_seed_first(tmp_path, monkeypatch):
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    todo = sweep.jobs("reward", sweep.parse(["reward", "--forms", "r", "r2", "--phi", "1", "--seeds", "0", "1"]))
+    assert [j.label for j in sweep.order(todo)] == ["r-phi1-s0", "r2-phi1-s0", "r-phi1-s1", "r2-phi1-s1"]
+    started = next(j for j in todo if j.label == "r2-phi1-s1")
+    Path(started.run_dir).mkdir(parents=True)
+    (Path(started.run_dir) / "checkpoint.pt").write_bytes(b"")
+    assert [j.label for j in sweep.order(todo)] == ["r2-phi1-s1", "r-phi1-s0", "r2-phi1-s0", "r-phi1-s1"]
 
 
 def test_a_sweep_without_a_finished_job_is_reported_as_such(tmp_path):
