@@ -129,10 +129,12 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
 def _budget(sweep: pd.DataFrame) -> str:
     """The training length of a sweep's jobs, flagged when shorter than the paper's."""
     episodes = int(sweep.episodes.max())
-    agent = [c for c in sweep.columns if c.startswith("agent_")]
-    recipe = (" by PRL's recipe (" + ", ".join(
-        f"{c.removeprefix('agent_')} " + "/".join(map(str, sorted(set(sweep[c].dropna().tolist())))) for c in agent) + " beside Table 2)"
-              if agent else "")
+    recipe = ""
+    for c in (c for c in sweep.columns if c.startswith("agent_")):  # agent config fields departing from Table 2
+        values = "/".join(f"{v:g}" if isinstance(v, float) else str(v) for v in sorted(set(sweep[c].dropna())))
+        n = int(sweep[c].notna().sum())
+        recipe += (f" by PRL's recipe ({c.removeprefix('agent_')} {values} beside Table 2)" if n == len(sweep) else
+                   f" ({n} of {len(sweep)} jobs by PRL's recipe, {c.removeprefix('agent_')} {values}; the others by Table 2)")
     if episodes >= PAPER_TRAINING_EPISODES:
         return f"{episodes} training episodes{recipe}"
     return (f"{episodes} training episodes{recipe} (shorter than the paper's {PAPER_TRAINING_EPISODES}, epsilon "

@@ -10,9 +10,9 @@ A job trains PRL with one reward configuration by PRL's recipe for ``--signals``
 (``bench.training.recipes``: its episodes and its departures from Table 2, as the shipped PRL seeds
 were trained; ``--paper``: the paper's 1000 episodes and Table 2), through ``bench.training.train``
 (so it resumes from its own checkpoints under ``$ECODRIVE_RUNS/sweeps/<study>/``); a job that is a
-shipped seed's training takes that policy instead (``shipped_training``). It copies its ``/train`` log into
-``<logs>/<run-id>/<study>/<name>/train.mcap``, then runs the exported (validation-selected) policy
-greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it, and writes
+shipped seed's training takes that policy instead (``shipped_training``). A trained job copies its
+``/train`` log into ``<logs>/<run-id>/<study>/<name>/train.mcap``; every job then runs the exported
+(validation-selected) policy greedily on the first ``--cases`` fixed test cases, one MCAP per case next to it, and writes
 ``job.json`` there last. A rerun skips what is finished; a finished folder made with other values
 (episodes, cases, reward, ...) is refused, never overwritten. ``sweep.parquet`` (one row per
 finished job of the study folder, whatever command ran it) and ``episodes.parquet`` (one row per
@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 import time
@@ -48,6 +49,7 @@ STUDIES = ("reward", "heatmap")
 PHIS = (0.5, 1.0, 2.0)  # section 5.2 varies phi; our set
 HEATMAP_VALUES = (10.0, 20.0, 30.0, 40.0, 50.0)  # |r_p^s| and |r_p^j|; r_p^c fixed at 50
 HEATMAP_LANE_CHANGE = 50.0
+VALIDATION_CASES = 20  # validation cases scored at every training checkpoint (as the shipped seeds')
 
 
 @dataclass(frozen=True)
@@ -62,7 +64,7 @@ class Job:
     log_dir: str  # <logs>/<run-id>/<study>/<name>-s<seed>
     reward: dict[str, Any] = field(default_factory=dict)
     agent_config: dict[str, Any] = field(default_factory=dict)  # PRL config fields departing from Table 2 (the recipe's)
-    validation_cases: int = 20  # validation cases scored at every training checkpoint
+    validation_cases: int = VALIDATION_CASES
     max_episode_time: float | None = None  # [s] episode truncation; None = the scenario default
 
     @property
@@ -89,12 +91,21 @@ def run_job(job: Job) -> dict[str, Any]:
     models = run_dir / "export"
     folder = policy_dir("prl", job.signals, models, job.seed)
     t0 = time.perf_counter()
-    shipped = None if (folder / "manifest.json").is_file() else shipped_training(job, env.cfg.to_dict())
-    if shipped is not None:  # this job is a shipped reference seed's training: its policy, not a retraining
+    # a job that is a shipped reference seed's training takes its policy (not when a training of this
+    # job has started here: its run folder is its own)
+    shipped = None if (run_dir / "checkpoint.pt").is_file() else shipped_training(job, env.cfg.to_dict())
+    if shipped is not None and not (folder / "manifest.json").is_file():
         folder.mkdir(parents=True, exist_ok=True)
-        for name in ("policy.pt", "metrics.parquet", "manifest.json"):
-            shutil.copyfile(shipped / name, folder / name)
-        shutil.copyfile(shipped / "metrics.parquet", run_dir / "metrics.parquet")
+        for src, dst in ((shipped / "policy.pt", folder / "policy.pt"),
+                         (shipped / "metrics.parquet", folder / "metrics.parquet"),
+                         (shipped / "metrics.parquet", run_dir / "metrics.parquet"),
+                         (shipped / "manifest.json", folder / "manifest.json")):  # the manifest last: present = copied
+            tmp = dst.with_name(f".{dst.name}.part")
+            shutil.copyfile(src, tmp)
+            os.replace(tmp, dst)
+    if shipped is not None:  # the export is the shipped policy only if it has its hash (a resumed job)
+        same = json.loads((folder / "manifest.json").read_text()).get("sha256")
+        shipped = shipped if same == json.loads((shipped / "manifest.json").read_text()).get("sha256") else None
     if not (folder / "manifest.json").is_file():
         # epsilon decays over the job's own episodes (eq. 12 with N = the training length)
         train("prl", job.signals, job.episodes, job.seed, run_dir, models=models, scenario=scenario, progress=False,
@@ -183,7 +194,8 @@ def is_finished(job: Job) -> bool:
     except (OSError, ValueError, KeyError):
         return False  # unreadable: the job reruns and rewrites it
     want = json.loads(json.dumps(_identity(job), default=float))
-    diff = [f"{k} {stored.get(k)!r} (asked {v!r})" for k, v in want.items() if stored.get(k) != v]
+    diff = [f"{k} {stored.get(k)!r} (asked {want.get(k)!r})" for k in sorted(want.keys() | stored.keys())
+            if stored.get(k) != want.get(k)]  # both ways: a key only one side has (agent_config) differs too
     if diff:
         raise ConfigError(f"{job.log_dir}: finished with {', '.join(diff)}; use another --run-id, or move the "
                           f"folder away to rerun it")
@@ -225,7 +237,10 @@ def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     rec = recipe("prl", args.signals, paper=args.paper)
     episodes = rec.episodes if args.episodes is None else args.episodes
     agent_config = dict(rec.overrides)
-    tag = "".join(f"-{k}{v}" for k, v in sorted(agent_config.items()))  # its own run folder: checkpoints differ
+    # what else makes a training differs from the defaults: its own run folder (checkpoints and export differ)
+    tag = "".join(f"-{k}{v}" for k, v in sorted(agent_config.items()))
+    tag += "" if args.validation_cases == VALIDATION_CASES else f"-val{args.validation_cases}"
+    tag += "" if args.max_episode_time is None else f"-t{args.max_episode_time:g}"
 
     if study == "reward":
         configs = [(f"{form}-phi{phi:g}", {"form": form, "phi": phi}) for form in args.forms for phi in args.phi]
@@ -256,7 +271,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--paper", action="store_true",
                     help="train by the paper's Table 2 and 1000 episodes instead of PRL's recipe")
     ap.add_argument("--cases", type=int, default=100, help="fixed test cases evaluated per job (0-100)")
-    ap.add_argument("--validation-cases", type=int, default=20, help="validation cases per training checkpoint (1-100)")
+    ap.add_argument("--validation-cases", type=int, default=VALIDATION_CASES, help="validation cases per training checkpoint (1-100)")
     ap.add_argument("--max-episode-time", type=float, default=None, help="episode truncation [s] (default: the scenario's)")
     ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
@@ -275,7 +290,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
         args.seeds = [0, 1, 2] if args.study == "reward" else [0]
     if (args.episodes is not None and not 1 <= args.episodes <= 100_000 or not 0 <= args.cases <= 100 or args.workers < 1 or min(args.seeds) < 0
             or not 1 <= args.validation_cases <= 100):
-        ap.error(f"out of range: --episodes {args.episodes} (1-100000), --cases {args.cases} (0-100), "
+        ap.error(f"out of range: --episodes {'(default)' if args.episodes is None else args.episodes} (1-100000), --cases {args.cases} (0-100), "
                  f"--workers {args.workers} (>= 1), --seeds {args.seeds} (>= 0), "
                  f"--validation-cases {args.validation_cases} (1-100)")
     return args

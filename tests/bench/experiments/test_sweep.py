@@ -10,6 +10,7 @@ import pytest
 import bench.training.train
 from bench.experiments import store, sweep
 from bench.logs.mcaplog import is_complete
+from envs.config import ConfigError
 from reports.build import build
 from reports.metrics import reward_curves, smooth
 
@@ -84,10 +85,33 @@ def test_a_job_that_is_a_shipped_seeds_training_takes_its_policy(tmp_path, monke
     log_dir = tmp_path / "logs" / "t" / "reward" / "r-phi1-s0"
     assert json.loads((log_dir / store.POLICY_MANIFEST).read_text())["sha256"] == manifest["sha256"]
     assert pd.read_parquet(log_dir / "metrics.parquet").equals(pd.read_parquet(shipped / "metrics.parquet"))
-    (job,) = sweep.jobs("reward", sweep.parse(argv + ["--max-episode-time", "60"]))
-    env = make_env("prl", job.signals, {"reward": job.reward, "max_episode_time": 60.0})
-    assert sweep.shipped_training(job, env.cfg.to_dict()) is None
+    # a job cut short after the copy (its job.json gone) resumes as the shipped policy's, not as a training
+    (log_dir / "job.json").unlink()
+    assert sweep.main(argv + ["--store", str(tmp_path / "empty-store")]) == 0  # not restored: run again
+    assert pd.read_parquet(tmp_path / "logs" / "t" / "reward" / "sweep.parquet").policy_from.tolist() == [
+        "models/prl-uncoordinated/s0"]
+    for other, scenario in ((["--max-episode-time", "60"], {"max_episode_time": 60.0}), (["--phi", "0.5"], {})):
+        (job,) = sweep.jobs("reward", sweep.parse(argv + other))
+        env = make_env("prl", job.signals, {"reward": job.reward, **scenario})
+        assert sweep.shipped_training(job, env.cfg.to_dict()) is None, other
+        env.close()
+    (cell,) = sweep.jobs("heatmap", sweep.parse(["heatmap", "--values", "40", "--seeds", "0"]))  # (40, 40): not (40, 30)
+    env = make_env("prl", cell.signals, {"reward": cell.reward})
+    assert sweep.shipped_training(cell, env.cfg.to_dict()) is None
     env.close()
+
+
+def test_a_recipe_jobs_folder_is_not_taken_for_a_paper_jobs(tmp_path, capsys):
+    """A log folder finished by a recipe job differs from a ``--paper`` job of the same episodes in
+    its agent config, which only the recipe job's identity names: it is refused, not reused."""
+    argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--episodes", "2", "--logs", str(tmp_path)]
+    (job,) = sweep.jobs("reward", sweep.parse(argv))
+    (paper,) = sweep.jobs("reward", sweep.parse(argv + ["--paper"]))
+    Path(job.log_dir).mkdir(parents=True)
+    (Path(job.log_dir) / "job.json").write_text(json.dumps({"job": sweep._identity(job), "row": {}}))
+    assert sweep.is_finished(job)
+    with pytest.raises(ConfigError, match="agent_config"):
+        sweep.is_finished(paper)
 
 
 def test_jobs_run_started_first_then_lowest_seed_first(tmp_path, monkeypatch):
@@ -108,6 +132,15 @@ def test_a_sweep_without_a_finished_job_is_reported_as_such(tmp_path):
     index, _ = build(tmp_path / "run", tmp_path / "report")
     text = index.read_text()
     assert "No job of the reward study has finished yet." in text and "No cell of the heatmap has finished yet." in text
+
+
+def test_the_report_names_the_training_of_a_mixed_sweep():
+    from reports.experiments import _budget
+
+    both = pd.DataFrame({"episodes": [300, 300], "agent_n_step": [5.0, None]})  # a recipe job and a --paper one
+    assert "(1 of 2 jobs by PRL's recipe, n_step 5; the others by Table 2)" in _budget(both)
+    assert "by PRL's recipe (n_step 5 beside Table 2)" in _budget(both.iloc[:1])
+    assert "recipe" not in _budget(pd.DataFrame({"episodes": [1000]}))
 
 
 def test_smoothing_is_the_papers():
