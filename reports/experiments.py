@@ -10,9 +10,9 @@ from pathlib import Path
 import pandas as pd
 
 from bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
-from bench.paper import HDV_TOL, SPEED_LOSS_TOL
+from bench.paper import HDV_TOL, HEATMAP_CHOICE, SPEED_LOSS_TOL
 
-from . import figures, metrics, tables
+from . import figures, metrics, sweep_claims, tables
 
 MPR_BREAKDOWN_DEMANDS = (200.0, 700.0)  # veh/h/lane, the paper's CV vs HDV breakdown
 PAPER_TRAINING_EPISODES = 1000  # the paper's training length (section 5.2)
@@ -45,6 +45,8 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
             md += [f"![reward study](figures/{p[0].name})", ""]
         md += [_table(sweep.groupby("config")[["energy", "travel_time", "lane_changes", "collisions",
                                                "selected_episode"]].mean()), ""]
+        md += ["The paper's claims on these jobs (`reports/sweep_claims.py`):", "",
+               _table(sweep_claims.reward_claims(sweep).set_index("claim")), ""]
     heat = run_dir / "heatmap" / "sweep.parquet"
     sweep = pd.read_parquet(heat) if heat.is_file() else pd.DataFrame()
     if heat.is_file() and sweep.empty:
@@ -57,8 +59,10 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         md += ["## Sensitivity heatmap (fig:heatmap)", "",
                f"|r_p^c| = 50; {_budget(sweep)}; {int(sweep.cases.max())} test cases per "
                f"cell. Lowest energy at |r_p^s| = {best.reward_speed_penalty:g}, |r_p^j| = {best.reward_jerk_penalty:g} "
-               f"(the paper chose 40 and 30).", "", f"![heatmap](figures/{p[0].name})", "",
-               "Energy [Wh]:", "", _table(grids["energy"]), "", "Travel time [s]:", "", _table(grids["travel_time"]), ""]
+               f"(the paper chose {HEATMAP_CHOICE[0]:g} and {HEATMAP_CHOICE[1]:g}).", "", f"![heatmap](figures/{p[0].name})", "",
+               "Energy [Wh]:", "", _table(grids["energy"]), "", "Travel time [s]:", "", _table(grids["travel_time"]), "",
+               "The paper's claims on these cells (`reports/sweep_claims.py`):", "",
+               _table(sweep_claims.heatmap_claims(sweep).set_index("claim")), ""]
     lateral = run_dir / "lateral" / "lateral.parquet"
     if lateral.is_file():
         summary = pd.read_parquet(lateral)

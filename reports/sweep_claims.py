@@ -1,0 +1,84 @@
+"""The paper's section 5.2 claims, checked on the sweeps' tables (pure functions, as
+``metrics.mixed_claims``).
+
+Each function takes a ``sweep.parquet`` table (one row per finished job: its reward values and its
+mean energy [Wh] and travel time [s] over the test cases) and returns one row per claim with
+``status`` PASS, FAIL or NOT CHECKED (the grid does not hold what the claim needs yet) and the
+numbers behind it. No tolerance is chosen here: a claim is a sign, an order, or an effect against
+the spread over training seeds of the same configuration.
+"""
+from __future__ import annotations
+
+import pandas as pd
+
+METRICS = (("energy", "Wh"), ("travel_time", "s"))
+
+
+def _row(claim: str, ok: bool | None, detail: str) -> dict[str, str]:
+    return {"claim": claim, "status": "NOT CHECKED" if ok is None else ("PASS" if ok else "FAIL"), "detail": detail}
+
+
+def _effect_and_noise(sweep: pd.DataFrame, factor: str, metric: str) -> tuple[float, float] | None:
+    """(range over ``factor``'s values of the metric's mean, mean over those values of the range over
+    training seeds), or None with fewer than two values or a value with fewer than two seeds."""
+    g = sweep.groupby(factor)[metric]
+    if g.ngroups < 2 or g.count().min() < 2:
+        return None
+    means = g.mean()
+    return float(means.max() - means.min()), float((g.max() - g.min()).mean())
+
+
+def reward_claims(sweep: pd.DataFrame) -> pd.DataFrame:
+    """Section 5.2, fig:rwd_compare: (1) with the terminal reward r1 the agent learns nothing useful,
+    while r2 and the paper's r converge to much lower energy: r1's mean test energy is the highest
+    of the forms; (2) phi hardly matters: for the paper's form r, the spread of the per-phi means is
+    no larger than the spread over training seeds within a phi, for energy and travel time."""
+    out = []
+    by_form = sweep.groupby("reward_form").energy.mean() if "reward_form" in sweep else pd.Series(dtype=float)
+    claim = "r1 (terminal reward only) ends with more energy than r2 and r"
+    if "r1" not in by_form or len(by_form) < 2:
+        out.append(_row(claim, None, "needs r1 and another form"))
+    else:
+        others = by_form.drop("r1")
+        out.append(_row(claim, bool(by_form["r1"] > others.max()),
+                        ", ".join(f"{f} {e:.1f} Wh" for f, e in by_form.items())))
+    r = sweep[sweep.reward_form == "r"] if "reward_form" in sweep else sweep.iloc[:0]
+    found = {m: _effect_and_noise(r, "reward_phi", m) for m, _ in METRICS}
+    claim = "phi hardly matters (form r): its effect is within the spread over training seeds"
+    if any(v is None for v in found.values()):
+        out.append(_row(claim, None, "needs two phi values of form r with two seeds each"))
+    else:
+        out.append(_row(claim, all(e <= n for e, n in found.values()), "; ".join(
+            f"{m}: phi moves the mean by {e:.1f} {u}, seeds spread {n:.1f} {u}"
+            for (m, u), (e, n) in zip(METRICS, found.values()))))
+    return pd.DataFrame(out)
+
+
+def heatmap_claims(sweep: pd.DataFrame) -> pd.DataFrame:
+    """Section 5.2, fig:heatmap, on the grid's cell means (over seeds): (1) a larger |r_p^s|
+    shortens the travel time (negative Spearman rank correlation over the cells) and (2) raises
+    the energy (positive); (3) |r_p^j| matters less than |r_p^s|: the range of the per-|r_p^j|
+    means is smaller than the range of the per-|r_p^s| means, for energy and travel time."""
+    out = []
+    cells = (sweep.groupby(["reward_speed_penalty", "reward_jerk_penalty"])[["energy", "travel_time"]].mean()
+             .reset_index() if len(sweep) else pd.DataFrame())
+    enough = len(cells) >= 3 and cells.reward_speed_penalty.nunique() >= 2
+    for metric, unit, sign, what in (("travel_time", "s", -1, "shortens the travel time"),
+                                     ("energy", "Wh", 1, "raises the energy")):
+        claim = f"a larger |r_p^s| {what}"
+        if not enough:
+            out.append(_row(claim, None, "needs three cells with two |r_p^s| values"))
+            continue
+        rho = cells.reward_speed_penalty.corr(cells[metric], method="spearman")
+        out.append(_row(claim, None if pd.isna(rho) else bool(sign * rho > 0),
+                        f"Spearman rank correlation {rho:+.2f} over {len(cells)} cells"))
+    claim = "|r_p^j| matters less than |r_p^s|"
+    if cells.empty or cells.reward_speed_penalty.nunique() < 2 or cells.reward_jerk_penalty.nunique() < 2:
+        out.append(_row(claim, None, "needs two values of each"))
+    else:
+        spans = {m: [float(cells.groupby(f)[m].mean().agg(lambda x: x.max() - x.min()))
+                     for f in ("reward_speed_penalty", "reward_jerk_penalty")] for m, _ in METRICS}
+        out.append(_row(claim, all(j < s for s, j in spans.values()), "; ".join(
+            f"{m}: range {s:.1f} {u} over |r_p^s|, {j:.1f} {u} over |r_p^j|"
+            for (m, u), (s, j) in zip(METRICS, spans.values()))))
+    return pd.DataFrame(out)

@@ -1,0 +1,35 @@
+"""The section 5.2 claims on sweep tables: each can pass, fail, or wait for the grid it needs."""
+from __future__ import annotations
+
+import pandas as pd
+
+from reports.sweep_claims import heatmap_claims, reward_claims
+
+
+def _reward(rows: list[tuple[str, float, int, float, float]]) -> pd.DataFrame:
+    return pd.DataFrame(rows, columns=["reward_form", "reward_phi", "seed", "energy", "travel_time"])
+
+
+def test_reward_claims_pass_fail_and_wait():
+    status = lambda df: reward_claims(df).set_index("claim").status.tolist()  # noqa: E731
+    assert status(_reward([("r", 1.0, 0, 200.0, 250.0)])) == ["NOT CHECKED", "NOT CHECKED"]
+    grid = [("r1", 1.0, 0, 260.0, 300.0), ("r2", 1.0, 0, 205.0, 250.0),
+            ("r", 0.5, 0, 200.0, 250.0), ("r", 0.5, 1, 210.0, 260.0), ("r", 2.0, 0, 203.0, 252.0),
+            ("r", 2.0, 1, 213.0, 262.0)]
+    assert status(_reward(grid)) == ["PASS", "PASS"]  # phi moves the means by 3 Wh / 2 s, the seeds by 10
+    worse = [row if row[0] != "r1" else ("r1", 1.0, 0, 190.0, 300.0) for row in grid]
+    far = [row if row[1] != 2.0 else (*row[:3], row[3] + 40.0, row[4]) for row in grid]
+    assert status(_reward(worse))[0] == "FAIL" and status(_reward(far))[1] == "FAIL"
+    assert "r1 190.0 Wh" in reward_claims(_reward(worse)).detail.iloc[0]
+
+
+def test_heatmap_claims_pass_fail_and_wait():
+    def grid(energy, time):
+        return pd.DataFrame([(s, j, energy(s, j), time(s, j)) for s in (10.0, 30.0, 50.0) for j in (10.0, 50.0)],
+                            columns=["reward_speed_penalty", "reward_jerk_penalty", "energy", "travel_time"])
+    papers = grid(lambda s, j: 200 + s + 0.1 * j, lambda s, j: 300 - s + 0.1 * j)
+    assert heatmap_claims(papers).status.tolist() == ["PASS", "PASS", "PASS"]
+    reversed_ = grid(lambda s, j: 300 - s + 0.1 * j, lambda s, j: 200 + s - 2 * j)
+    assert heatmap_claims(reversed_).status.tolist() == ["FAIL", "FAIL", "FAIL"]
+    assert heatmap_claims(papers.iloc[:1]).status.tolist() == ["NOT CHECKED"] * 3
+    assert heatmap_claims(papers.iloc[:0]).status.tolist() == ["NOT CHECKED"] * 3
