@@ -46,7 +46,7 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         md += [_table(sweep.groupby("config")[["energy", "travel_time", "lane_changes", "collisions",
                                                "selected_episode"]].mean()), ""]
         md += ["The paper's claims on these jobs (`reports/sweep_claims.py`):", "",
-               _table(sweep_claims.reward_claims(sweep).set_index("claim")), ""]
+               _table(sweep_claims.reward_claims(sweep, _baseline_energy(run_dir, sweep)).set_index("claim")), ""]
     heat = run_dir / "heatmap" / "sweep.parquet"
     sweep = pd.read_parquet(heat) if heat.is_file() else pd.DataFrame()
     if heat.is_file() and sweep.empty:
@@ -143,6 +143,18 @@ def _budget(sweep: pd.DataFrame) -> str:
         return f"{episodes} training episodes{recipe}"
     return (f"{episodes} training episodes{recipe} (shorter than the paper's {PAPER_TRAINING_EPISODES}, epsilon "
             f"decaying over {episodes}: a short-budget variant)")
+
+
+def _baseline_energy(run_dir: Path, sweep: pd.DataFrame) -> float | None:
+    """SUMO's driver's mean energy [Wh] over the test cases the sweep's jobs ran (the first
+    ``cases``), from the run folder's ``results.parquet``; None where it lacks them."""
+    try:
+        r = pd.read_parquet(run_dir / "results.parquet", columns=["method", "signals", "case", "energy"])
+    except (OSError, ValueError, KeyError):
+        return None
+    signals, cases = sweep.signals.iloc[0], int(sweep.cases.max())
+    b = r[(r.method == "baseline") & (r.signals == signals) & (r.case < cases)]
+    return float(b.energy.mean()) if b.case.nunique() == cases and sweep.signals.nunique() == 1 else None
 
 
 def _train_logs(sweep: pd.DataFrame, warnings: list[str]) -> pd.DataFrame:

@@ -12,15 +12,18 @@ def _reward(rows: list[tuple[str, float, int, float, float]]) -> pd.DataFrame:
 
 def test_reward_claims_pass_fail_and_wait():
     status = lambda df: reward_claims(df).set_index("claim").status.tolist()  # noqa: E731
-    assert status(_reward([("r", 1.0, 0, 200.0, 250.0)])) == ["NOT CHECKED", "NOT CHECKED"]
+    assert status(_reward([("r", 1.0, 0, 200.0, 250.0)])) == ["NOT CHECKED"] * 3
     grid = [("r1", 1.0, 0, 260.0, 300.0), ("r2", 1.0, 0, 205.0, 250.0),
             ("r", 0.5, 0, 200.0, 250.0), ("r", 0.5, 1, 210.0, 260.0), ("r", 2.0, 0, 203.0, 252.0),
             ("r", 2.0, 1, 213.0, 262.0)]
-    assert status(_reward(grid)) == ["PASS", "PASS"]  # phi moves the means by 3 Wh / 2 s, the seeds by 10
+    assert status(_reward(grid)) == ["NOT CHECKED", "PASS", "PASS"]  # phi moves the means by 3 Wh / 2 s, the seeds by 10
+    with_baseline = reward_claims(_reward(grid), baseline_energy=255.0)
+    assert with_baseline.status.iloc[0] == "PASS" and "(+2.0%)" in with_baseline.detail.iloc[0]
+    assert reward_claims(_reward(grid), baseline_energy=270.0).status.iloc[0] == "FAIL"
     worse = [row if row[0] != "r1" else ("r1", 1.0, 0, 190.0, 300.0) for row in grid]
     far = [row if row[1] != 2.0 else (*row[:3], row[3] + 40.0, row[4]) for row in grid]
-    assert status(_reward(worse))[0] == "FAIL" and status(_reward(far))[1] == "FAIL"
-    assert "r1 190.0 Wh" in reward_claims(_reward(worse)).detail.iloc[0]
+    assert status(_reward(worse))[1] == "FAIL" and status(_reward(far))[2] == "FAIL"
+    assert "r1 190.0 Wh" in reward_claims(_reward(worse)).detail.iloc[1]
 
 
 def test_heatmap_claims_pass_fail_and_wait():
