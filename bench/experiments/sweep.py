@@ -330,9 +330,11 @@ def main(argv: list[str] | None = None) -> int:
     it = (run_local(todo, args.workers, run_job) if args.executor == "local"
           else run_ray(todo, args.address, args.workers, run_job))
     for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
+        rows.update(finished(root))  # and what a sweep running beside this one finished meanwhile
         rows[row["log_dir"]] = row
         _store(args.store, by_dir[row["log_dir"]])
         write_tables(root, rows)  # a killed sweep leaves the tables of its finished jobs
+    rows.update(finished(root))
     df = write_tables(root, rows)
     print(df[["config", "seed", "selected_episode", "energy", "travel_time", "collisions"]].round(2).to_string(index=False))
     print(f"results: {root / 'sweep.parquet'}")

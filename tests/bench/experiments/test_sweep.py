@@ -124,6 +124,29 @@ def test_jobs_run_started_first_then_lowest_seed_first(tmp_path, monkeypatch):
     assert [j.label for j in sweep.order(todo)] == ["r2-phi1-s1", "r-phi1-s0", "r2-phi1-s0", "r-phi1-s1"]
 
 
+def test_two_sweeps_side_by_side_keep_each_others_jobs_in_the_table(tmp_path, monkeypatch):
+    """A job that another sweep (another process, on another part of the grid) finishes while this
+    one runs stays in the study's table when this sweep rewrites it."""
+    argv = ["reward", "--forms", "r", "--phi", "0.5", "--seeds", "0", "--logs", str(tmp_path), "--run-id", "t"]
+    root = tmp_path / "t" / "reward"
+
+    def job_json(log_dir: Path, config: str) -> dict:
+        row = {"config": config, "seed": 0, "selected_episode": 1, "energy": 1.0, "travel_time": 1.0,
+               "collisions": 0, "log_dir": str(log_dir)}
+        log_dir.mkdir(parents=True)
+        (log_dir / "job.json").write_text(json.dumps({"job": {}, "row": row}))
+        return row
+
+    def run_job(job):  # meanwhile, the other sweep finishes r1-phi1
+        job_json(root / "r1-phi1-s0", "r1-phi1")
+        return job_json(Path(job.log_dir), job.name)
+
+    monkeypatch.setattr(sweep, "run_job", run_job)
+    monkeypatch.setattr(sweep, "run_local", lambda todo, workers, fn: (fn(t) for t in todo))
+    assert sweep.main(argv) == 0
+    assert pd.read_parquet(root / "sweep.parquet").config.tolist() == ["r-phi0.5", "r1-phi1"]
+
+
 def test_a_sweep_without_a_finished_job_is_reported_as_such(tmp_path):
     """A sweep writes its (empty) tables before its first job finishes; the report says so."""
     for study in sweep.STUDIES:
