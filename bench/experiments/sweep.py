@@ -43,13 +43,13 @@ from bench.experiments import store
 from bench.harness.executors import EXECUTORS, run_local, run_ray
 from bench.io import atomic_json, atomic_parquet
 from bench.logs.mcaplog import episode_summary
+from bench.training.recipes import VALIDATION_CASES, recipe
 from envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig
 
 STUDIES = ("reward", "heatmap")
 PHIS = (0.5, 1.0, 2.0)  # section 5.2 varies phi; our set
 HEATMAP_VALUES = (10.0, 20.0, 30.0, 40.0, 50.0)  # |r_p^s| and |r_p^j|; r_p^c fixed at 50
 HEATMAP_LANE_CHANGE = 50.0
-VALIDATION_CASES = 20  # validation cases scored at every training checkpoint (as the shipped seeds')
 
 
 @dataclass(frozen=True)
@@ -142,23 +142,23 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def shipped_training(job: Job, scenario: dict[str, Any], models: Path | None = None) -> Path | None:
-    """The shipped PRL policy folder that is this job's training, or None. A shipped reference seed
-    was trained by the recipe on the default scenario; a job with the same seed, episodes, agent
-    config, validation cases and scenario (the reward study's r, phi = 1 cell; the heatmap's
-    (40, 30)) would train it again, so it takes the shipped policy and its training metrics."""
-    from bench.harness.policies import MODELS, CheckpointError, policy_dir, trained_scenario
+    """The shipped PRL policy folder that is this job's training, or None: a shipped reference seed
+    (``train_all.is_reference_seed``: by the recipe, under today's scenario) of the job's seed and
+    episodes, when the job trains by the recipe on that scenario (``scenario``: the job's) with the
+    same validation cases (the reward study's r, phi = 1 cell; the heatmap's (40, 30)). Such a
+    job takes the shipped policy and its training metrics instead of training it again."""
+    from bench.harness.policies import MODELS, policy_dir
+    from bench.training.train_all import is_reference_seed
+    from envs.config import diff
 
-    folder = policy_dir("prl", job.signals, MODELS if models is None else models, job.seed)
-    try:
-        m = json.loads((folder / "manifest.json").read_text())
-        trained = trained_scenario(folder, m).to_dict()  # fields added since read as their absence meant
-    except (OSError, ValueError, CheckpointError):
+    models = MODELS if models is None else models
+    if (job.agent_config != recipe("prl", job.signals).overrides
+            or not is_reference_seed("prl", job.signals, job.seed, job.episodes, models)):
         return None
-    decay = {"eps_decay_episodes": job.episodes}
-    same = (m.get("method") == "prl" and m.get("seed") == job.seed and m.get("episodes") == job.episodes
-            and m.get("selection") == "objective" and m.get("validation", {}).get("cases") == job.validation_cases
-            and {**decay, **(m.get("agent_config") or {})} == {**decay, **job.agent_config}
-            and json.dumps(trained, sort_keys=True, default=float) == json.dumps(scenario, sort_keys=True, default=float))
+    folder = policy_dir("prl", job.signals, models, job.seed)
+    m = json.loads((folder / "manifest.json").read_text())
+    same = (m.get("selection") == "objective" and m.get("validation", {}).get("cases") == job.validation_cases
+            and not diff(m.get("scenario", {}), scenario))
     return folder if same and all((folder / f).is_file() for f in ("policy.pt", "metrics.parquet")) else None
 
 
@@ -223,15 +223,12 @@ def _store(root: Path, job: Job) -> None:
 
 
 def order(todo: list[Job]) -> list[Job]:
-    """Started jobs first (their checkpoints resume), then the lowest seeds: every configuration gets
-    seed 0 before any gets seed 1, so a sweep cut short by a session's end leaves a whole grid."""
-    started = [(Path(j.run_dir) / "checkpoint.pt").is_file() for j in todo]
-    return [j for _, _, _, j in sorted((not s, j.seed, i, j) for i, (s, j) in enumerate(zip(started, todo)))]
+    """Started jobs first (their checkpoints resume), the rest as ``jobs`` lists them (seed by seed)."""
+    return sorted(todo, key=lambda j: not (Path(j.run_dir) / "checkpoint.pt").is_file())
 
 
 def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     """The job list of a study; every reward configuration is validated before anything runs."""
-    from bench.training.recipes import recipe
     from bench.training.train import RUNS
 
     rec = recipe("prl", args.signals, paper=args.paper)
@@ -255,7 +252,7 @@ def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     return [Job(study, name, args.signals, seed, episodes, args.cases,
                 str(RUNS / "sweeps" / study / f"{args.signals}-{name}-s{seed}-e{episodes}{tag}"),
                 str(root / f"{name}-s{seed}"), reward, agent_config, args.validation_cases, args.max_episode_time)
-            for name, reward in configs for seed in args.seeds]
+            for seed in args.seeds for name, reward in configs]  # every configuration gets seed 0 before any gets seed 1
 
 
 def parse(argv: list[str] | None) -> argparse.Namespace:

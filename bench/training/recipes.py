@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+VALIDATION_CASES = 20  # validation cases scored at every checkpoint to select the exported one (all recipes)
+
 
 @dataclass(frozen=True)
 class Recipe:

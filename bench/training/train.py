@@ -46,7 +46,7 @@ from bench.harness.policies import MODELS, CheckpointError, load_torch, policy_d
 from bench.harness.provenance import git_sha, package_versions
 from bench.io import Unwritable, atomic_parquet, atomic_torch_save, writable_dir
 from bench.logs.mcaplog import write_train_log
-from bench.training.recipes import is_recipe, recipe
+from bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
 from envs.config import SIGNALS, added_values, backfill, flat
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
@@ -95,7 +95,7 @@ def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
 def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
-          stop_after: int | None = None, progress: bool = True, validation_cases: int = 20,
+          stop_after: int | None = None, progress: bool = True, validation_cases: int = VALIDATION_CASES,
           select: str = "objective", device: str = "cpu") -> pd.DataFrame:
     """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
     after that many episodes of this call (used to test resumption).
@@ -258,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="seed of the agent and of the episode draws (>= 0)")
     ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
-    ap.add_argument("--validation-cases", type=int, default=20, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
+    ap.add_argument("--validation-cases", type=int, default=VALIDATION_CASES, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
     ap.add_argument("--select", default="objective", choices=list(SELECTION),
                     help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
     ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")

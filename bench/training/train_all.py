@@ -38,8 +38,8 @@ def stale(trained: dict, method: str, signals: str) -> list[str]:
     return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict())
 
 
-def _finished(method: str, signals: str, seed: int, episodes: int | None = None, models: Path = MODELS,
-              paper: bool = False) -> bool:
+def is_reference_seed(method: str, signals: str, seed: int, episodes: int | None = None, models: Path = MODELS,
+                      paper: bool = False) -> bool:
     """A policy in ``models`` from this seed, trained by the recipe (``paper``: the paper's;
     ``episodes`` given: that episode count instead of the recipe's) under today's scenario."""
     man = policy_dir(method, signals, models, seed) / "manifest.json"
@@ -57,7 +57,7 @@ def plan(methods: list[str], seeds: list[int], episodes: int | None = None, runs
     """(method, signals, seed) still to train; runs with a checkpoint (started in an earlier
     session) come first, then by seed, then in the given method order."""
     todo = [(m, s, sd) for sd in seeds for m in methods for s in SIGNALS
-            if not _finished(m, s, sd, episodes, models, paper)]
+            if not is_reference_seed(m, s, sd, episodes, models, paper)]
     return sorted(todo, key=lambda t: not (runs / f"{t[0]}-{t[1]}-s{t[2]}" / "checkpoint.pt").is_file())
 
 
