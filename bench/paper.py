@@ -15,6 +15,7 @@ TABLE4: dict[tuple[str, str], tuple[float, float]] = {
 }
 FLEET_SAVING = 0.138  # fleet energy, MPR 1 against MPR 0 (section 5.5)
 HEATMAP_CHOICE = (40.0, 30.0)  # (|r_p^s|, |r_p^j|) the paper chose from its heatmap (section 5.2)
+TRAINING_EPISODES = 1000  # the paper's training length (sections 5.2 and 5.3)
 
 BASELINE_TOL = 0.10  # relative; our baseline row against Table 4's (the calibration tolerance)
 IMPROVEMENT_BAND = 0.15  # absolute; an RL improvement against the published one (reported, not failed)

@@ -11,12 +11,11 @@ import pandas as pd
 
 from bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
 from bench.paper import HDV_TOL, HEATMAP_CHOICE, SPEED_LOSS_TOL
-from bench.training.recipes import PAPER
+from bench.paper import TRAINING_EPISODES as PAPER_TRAINING_EPISODES
 
 from . import figures, metrics, sweep_claims, tables
 
 MPR_BREAKDOWN_DEMANDS = (200.0, 700.0)  # veh/h/lane, the paper's CV vs HDV breakdown
-PAPER_TRAINING_EPISODES = PAPER.episodes  # the paper's training length (section 5.2)
 
 
 def present(run_dir: Path) -> bool:

@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from bench.paper import TRAINING_EPISODES
+
 VALIDATION_CASES = 20  # validation cases scored at every checkpoint to select the exported one (all recipes)
 
 
@@ -23,7 +25,7 @@ class Recipe:
     evidence: str = "the paper's Table 2"  # where the choice is argued
 
 
-PAPER = Recipe(episodes=1000)  # the paper's schedule and hyper-parameters
+PAPER = Recipe(episodes=TRAINING_EPISODES)  # the paper's schedule and hyper-parameters
 N_STEP_300 = Recipe(  # PRL uncoordinated's recipe, extended to the other P-DQN settings
     episodes=300, overrides={"n_step": 5},
     evidence="docs/notebook.md, 'The recipe extended to PRL coordinated and MP-DQN' (validation cases, "
