@@ -6,10 +6,9 @@ is the composite without the lane-change term r_p^c (``lane_change_penalty = 0``
 Bounding the action (not in the paper): the actor's output is the normalised acceleration itself,
 clipped to [-1, 1] when acting, and the actor's gradient is inverted at the bounds (Hausknecht &
 Stone 2016): dQ/da is scaled by (1 - a)/2 where it pushes a up and by (a + 1)/2 where it pushes
-it down, so the output slows down as it nears a bound instead of crossing it. With a tanh output
-instead (``bound = "tanh"``) the first run saturated: by episode 25 the pre-tanh output was about
-4 on every state and by episode 1000 about 10, i.e. "always +3 m/s^2, let Krauss brake", with a
-vanishing gradient and the same greedy validation score at every checkpoint from 25 to 1000.
+it down, so the output slows down as it nears a bound instead of crossing it. A tanh output
+(``bound = "tanh"``) saturates: its pre-tanh output grows on every state until the policy is
+"always +3 m/s^2, let Krauss brake", with a vanishing gradient (the run is in docs/notebook.md).
 """
 from __future__ import annotations
 

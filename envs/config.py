@@ -85,8 +85,8 @@ class RewardConfig:
     cost_timing: str = field(default="step", metadata={"choices": COST_TIMINGS})
     # when r_p^c is charged: "request" = in the step whose accepted request starts the change (the
     # agent's own decision; a change SUMO makes on its own is charged when the lane index changes);
-    # "lane" = when the lane index changes, mid-manoeuvre, one step after the request (the older charging; runs
-    # that started with it keep it)
+    # "lane" = when the lane index changes, mid-manoeuvre, one step after the request (kept by
+    # runs whose checkpoint records it)
     lane_change_charge: str = field(default="request", metadata={"choices": LANE_CHANGE_CHARGES})
 
     def __post_init__(self) -> None:

@@ -81,4 +81,5 @@ def rewrite(readme: Path, results: pd.DataFrame, run_name: str, manifest: dict) 
     pattern = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
     if not pattern.search(text):
         raise ValueError(f"{readme}: no '{START}' ... '{END}' block to rewrite")
-    atomic_text(pattern.sub(lambda _: block(results, run_name, manifest, readme.name), text, count=1), readme)
+    target = readme.name if readme.is_absolute() else readme.as_posix()  # as typed; no machine's paths
+    atomic_text(pattern.sub(lambda _: block(results, run_name, manifest, target), text, count=1), readme)

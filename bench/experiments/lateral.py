@@ -199,7 +199,8 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = Parser(description="Run the lateral scenarios A and B (section 5.4) for each method, every shipped "
                             "training seed of a learning method.")
-    ap.add_argument("--methods", nargs="+", default=list(LATERAL_METHODS), help=f"among {', '.join(METHODS)}")
+    ap.add_argument("--methods", nargs="+", default=list(LATERAL_METHODS),
+                    help=f"among {', '.join(METHODS)} (default: the paper's figure, {' '.join(LATERAL_METHODS)})")
     ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     ap.add_argument("--workers", type=int_in(1), default=2, help="parallel episodes (>= 1)")

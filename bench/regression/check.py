@@ -151,7 +151,7 @@ def record_rows(now: list[tuple[str, str, str]], earlier: list[tuple[str, str, s
 
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
-    ap.add_argument("--write-reference", action="store_true", help=f"write {REFERENCE} from this run")
+    ap.add_argument("--write-reference", action="store_true", help=f"write bench/regression/reference/{REFERENCE.name} from this run")
     ap.add_argument("--no-mixed", action="store_true", help="skip the mixed-traffic cells (reported NOT CHECKED)")
     ap.add_argument("--logs", default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
     args = ap.parse_args(argv)

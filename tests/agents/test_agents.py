@@ -299,7 +299,7 @@ def test_train_all_resumes_started_runs_first_then_fills_seeds_in_order(tmp_path
     todo = plan(["dqn", "ddpg"], seeds=[0, 1], episodes=1000, runs=runs, models=models)
     assert ("dqn", "coordinated", 0) not in todo and ("dqn", "coordinated", 1) in todo
     assert ("dqn", "coordinated", 0) in plan(["dqn"], seeds=[0], episodes=300, runs=runs, models=models)
-    # trained before the lane-change charging fix: stale for a method with r_p^c, not for DDPG (no r_p^c)
+    # a manifest without reward.lane_change_charge: stale for a method with r_p^c, not for DDPG (no r_p^c)
     old = {**today, "reward": {k: v for k, v in today["reward"].items() if k != "lane_change_charge"}}
     assert stale(old, "dqn", "coordinated") == ["reward.lane_change_charge"]
     assert stale({**old, "reward": {**old["reward"], "lane_change_penalty": 0.0}}, "ddpg", "coordinated") == []

@@ -2,8 +2,8 @@
 
 ``update`` of P-DQN / MP-DQN, DQN and DDPG computes its gradients by hand (agents/nets.py: the
 conv trunk as matmuls, pairwise max pools, explicit backward passes, fused Adam with the clip
-factor as its gradient scale). The references below are the updates as they were written before
-that (autograd through the losses, ``clip_grad_norm_``, the default Adam, one ``lerp_`` per
+factor as its gradient scale). The references below are the straightforward autograd updates
+(autograd through the losses, ``clip_grad_norm_``, the default Adam, one ``lerp_`` per
 tensor); P-DQN's losses are the agent's own ``losses``, DQN's and DDPG's are written out here.
 From the same initial state and the same replay draws, a few updates must leave every online and
 target parameter equal up to float reassociation.
@@ -58,7 +58,7 @@ def _agent(method: str, grid_shape=(60, 5), n: int = 600, **config):
 
 # ---------------------------------------------------------------------------------------- references
 # P-DQN's autograd formulation is the agent's own ``losses`` (eq. 7 and 8 through ``q_values``),
-# which ``update`` no longer calls; DQN's and DDPG's are written out below.
+# which ``update`` does not call; DQN's and DDPG's are written out below.
 
 
 class RefPDQN:

@@ -196,7 +196,7 @@ def test_steady_baseline_removes_the_egos_dawdling(cases):
 @pytest.mark.parametrize("charge", ["request", "lane"])
 def test_lane_change_penalty_falls_on_the_step_that_decides_it(charge):
     """With SUMO's 3 s manoeuvre the lane index flips one step after the request. "request" charges
-    r_p^c in the request's own transition, "lane" (the older charging) in the next one, whose action
+    r_p^c in the request's own transition, "lane" (kept by runs whose checkpoint records it) in the next one, whose action
     was 'stay'; each charges the change once."""
     env = gym.make("EcoDrive-v0", action="parameterized",
                    config={**EMPTY, "reward": {"lane_change_charge": charge}}).unwrapped

@@ -49,3 +49,14 @@ def test_rewrite_replaces_only_the_block(tmp_path):
     with pytest.raises(ValueError, match="no '<!-- headline:start -->'"):
         rewrite(bare, results(), "paper", {})
     assert bare.read_text() == "no markers\n"
+
+
+def test_the_block_names_the_readme_as_typed_but_no_absolute_path(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "docs").mkdir()
+    for path in (tmp_path / "docs" / "results.md", "docs/results.md"):
+        readme = tmp_path / "docs" / "results.md"
+        readme.write_text(f"{START}\n{END}\n")
+        rewrite(type(readme)(path), results(), "paper", {})
+        expected = "results.md`" if str(path).startswith("/") else "docs/results.md`"
+        assert f"--readme {expected}" in readme.read_text()

@@ -225,8 +225,8 @@ def test_mixed_claims_on_a_grid():
 def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
     """Uncoordinated, MPR 0.6, 200 veh/h/lane, the shipped PRL policy: at t = 493 s an HDV stops
     at a yellow light at its decel of 4.5 m/s^2, 13 m ahead of a CV whose decel (the action bound)
-    is 4 m/s^2. With speed mode 31 the CV could not brake harder than 4 m/s^2 and hit it; the
-    safety layer now lets SUMO brake it as hard as its safe speed asks (speed mode 27)."""
+    is 4 m/s^2. The safety layer (speed mode 27) lets SUMO brake it as hard as its safe speed asks,
+    so it stops short (with speed mode 31 it could brake no harder than 4 m/s^2 and would hit it)."""
     from bench.harness.policies import policy_dir
 
     cell = Cell("uncoordinated", 0.6, 200, 0, 520.0, str(tmp_path / "cell.mcap"),

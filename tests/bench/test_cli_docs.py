@@ -1,0 +1,35 @@
+"""docs/cli.md shows each command's ``--help``: it must be what the command prints today."""
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench.cli import COMMANDS, main
+
+DOC = Path(__file__).parents[2] / "docs" / "cli.md"
+
+
+def documented(command: str) -> str:
+    """The ```text block under the command's heading in docs/cli.md."""
+    heading = "## `ecodrive`" if command == "" else f"## `ecodrive {command}`"
+    m = re.search(re.escape(heading) + r"\n\n```text\n(.*?)\n```", DOC.read_text(), re.S)
+    assert m, f"docs/cli.md has no help block under {heading}"
+    return m.group(1)
+
+
+def words(text: str) -> list[str]:  # line wrapping depends on the terminal's width
+    return text.split()
+
+
+@pytest.mark.parametrize("command", ["", *COMMANDS])
+def test_docs_show_the_commands_help(command, capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "100")
+    monkeypatch.setattr(sys, "argv", ["ecodrive"])
+    with pytest.raises(SystemExit) as e:
+        main([command, "--help"] if command else ["--help"])
+    assert e.value.code == 0
+    assert words(capsys.readouterr().out) == words(documented(command)), (
+        f"docs/cli.md's block for `ecodrive {command}` differs from its --help: paste the current output")
