@@ -41,6 +41,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] not in ("-h", "--help") and argv[0] in COMMANDS:
         ns = argparse.Namespace(command=argv[0], args=argv[1:])
+    elif argv and argv[0].startswith("-") and argv[0] not in ("-h", "--help"):
+        parser().error(f"{argv[0]} before a COMMAND; give one of {', '.join(COMMANDS)} first")
     else:
         ns = parser().parse_args(argv)
     module = importlib.import_module(COMMANDS[ns.command][0])

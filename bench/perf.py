@@ -114,6 +114,9 @@ def main(argv: list[str] | None = None) -> int:
         r = ratios(args.benchmark_json)
     except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as e:
         return fail(ap.prog, f"{args.benchmark_json}: not a pytest-benchmark JSON file ({type(e).__name__}: {e})")
+    if not r:
+        return fail(ap.prog, f"{args.benchmark_json}: none of the suite's benchmarks (tests/benchmarks) in it; "
+                             "write one with nox -s perf")
     ok = True
     for key, (_, _, limit, what) in TARGETS.items():
         if key in r:

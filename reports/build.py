@@ -290,8 +290,15 @@ def main(argv: list[str] | None = None) -> int:
                          "each method's change on the held-out corridors beside its change in this run")
     args = ap.parse_args(argv)
     out = args.out or Path("reports") / args.run_dir.name
-    if args.readme is not None and not args.readme.is_file():
-        return fail(ap.prog, f"--readme {args.readme}: no such file")
+    if args.readme is not None:
+        if not args.readme.is_file():
+            return fail(ap.prog, f"--readme {args.readme}: no such file")
+        try:
+            headline.check(args.readme)
+        except UnicodeDecodeError:
+            return fail(ap.prog, f"--readme {args.readme}: not a UTF-8 text file")
+        except ValueError as e:
+            return fail(ap.prog, f"--readme {e}")
     created = not out.exists()
     try:
         index, warnings = build(args.run_dir, out, args.generalisation)

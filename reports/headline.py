@@ -74,12 +74,20 @@ def block(results: pd.DataFrame, run_name: str, manifest: dict, target: str = "R
     return "\n".join([START, source, "", table(results), "", END])
 
 
+PATTERN = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
+
+
+def check(readme: Path) -> None:
+    """A ValueError unless ``readme`` has a headline block to rewrite (checked before a report is
+    built, so a bad ``--readme`` leaves nothing behind)."""
+    if not PATTERN.search(readme.read_text()):
+        raise ValueError(f"{readme}: no '{START}' ... '{END}' block to rewrite")
+
+
 def rewrite(readme: Path, results: pd.DataFrame, run_name: str, manifest: dict) -> None:
     """Replace the headline block of ``readme`` in place (atomically); a file without both
     markers is a ValueError and is left untouched."""
+    check(readme)
     text = readme.read_text()
-    pattern = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
-    if not pattern.search(text):
-        raise ValueError(f"{readme}: no '{START}' ... '{END}' block to rewrite")
     target = readme.name if readme.is_absolute() else readme.as_posix()  # as typed; no machine's paths
-    atomic_text(pattern.sub(lambda _: block(results, run_name, manifest, target), text, count=1), readme)
+    atomic_text(PATTERN.sub(lambda _: block(results, run_name, manifest, target), text, count=1), readme)

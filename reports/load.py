@@ -14,6 +14,10 @@ class RunError(RuntimeError):
     pass
 
 
+# what every report reads from a results table; other columns are drawn where present
+REQUIRED_COLUMNS = ("method", "signals", "case", "energy", "travel_time", "mcap")
+
+
 def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict]:
     res, man = run_dir / "results.parquet", run_dir / "manifest.json"
     if not res.is_file():
@@ -28,8 +32,10 @@ def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict]:
         results = pd.read_parquet(res)
     except Exception as e:  # pyarrow's errors for a truncated or foreign file have no common base
         raise RunError(f"{res}: not a readable results table ({type(e).__name__}: {str(e).splitlines()[0]})") from None
-    if "mcap" not in results.columns:
-        raise RunError(f"{res}: no 'mcap' column (is this a results table written by `ecodrive run`?)")
+    missing = [c for c in REQUIRED_COLUMNS if c not in results.columns]
+    if missing:
+        raise RunError(f"{res}: no {', '.join(repr(c) for c in missing)} column; a results table written by "
+                       f"`ecodrive run` has {', '.join(REQUIRED_COLUMNS)}")
     return results, manifest
 
 

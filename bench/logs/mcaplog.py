@@ -252,7 +252,7 @@ def episode_summary(path: str | Path, agent_sha256: str | None = None, eval_scen
                     return None
                 if eval_scenario is not None and meta.get("eval_scenario_hash", legacy_scenario) != eval_scenario:
                     return None
-            for _, channel, message in reader.iter_messages(topics=["/episode"]):
+            for _, _, message in reader.iter_messages(topics=["/episode"]):
                 ep = schema.Episode.FromString(message.data)
                 return {fd.name: getattr(ep, fd.name) for fd in ep.DESCRIPTOR.fields}
     except Exception:  # any damage means: run the case again

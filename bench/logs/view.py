@@ -15,14 +15,15 @@ Entities (timeline ``sim_time``, simulation seconds):
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from bench.logs.mcaplog import LogError, read_log
 from bench.args import Parser, fail
 from bench.io import Unwritable, writable_dir
+from bench.logs.mcaplog import LogError, read_log
 
 GREEN, RED, YELLOW = (40, 180, 60), (220, 40, 40), (230, 190, 30)
 TRAIL_S = 60  # [s] of ego trail
@@ -62,7 +63,7 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
     plan = data.plan
     plan_x = dict(zip(np.round(plan["time"], 6), plan["x"])) if plan else {}
     trail: list[tuple[float, float]] = []
-    for i, s in enumerate(steps):
+    for s in steps:
         rec.set_time("sim_time", duration=s.time)
         trail.append((s.x, s.y))
         trail[:] = trail[-TRAIL_S:]
@@ -131,31 +132,40 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("mcap", type=Path, help="a step log (.mcap, or a killed run's .mcap.part)")
-    ap.add_argument("--save", type=Path, default=None, help="write an .rrd instead of spawning the viewer")
+    ap.add_argument("--save", type=Path, default=None,
+                    help="write an .rrd (a new path: an existing file is never overwritten) instead of spawning the viewer")
     args = ap.parse_args(argv)
     import rerun as rr
 
     try:
         read_log(args.mcap)  # a file that is not a step log is refused before a viewer starts
         if args.save:
+            if args.save.exists():
+                return fail(ap.prog, f"--save {args.save} exists; give a new path (nothing is overwritten)")
             writable_dir(args.save.parent)
     except (LogError, Unwritable) as e:
         return fail(ap.prog, str(e))
     rec = rr.RecordingStream("ecodrive")
+    part = None if args.save is None else args.save.with_name(f".{args.save.name}.part")
+    done = False
     try:
-        if args.save:
-            rec.save(args.save)
+        if part is not None:
+            rec.save(part)  # renamed to --save once complete: no half-written recording under its name
         else:
             rec.spawn()
         n, warning = build_recording(args.mcap, rec)
-    except LogError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    finally:
         rec.flush()
+        done = True
+    except LogError as e:
+        return fail(ap.prog, str(e))
+    finally:
+        rec.disconnect()
+        if part is not None and not done:
+            part.unlink(missing_ok=True)
     if warning:
         print(f"warning: {warning} (showing the {n} steps read)", file=sys.stderr)
-    if args.save:
+    if part is not None:
+        os.replace(part, args.save)
         print(f"saved {n} steps to {args.save}")
     return 0
 

@@ -42,6 +42,9 @@ def test_an_unknown_command_is_one_line():
     out = run("frobnicate")
     assert out.returncode == 2
     assert out.stderr.strip().splitlines() == [out.stderr.strip()] and "'frobnicate'" in out.stderr
+    out = run("--frobnicate")  # an option before any command is named as such
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines() == [out.stderr.strip()] and "--frobnicate" in out.stderr
 
 
 @pytest.mark.parametrize("command, args", [

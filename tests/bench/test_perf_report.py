@@ -109,3 +109,11 @@ def test_not_a_benchmark_file(tmp_path, capsys):
     bad = tmp_path / "x.json"
     bad.write_text("{}")
     assert main([str(bad)]) == 2 and "not a pytest-benchmark JSON" in capsys.readouterr().err
+
+
+def test_a_benchmark_file_without_the_suites_benchmarks_is_refused(tmp_path, capsys):
+    other = tmp_path / "other.json"
+    other.write_text('{"benchmarks": [{"name": "test_something_else", "stats": {"median": 1.0, "mean": 1.0}}]}')
+    assert main([str(other)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "other.json" in err[0]

@@ -57,6 +57,7 @@ def test_the_report_is_the_same_from_any_working_directory(smoke, tmp_path, monk
     ("manifest_list", "expected an object"),
     ("manifest_text", "not valid JSON"),
     ("results_truncated", "not a readable results table"),
+    ("results_no_energy", "no 'energy' column"),
 ])
 def test_bad_input_is_one_line_and_leaves_nothing(damage, words, smoke, tmp_path, capsys):
     run_dir = copy(smoke, tmp_path)
@@ -67,6 +68,8 @@ def test_bad_input_is_one_line_and_leaves_nothing(damage, words, smoke, tmp_path
         (run_dir / "manifest.json").write_text("[1, 2, 3]")
     elif damage == "manifest_text":
         (run_dir / "manifest.json").write_text("{not json")
+    elif damage == "results_no_energy":
+        pd.read_parquet(run_dir / "results.parquet").drop(columns=["energy"]).to_parquet(run_dir / "results.parquet")
     else:
         data = (run_dir / "results.parquet").read_bytes()
         (run_dir / "results.parquet").write_bytes(data[: len(data) // 2])
@@ -86,7 +89,7 @@ def test_readme_headline_is_rewritten_from_the_run(smoke, tmp_path, capsys):
     bare = tmp_path / "BARE.md"
     bare.write_text("no block\n")
     assert main([str(smoke), "--out", str(tmp_path / "rep2"), "--readme", str(bare)]) == 2
-    assert bare.read_text() == "no block\n"
+    assert bare.read_text() == "no block\n" and not (tmp_path / "rep2").exists()  # refused before building
     assert "no '<!-- headline:start -->'" in capsys.readouterr().err.splitlines()[-1]
     assert main([str(smoke), "--out", str(tmp_path / "rep3"), "--readme", str(tmp_path / "missing.md")]) == 2
     assert not (tmp_path / "rep3").exists()

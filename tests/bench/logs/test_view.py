@@ -86,3 +86,22 @@ def test_a_plan_shows_beside_the_driven_trajectory(tmp_path, cases):
     df = _read_rrd(tmp_path / "o.rrd")
     assert df["/series/planned_speed:Scalars:scalars"].notna().sum() >= row["steps"]
     assert df["/world/plan:Boxes2D:centers"].notna().sum() >= row["steps"] - 1
+
+
+def test_an_existing_save_path_is_refused_and_kept(log, tmp_path):
+    keep = tmp_path / "keep.rrd"
+    keep.write_bytes(b"precious")
+    out = _view(log[0], "--save", keep)
+    assert out.returncode == 2 and str(keep) in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert keep.read_bytes() == b"precious"
+    folder = tmp_path / "a-folder"
+    folder.mkdir()
+    out = _view(log[0], "--save", folder)
+    assert out.returncode == 2 and "Traceback" not in out.stderr and folder.is_dir()
+
+
+def test_a_refused_log_leaves_no_recording(tmp_path):
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 10)
+    _view(bad, "--save", tmp_path / "c.rrd")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
