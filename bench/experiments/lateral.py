@@ -7,7 +7,10 @@ B: the ego follows a platoon of HDVs that queues at the first intersection on re
 Both run on an empty corridor (no random demand) with uncoordinated signals, so every method
 sees exactly the same situation. ``run_scenario`` returns the trajectories of the ego and the
 scripted vehicles; the lateral behaviour is judged from them. ``ecodrive lateral`` drives every
-shipped training seed of a learning method (``<method>-s<seed>.mcap``; one row per seed).
+shipped training seed of a learning method (``<method>-s<seed>.mcap``; one row per seed). A
+learning method named in ``--methods`` without a shipped uncoordinated policy is an error (exit
+2); of the default methods it is skipped with a note. Every policy is loaded into its agent
+before any episode runs: a file that cannot be is one error line, exit 2, nothing written.
 """
 from __future__ import annotations
 
@@ -166,20 +169,26 @@ def run_task(task: LateralTask) -> dict[str, Any]:
     uncoordinated setting, used here on the empty scripted corridor on purpose (no scenario check)."""
     import torch
 
-    from agents.registry import LEARNING, make_agent
-    from bench.harness.policies import load_policy
-
     torch.set_num_threads(1)
     env = scenario_env(task.method)
-    agent = make_agent(task.method, env.observation_space, env.action_space)
-    sha = ""
-    if task.method in LEARNING:
-        state, manifest = load_policy(Path(task.policy_dir), task.method)
-        agent.load_state_dict(state)
-        sha = manifest["sha256"]
+    agent, sha = task_agent(task, env)
     df = run_scenario(task.scenario, agent, task.method, log_path=Path(task.path), agent_sha256=sha, env=env)
     atomic_parquet(df, Path(task.path).with_suffix(".parquet"))
     return _row(df, task)
+
+
+def task_agent(task: LateralTask, env: Any) -> tuple[Agent, str]:
+    """(agent, policy sha256) of a task: a rule-based agent, or a learning one holding its
+    verified policy (a file that cannot be loaded is a ``CheckpointError`` naming it)."""
+    from agents.registry import LEARNING, make_agent
+    from bench.harness.policies import load_policy, policy_agent
+
+    spaces = (env.observation_space, env.action_space)
+    if task.method not in LEARNING:
+        return make_agent(task.method, *spaces), ""
+    folder = Path(task.policy_dir)
+    state, manifest = load_policy(folder, task.method)
+    return policy_agent(folder, task.method, spaces, manifest, state), manifest["sha256"]
 
 
 def _row(df: pd.DataFrame, task: LateralTask) -> dict[str, Any]:
@@ -189,17 +198,20 @@ def _row(df: pd.DataFrame, task: LateralTask) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``ecodrive lateral``: bad input (an option, a missing or unloadable policy) is one error
+    line and exit code 2, before any episode runs or any folder is written."""
     import sys
 
-    from agents.registry import LEARNING, METHODS
+    from agents.registry import METHODS
     from bench.harness.executors import EXECUTORS, run_local, run_ray
-    from bench.harness.policies import MODELS, policy_dir, shipped_seeds
+    from bench.harness.policies import MODELS, CheckpointError
     from bench.io import sha256
     from bench.logs.mcaplog import episode_summary
 
     ap = Parser(description="Run the lateral scenarios A and B (section 5.4) for each method, every shipped "
                             "training seed of a learning method.")
-    ap.add_argument("--methods", nargs="+", default=list(LATERAL_METHODS),
+    # default None: a learning method named here must have a shipped policy (module docstring)
+    ap.add_argument("--methods", nargs="+", default=None,
                     help=f"among {', '.join(METHODS)} (default: the paper's figure, {' '.join(LATERAL_METHODS)})")
     ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
@@ -208,25 +220,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
     ap.add_argument("--models", type=Path, default=MODELS, help="shipped policies (default: models/)")
     args = ap.parse_args(argv)
-    bad = ", ".join(m for m in args.methods if m not in METHODS)
+    explicit, methods = args.methods is not None, args.methods or list(LATERAL_METHODS)
+    bad = ", ".join(m for m in methods if m not in METHODS)
     error = (bad and f"--methods {bad} is not accepted; accepted: {', '.join(METHODS)}"
-             or args.executor not in EXECUTORS and f"--executor {args.executor} is not accepted; accepted: {', '.join(EXECUTORS)}"
-             or args.workers < 1 and f"--workers {args.workers} is not accepted; accepted: >= 1")
+             or args.executor not in EXECUTORS and f"--executor {args.executor} is not accepted; accepted: {', '.join(EXECUTORS)}")
     if error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    seeds = {m: shipped_seeds(m, "uncoordinated", args.models) if m in LEARNING else [None] for m in args.methods}
-    missing = [m for m in args.methods if not seeds[m]]
-    if missing:
-        print(f"note: no shipped uncoordinated policy for {', '.join(missing)}; skipped", file=sys.stderr)
+        return fail(ap.prog, error)
     root = args.logs / args.run_id / "lateral"
     try:
+        seeds, skipped = lateral_seeds(methods, args.models, explicit)
+        tasks = lateral_tasks(seeds, args.models, root)
         writable_dir(root)
-    except Unwritable as e:
+    except (CheckpointError, Unwritable) as e:
         return fail(ap.prog, str(e))
-    tasks = [LateralTask(name, m, "" if sd is None else str(policy_dir(m, "uncoordinated", args.models, sd)),
-                         str(root / name / (f"{m}.mcap" if sd is None else f"{m}-s{sd}.mcap")), sd)
-             for name in SCENARIO_NAMES for m in args.methods for sd in seeds[m]]
+    if skipped:  # after the checks: a refused command prints its one error line only
+        print(f"note: no shipped uncoordinated policy for {', '.join(skipped)}; skipped", file=sys.stderr)
     for t in tasks:
         Path(t.path).parent.mkdir(parents=True, exist_ok=True)
     rows, todo = [], []
@@ -238,12 +246,47 @@ def main(argv: list[str] | None = None) -> int:
         else:
             todo.append(t)
     it = run_local(todo, args.workers, run_task) if args.executor == "local" else run_ray(todo, args.address, args.workers, run_task)
-    rows += list(it)
+    try:
+        rows += list(it)
+    except CheckpointError as e:  # checked above; a file replaced since is refused by its worker
+        return fail(ap.prog, str(e))
     out = pd.DataFrame(rows).astype({"train_seed": "Int64"}).sort_values(["scenario", "method", "train_seed"],
                                                                         ignore_index=True)
     atomic_parquet(out, root / "lateral.parquet")
     print(out.to_string(index=False))
     return 0
+
+
+def lateral_seeds(methods: list[str], models: Path,
+                  explicit: bool) -> tuple[dict[str, list[int | None]], list[str]]:
+    """(the shipped uncoordinated training seeds of each method, [None] for a rule-based one; the
+    learning methods skipped for want of one). A learning method without one is a
+    ``CheckpointError`` when ``explicit`` (named in --methods), else skipped."""
+    from agents.registry import LEARNING
+    from bench.harness.policies import CheckpointError, family_dir, shipped_seeds
+
+    seeds: dict[str, list[int | None]] = {
+        m: list(shipped_seeds(m, "uncoordinated", models)) if m in LEARNING else [None] for m in methods}
+    missing = [m for m in methods if not seeds[m]]
+    if missing and explicit:
+        raise CheckpointError(f"--methods {' '.join(missing)}: no shipped uncoordinated policy under {models} (expected "
+                              f"{family_dir(missing[0], 'uncoordinated', models)}/s<seed>/manifest.json); train it: "
+                              f"ecodrive train --method {missing[0]} --signals uncoordinated")
+    return {m: sd for m, sd in seeds.items() if sd}, missing
+
+
+def lateral_tasks(seeds: dict[str, list[int | None]], models: Path, root: Path) -> list[LateralTask]:
+    """Every (scenario, method, seed) task, each policy loaded into its agent once here first
+    (``check_policy``): a file that cannot drive is a ``CheckpointError`` before anything runs."""
+    from bench.harness.policies import check_policy, policy_dir
+
+    dirs = {(m, sd): "" if sd is None else str(policy_dir(m, "uncoordinated", models, sd))
+            for m, sds in seeds.items() for sd in sds}
+    for (m, _), pdir in dirs.items():
+        if pdir:
+            check_policy(Path(pdir), m)
+    return [LateralTask(name, m, dirs[(m, sd)], str(root / name / (f"{m}.mcap" if sd is None else f"{m}-s{sd}.mcap")), sd)
+            for name in SCENARIO_NAMES for (m, sd) in dirs]
 
 
 if __name__ == "__main__":

@@ -45,9 +45,7 @@ def run_task(task: Task) -> dict[str, Any]:
     """One greedy episode in this worker; envs and policies are loaded once per worker."""
     import torch
 
-    from agents.registry import LEARNING, make_agent
     from bench.harness.episode import make_env, run_episode
-    from bench.harness.policies import CheckpointError, load_policy, policy_spaces
 
     torch.set_num_threads(1)
     scenario = json.loads(task.scenario) if task.scenario else None
@@ -67,20 +65,7 @@ def run_task(task: Task) -> dict[str, Any]:
         _ENVS[env_key] = make_env(task.method, task.signals, scenario)
     env = _ENVS[env_key]
     if key not in _AGENTS:
-        sha, state, config = "", None, {}
-        spaces = env.observation_space, env.action_space
-        if task.method in LEARNING:
-            state, manifest = load_policy(Path(task.policy_dir), task.method, env.cfg.to_dict(), task.transfer)
-            sha, config = manifest["sha256"], manifest.get("agent_config") or {}
-            if task.transfer:  # the spaces it trained with: its shapes, and its input scaling
-                spaces = policy_spaces(Path(task.policy_dir), manifest)
-        try:  # an experiment's policy (ecodrive train --set) is built with the config it trained with
-            agent = make_agent(task.method, *spaces, **config)
-        except (TypeError, ValueError) as e:
-            raise CheckpointError(f"{task.policy_dir}/manifest.json: agent_config {config!r} not accepted ({e})") from None
-        if state is not None:
-            agent.load_state_dict(state)
-        _AGENTS[key] = (agent, sha)
+        _AGENTS[key] = task_agent(task, env)
     agent, sha = _AGENTS[key]
     t0 = time.perf_counter()
     row = run_episode(env, agent, task.case, task.method, log_path=Path(task.path), agent_sha256=sha,
@@ -89,6 +74,22 @@ def run_task(task: Task) -> dict[str, Any]:
     row["mcap"] = task.path
     row["train_seed"] = task.train_seed
     return row
+
+
+def task_agent(task: Task, env: Any) -> tuple[Any, str]:
+    """(agent, policy sha256) of a built-in method on ``env``: a rule-based one, or a learning
+    one holding its verified policy (``bench.harness.policies``; a policy that cannot be loaded
+    is a ``CheckpointError`` naming the file)."""
+    from agents.registry import LEARNING, make_agent
+    from bench.harness.policies import load_policy, policy_agent, policy_spaces
+
+    if task.method not in LEARNING:
+        return make_agent(task.method, env.observation_space, env.action_space), ""
+    folder = Path(task.policy_dir)
+    state, manifest = load_policy(folder, task.method, env.cfg.to_dict(), task.transfer)
+    spaces = (policy_spaces(folder, manifest) if task.transfer  # the spaces it trained with: its shapes and input scaling
+              else (env.observation_space, env.action_space))
+    return policy_agent(folder, task.method, spaces, manifest, state), manifest["sha256"]
 
 
 PR_SET_PDEATHSIG = 1  # linux/prctl.h

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,7 +32,9 @@ def load_torch(path: Path) -> Any:
     only. A pickle that names any other global (a planted ``__reduce__`` payload, say) is a
     ``CheckpointError``, and nothing in it runs."""
     try:
-        return torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # a raw pickle (no torch zip) warns of its protocol before it is refused
+            warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
+            return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
         why = next((ln.strip().rstrip(".") for ln in str(e).splitlines() if "GLOBAL" in ln), "not plain data")
         raise CheckpointError(f"{path}: refused, it holds more than tensors and plain data ({why}); "
@@ -89,6 +92,45 @@ def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = Non
     if scenario is not None:
         check_scenario(folder, manifest, scenario, transfer)
     return state, manifest
+
+
+def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: dict[str, Any],
+                 state: Any, **overrides: Any) -> Any:
+    """A fresh ``method`` agent on ``spaces`` (observation, action), built with the
+    ``agent_config`` the policy was trained with (``overrides`` on top) and holding its ``state``
+    (from ``load_policy``). A config or a state the agent does not accept is a ``CheckpointError``
+    naming the file: plain data of the wrong structure passes ``load_torch`` but not this."""
+    from agents.registry import make_agent
+
+    config = manifest.get("agent_config") or {}
+    try:  # an experiment's policy (ecodrive train --set) is built with the config it trained with
+        agent = make_agent(method, *spaces, **{**config, **overrides})
+    except (TypeError, ValueError) as e:
+        raise CheckpointError(f"{folder / 'manifest.json'}: agent_config {config!r} not accepted ({e})") from None
+    try:
+        agent.load_state_dict(state)
+    except Exception as e:  # the agents' and torch's errors for a wrong structure have no common base
+        why = " ".join(str(e).split())[:300]
+        raise CheckpointError(f"{folder / 'policy.pt'}: not the state of a {method} agent ({type(e).__name__}: {why}); "
+                              f"expected a policy saved by ecodrive train --method {method}") from None
+    return agent
+
+
+def check_policy(folder: Path, method: str) -> None:
+    """Refuse, before anything runs, a policy that could not drive: ``load_policy``'s checks, then
+    its state loaded into a fresh agent on the spaces it was trained with. The episodes' workers
+    load it again; this is the parent's check, so a bad file is one error before any folder is
+    written. The agent's replay buffer is kept small (greedy driving never uses it)."""
+    state, manifest = load_policy(folder, method)
+    config = manifest.get("agent_config")
+    batch = config.get("batch_size", 1) if isinstance(config, dict) else 1
+    small = {"batch_size": batch, "replay_size": batch if type(batch) is int and batch >= 1 else 1}
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # a few small networks: threads only contend
+    try:
+        policy_agent(folder, method, policy_spaces(folder, manifest), manifest, state, **small)
+    finally:
+        torch.set_num_threads(threads)
 
 
 def read_manifest(folder: Path) -> dict[str, Any]:

@@ -33,7 +33,7 @@ from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
 from bench.harness.external import GROUP, AgentError, registered
 from bench.harness.generalisation import CASES_PER_VARIANT, FamilyError
 from bench.harness.oracle import NAME as ORACLE
-from bench.harness.policies import MODELS, CheckpointError, family_dir, policy_dir, shipped_seeds
+from bench.harness.policies import MODELS, CheckpointError, check_policy, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import git_sha, package_versions
 from bench.harness.sb3 import ALGOS as SB3_ALGOS
 from bench.io import Unwritable, atomic_json, atomic_parquet, sha256, writable_dir
@@ -184,6 +184,15 @@ def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str, int]], l
     return runs, skipped
 
 
+def check_policies(pdirs: dict[tuple[str, str, int], str]) -> None:
+    """Load every policy of the command into its agent once, here in the parent: a file that
+    cannot drive is a ``CheckpointError`` before the run folder is made or any episode starts
+    (``bench.harness.policies.check_policy``)."""
+    for (method, _, _), pdir in pdirs.items():
+        if pdir:
+            check_policy(Path(pdir), method)
+
+
 def check_writable(run_dir: Path) -> None:
     try:
         writable_dir(run_dir)
@@ -202,13 +211,14 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
         except AgentError as e:
             raise UsageError(str(e)) from None
     methods = list(dict.fromkeys(m for m, _, _ in runs))
-    if skipped:
-        print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
     run_dir = opts["logs"] / opts["run_id"]
     evals = {s: scenarios.setting(s, overrides) for s in opts["signals"]}
     pdirs = {(m, s, sd): str(policy_dir(m, s, opts["models"], sd)) if sd >= 0 else "" for m, s, sd in runs}
     # a policy that may not (or cannot) drive the scenario is refused before anything is written
     where = {r: scenarios.evaluation(r[0], r[1], pdirs[r], overrides, transfer) for r in runs}
+    check_policies(pdirs)
+    if skipped:  # after the checks: a refused command prints its one error line only
+        print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
     one_scenario(run_dir, {s: c.digest() for s, c in evals.items()})
     check_writable(run_dir)
     cases = opts.get("cases") or load()[: PROFILES[opts["profile"]]]  # a variant's own (generalisation)

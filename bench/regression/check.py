@@ -22,6 +22,8 @@ import numpy as np
 import pandas as pd
 
 from bench.args import Parser, fail
+from bench.harness.external import AgentError
+from bench.harness.policies import CheckpointError
 from bench.harness.run import UsageError, parse, run
 from bench.io import atomic_csv
 from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
@@ -149,6 +151,14 @@ def record_rows(now: list[tuple[str, str, str]], earlier: list[tuple[str, str, s
     return checked + [r for r in earlier if r[0] not in names and r[1] != "NOT CHECKED"]
 
 
+def _drop_if_empty(folder: Path) -> None:
+    """Remove the fresh temporary log root of a refused command, if nothing was written in it."""
+    try:
+        folder.rmdir()
+    except OSError:
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("--write-reference", action="store_true", help=f"write bench/regression/reference/{REFERENCE.name} from this run")
@@ -161,7 +171,9 @@ def main(argv: list[str] | None = None) -> int:
     logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
     try:
         df = run(parse(["--profile", "regression", "--logs", logs]), progress=False)
-    except UsageError as e:
+    except (UsageError, CheckpointError, AgentError) as e:  # a shipped policy that cannot drive included
+        if not args.logs:
+            _drop_if_empty(Path(logs))
         return fail(ap.prog, str(e))
     if args.write_reference:
         REFERENCE.parent.mkdir(exist_ok=True)

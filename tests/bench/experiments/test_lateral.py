@@ -101,3 +101,128 @@ def test_lateral_command_drives_every_shipped_seed(tmp_path):
     assert sorted(p.name for p in (root / "B").glob("*.mcap")) == ["baseline.mcap", "prl-s0.mcap", "prl-s1.mcap"]
     text = build(tmp_path / "t", tmp_path / "report")[0].read_text()
     assert "- prl, scenario B: " in text and " of 2 runs show the paper's behaviour" in text
+
+
+# ---------------------------------------------------------------- bad input: one line, exit 2, nothing written
+def _lateral_copy(tmp_path):
+    """A models root with a copy of the shipped uncoordinated PRL seed 0, and that seed's folder."""
+    import shutil
+
+    from bench.harness.policies import policy_dir
+
+    models = tmp_path / "models"
+    folder = policy_dir("prl", "uncoordinated", models)
+    shutil.copytree(policy_dir("prl", "uncoordinated"), folder)
+    return models, folder
+
+
+def _match_manifest(folder):
+    """The manifest's sha256 made to match the (replaced) policy.pt, as whoever replaced it could."""
+    import json
+
+    from bench.io import sha256
+
+    man = json.loads((folder / "manifest.json").read_text())
+    man["sha256"] = sha256(folder / "policy.pt")
+    (folder / "manifest.json").write_text(json.dumps(man))
+
+
+def _truncated(folder, tmp_path):
+    path = folder / "policy.pt"
+    path.write_bytes(path.read_bytes()[:1000])
+    _match_manifest(folder)
+    return path
+
+
+def _wrong_structure(folder, tmp_path):
+    import torch
+
+    path = folder / "policy.pt"
+    state = torch.load(path, weights_only=True)
+    torch.save({**state, "name": "x"}, path)
+    _match_manifest(folder)
+    return path
+
+
+def _payload(folder, tmp_path):
+    import os
+
+    import torch
+
+    class Payload:
+        def __reduce__(self):
+            return (os.system, (f"touch {tmp_path / 'ran'}",))
+
+    path = folder / "policy.pt"
+    state = torch.load(path, weights_only=True)
+    torch.save({**state, "extra": Payload()}, path)
+    _match_manifest(folder)
+    return path
+
+
+def _bad_manifest(folder, tmp_path):
+    path = folder / "manifest.json"
+    path.write_text("{oops")
+    return path
+
+
+@pytest.mark.parametrize("corrupt", [_truncated, _wrong_structure, _payload, _bad_manifest],
+                         ids=["truncated", "wrong-structure", "payload", "bad-manifest"])
+def test_lateral_refuses_a_bad_policy_as_one_line_before_anything_runs(corrupt, tmp_path, capsys):
+    from bench.experiments.lateral import main
+
+    models, folder = _lateral_copy(tmp_path)
+    path = corrupt(folder, tmp_path)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    logs = tmp_path / "logs"
+    rc = main(["--methods", "prl", "--models", str(models), "--logs", str(logs), "--workers", "1"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and str(path) in err
+    assert not logs.exists() and not (tmp_path / "ran").exists()
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_lateral_refuses_a_named_learning_method_without_a_shipped_policy(tmp_path, capsys):
+    from bench.experiments.lateral import main
+
+    models, logs = tmp_path / "nonexistent", tmp_path / "logs"
+    rc = main(["--methods", "baseline", "prl", "--models", str(models), "--logs", str(logs)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and "--methods prl" in err and str(models / "prl-uncoordinated") in err
+    assert not logs.exists()
+
+
+def test_lateral_skips_a_default_learning_method_without_a_shipped_policy(tmp_path):
+    from bench.experiments.lateral import LATERAL_METHODS, lateral_seeds
+
+    seeds, skipped = lateral_seeds(list(LATERAL_METHODS), tmp_path / "nonexistent", explicit=False)
+    assert seeds == {"baseline": [None]} and skipped == ["prl", "ddpg"]
+
+
+def test_lateral_with_default_methods_and_a_bad_policy_prints_the_error_only(tmp_path, capsys):
+    """ddpg is skipped (no shipped policy) and prl refused: the refusal is the only line."""
+    from bench.experiments.lateral import main
+
+    models, folder = _lateral_copy(tmp_path)
+    path = _wrong_structure(folder, tmp_path)
+    rc = main(["--models", str(models), "--logs", str(tmp_path / "logs")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and str(path) in err
+
+
+def test_the_lateral_worker_refuses_a_wrong_structure_as_a_checkpoint_error(tmp_path):
+    """The worker's own load (a file replaced after the parent's check) names the file."""
+    from types import SimpleNamespace
+
+    from bench.experiments.lateral import LateralTask, task_agent
+    from bench.harness.policies import CheckpointError, policy_spaces, read_manifest
+
+    _, folder = _lateral_copy(tmp_path)
+    path = _wrong_structure(folder, tmp_path)
+    obs, act = policy_spaces(folder, read_manifest(folder))
+    task = LateralTask("A", "prl", str(folder), str(tmp_path / "prl-s0.mcap"), 0)
+    with pytest.raises(CheckpointError) as e:
+        task_agent(task, SimpleNamespace(observation_space=obs, action_space=act))
+    assert str(path) in str(e.value) and "\n" not in str(e.value)

@@ -69,3 +69,32 @@ def test_a_reference_written_without_the_mixed_cells_keeps_their_recorded_claims
     now = [("a", "FAIL", "new"), ("mixed-traffic claims", "NOT CHECKED", "--no-mixed given")]
     assert record_rows(now, earlier) == [("a", "FAIL", "new"), ("mixed x", "FAIL", "stalls")]
     assert record_rows(now + [("mixed x", "PASS", "fixed")], earlier)[-1] == ("mixed x", "PASS", "fixed")
+
+
+def test_a_shipped_policy_that_cannot_drive_is_one_error_line(tmp_path, monkeypatch, capsys):
+    """``ecodrive regress`` over models/ with a policy of the wrong structure (its manifest's
+    sha256 matching): one line naming the file, exit code 2, before any episode runs."""
+    import json
+    import shutil
+
+    import torch
+
+    import bench.harness.run as br
+    from bench.harness.policies import policy_dir
+    from bench.io import sha256
+    from bench.regression.check import main
+
+    models = tmp_path / "models"
+    folder = policy_dir("prl", "coordinated", models)
+    shutil.copytree(policy_dir("prl", "coordinated"), folder)
+    path = folder / "policy.pt"
+    torch.save([1, 2, 3], path)
+    man = json.loads((folder / "manifest.json").read_text())
+    (folder / "manifest.json").write_text(json.dumps({**man, "sha256": sha256(path)}))
+    monkeypatch.setattr(br, "MODELS", models)  # regress evaluates the default models folder
+    logs = tmp_path / "logs"
+    rc = main(["--logs", str(logs), "--no-mixed"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and str(path) in err
+    assert not logs.exists()

@@ -1,0 +1,122 @@
+"""A shipped policy whose file passes the manifest's sha256 but does not hold a policy of its
+method (plain data of the wrong structure, a raw pickle) is refused as one error line naming the
+file, exit code 2, before the run folder is made or any episode runs (no SUMO here)."""
+from __future__ import annotations
+
+import json
+import pickle
+import shutil
+import warnings
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+import torch
+
+from bench.harness.cases import Case
+from bench.harness.executors import Task, task_agent
+from bench.harness.policies import CheckpointError, check_policy, load_torch, policy_dir, policy_spaces, read_manifest
+from bench.harness.run import main
+from bench.io import sha256
+from envs.config import ScenarioConfig
+
+METHOD, SIGNALS = "prl", "coordinated"
+
+
+def shipped_copy(tmp_path: Path) -> Path:
+    """A models root holding a copy of the shipped PRL coordinated seed 0."""
+    models = tmp_path / "models"
+    shutil.copytree(policy_dir(METHOD, SIGNALS), policy_dir(METHOD, SIGNALS, models))
+    return models
+
+
+def replace_policy(folder: Path, data: bytes) -> Path:
+    """Write ``data`` as the folder's policy.pt and make the manifest's sha256 match it."""
+    path = folder / "policy.pt"
+    path.write_bytes(data)
+    man = read_manifest(folder)
+    man["sha256"] = sha256(path)
+    (folder / "manifest.json").write_text(json.dumps(man))
+    return path
+
+
+def saved(obj: Any, tmp_path: Path) -> bytes:
+    path = tmp_path / "obj.pt"
+    torch.save(obj, path)
+    return path.read_bytes()
+
+
+def wrong_name(state: dict) -> Any:
+    return {**state, "name": "x"}
+
+
+def missing_key(state: dict) -> Any:
+    return {k: v for k, v in state.items() if k != "q"}
+
+
+def wrong_shape(state: dict) -> Any:
+    q = dict(state["q"])
+    first = next(iter(q))
+    q[first] = torch.zeros(3, 3)
+    return {**state, "q": q}
+
+
+def a_list(state: dict) -> Any:
+    return [1, 2, 3]
+
+
+CORRUPTIONS = [wrong_name, missing_key, wrong_shape, a_list]
+
+
+@pytest.mark.parametrize("corrupt", CORRUPTIONS, ids=[c.__name__ for c in CORRUPTIONS])
+def test_ecodrive_run_refuses_a_policy_of_the_wrong_structure_before_anything_runs(corrupt, tmp_path, capsys):
+    models = shipped_copy(tmp_path)
+    folder = policy_dir(METHOD, SIGNALS, models)
+    state = torch.load(folder / "policy.pt", weights_only=True)
+    path = replace_policy(folder, saved(corrupt(state), tmp_path))
+    logs = tmp_path / "logs"
+    rc = main(["--profile", "smoke", "--methods", METHOD, "--signals", SIGNALS, "--models", str(models),
+               "--logs", str(logs), "--workers", "1"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and str(path) in err and f"not the state of a {METHOD} agent" in err
+    assert not logs.exists()  # refused before the run folder is made
+
+
+def test_a_raw_pickle_policy_is_refused_as_one_line_without_a_warning(tmp_path, capsys):
+    models = shipped_copy(tmp_path)
+    path = replace_policy(policy_dir(METHOD, SIGNALS, models), pickle.dumps({"name": METHOD}, protocol=4))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(CheckpointError, match="cannot be loaded|refused"):
+            load_torch(path)
+    assert not [w for w in caught if "pickle protocol" in str(w.message)]
+    logs = tmp_path / "logs"
+    rc = main(["--profile", "smoke", "--methods", METHOD, "--signals", SIGNALS, "--models", str(models),
+               "--logs", str(logs)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and str(path) in err and not logs.exists()
+
+
+def test_check_policy_accepts_every_shipped_policy():
+    from bench.harness.policies import MODELS
+
+    folders = sorted(MODELS.glob("*-*/s*"))
+    assert folders
+    for folder in folders:
+        check_policy(folder, folder.parent.name.split("-")[0])
+
+
+def test_the_worker_refuses_a_wrong_structure_as_a_checkpoint_error(tmp_path):
+    """The episode worker's own load (a file replaced after the parent's check): a
+    ``CheckpointError`` naming the file, not the agent's ValueError."""
+    folder = policy_dir(METHOD, SIGNALS, shipped_copy(tmp_path))
+    state = torch.load(folder / "policy.pt", weights_only=True)
+    path = replace_policy(folder, saved(wrong_name(state), tmp_path))
+    obs, act = policy_spaces(folder, read_manifest(folder))
+    env = SimpleNamespace(cfg=ScenarioConfig(signals=SIGNALS), observation_space=obs, action_space=act)
+    task = Task(METHOD, SIGNALS, Case(0, 1, 10.0, 0), str(tmp_path / "case.mcap"), str(folder), 0)
+    with pytest.raises(CheckpointError) as e:
+        task_agent(task, env)
+    assert str(path) in str(e.value) and "\n" not in str(e.value)
