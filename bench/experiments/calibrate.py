@@ -6,49 +6,32 @@ Prints mean energy and travel time per signal setting, the paper's values and th
 """
 from __future__ import annotations
 
-import json
 import sys
 import time
 
 import numpy as np
 
 from agents import BaselineAgent
-from bench.args import Parser
+from bench.args import Parser, int_in
 from bench.harness.cases import load
 from bench.harness.episode import make_env, run_episode
+from bench.harness.scenarios import parse_overrides
 from bench.paper import TABLE4
 
 PAPER_BASELINE = {s: TABLE4[("baseline", s)] for s in ("coordinated", "uncoordinated")}  # [Wh], [s]
 
 
-def parse_overrides(items: list[str]) -> dict:
-    """``a.b=v`` strings to a nested config dict (values parsed as JSON when possible)."""
-    out: dict = {}
-    for item in items:
-        if "=" not in item:
-            raise SystemExit(f"--set {item!r}: expected KEY=VALUE, e.g. ev.mass=1450")
-        key, raw = item.split("=", 1)
-        try:
-            val = json.loads(raw)
-        except json.JSONDecodeError:
-            val = raw
-        d = out
-        parts = key.split(".")
-        for p in parts[:-1]:
-            d = d.setdefault(p, {})
-        d[parts[-1]] = val
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
+    cases = load()
     ap = Parser(description=__doc__)
-    ap.add_argument("--cases", type=int, default=100, help="number of fixed cases per setting (1-100)")
+    ap.add_argument("--cases", type=int_in(1, len(cases)), default=len(cases),
+                    help=f"number of fixed cases per setting (1-{len(cases)})")
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="scenario config overrides")
     args = ap.parse_args(argv)
-    cases = load()
-    if not 1 <= args.cases <= len(cases):
-        ap.error(f"--cases {args.cases} is out of range; accepted: 1..{len(cases)}")
-    overrides = parse_overrides(args.set)
+    try:  # every override checked on both settings' corridors before anything runs
+        overrides = parse_overrides(None, args.set, list(PAPER_BASELINE))
+    except ValueError as e:
+        ap.error(str(e))
     agent = BaselineAgent()
     print(f"{'signals':14s} {'energy Wh':>10s} {'paper':>8s} {'dev':>7s} {'time s':>8s} {'paper':>8s} {'dev':>7s}")
     for signals, (e_ref, t_ref) in PAPER_BASELINE.items():

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from bench.args import Parser, fail, int_in, name, prog_name
+from bench.args import Parser, fail, float_in, int_in, name, prog_name
 from bench.harness.executors import EXECUTORS, run_local, run_ray
 from bench.harness.policies import MODELS, CheckpointError, policy_dir
 from bench.harness.provenance import git_sha
@@ -225,10 +225,10 @@ def write_table(rows: dict[str, dict[str, Any]], table: Path) -> pd.DataFrame:
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap = Parser(description=__doc__)
     ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS))
-    ap.add_argument("--mpr", nargs="+", type=float, default=list(MPRS), help="CV market-penetration rates, each in [0, 1]")
-    ap.add_argument("--demand", nargs="+", type=float, default=list(DEMANDS), help="arterial demands [veh/h/lane], each in (0, 1000]")
-    ap.add_argument("--reps", type=int, default=REPS, help="repetitions (traffic draws) per cell (>= 1)")
-    ap.add_argument("--duration", type=float, default=DURATION, help="simulated seconds per cell (10-7200)")
+    ap.add_argument("--mpr", nargs="+", type=float_in(0, 1), default=list(MPRS), help="CV market-penetration rates, each in [0, 1]")
+    ap.add_argument("--demand", nargs="+", type=float_in(0, 1000, lo_open=True), default=list(DEMANDS), help="arterial demands [veh/h/lane], each in (0, 1000]")
+    ap.add_argument("--reps", type=int_in(1), default=REPS, help="repetitions (traffic draws) per cell (>= 1)")
+    ap.add_argument("--duration", type=float_in(10, 7200), default=DURATION, help="simulated seconds per cell (10-7200)")
     ap.add_argument("--executor", default="local", choices=list(EXECUTORS))
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     ap.add_argument("--workers", type=int_in(1), default=2, help="parallel cells (>= 1)")
@@ -237,21 +237,15 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                          "(ablation, beyond the paper; cells get a '-stay' suffix)")
     ap.add_argument("--run-id", type=name, default="paper", help="run folder under --logs (cells go to <run-id>/mixed/)")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
-    args = ap.parse_args(argv)
-    bad = [m for m in args.mpr if not 0 <= m <= 1] + [d for d in args.demand if not 0 < d <= 1000]
-    if bad or not 10 <= args.duration <= 7200 or args.reps < 1:
-        ap.error(f"out of range: {bad or [args.duration, args.reps]}; accepted: mpr in [0, 1], demand in "
-                 f"(0, 1000] veh/h/lane, duration in [10, 7200] s, reps >= 1")
-    return args
+    return ap.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     for s in args.signals:
         if any(m > 0 for m in args.mpr) and not (policy_dir("prl", s) / "manifest.json").is_file():
-            print(f"error: no trained PRL policy for {s} ({policy_dir('prl', s)}); "
-                  f"train it: ecodrive train --method prl --signals {s}", file=sys.stderr)
-            return 2
+            return fail(prog_name(), f"no trained PRL policy for {s} ({policy_dir('prl', s)}); "
+                                     f"train it: ecodrive train --method prl --signals {s}")
     root = args.logs / args.run_id / "mixed"
     try:
         writable_dir(root)
@@ -266,8 +260,7 @@ def main(argv: list[str] | None = None) -> int:
             if c.path in rows:
                 _check(c, rows[c.path])
     except CellMismatch as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        return fail(prog_name(), str(e))
     todo = [c for c in cells if c.path not in rows]
     write_table(rows, table)
     t0 = time.perf_counter()
@@ -278,8 +271,7 @@ def main(argv: list[str] | None = None) -> int:
             rows[row["mcap"]] = row
             write_table(rows, table)  # a killed sweep leaves the table of its finished cells
     except CheckpointError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        return fail(prog_name(), str(e))
     df = write_table(rows, table)
     cols = [c for c in ("all_energy", "all_speed", "all_energy_per_km", "all_space_mean_speed", "all_unfinished",
                         "cv_longest_stall_s") if c in df.columns]

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.args import Parser, fail
+from bench.args import Parser, fail, float_in, int_in
 from bench.experiments.mixed import CI_DEMAND, CI_DURATION, MASTER_SEED, cell_scenario
 from bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
 from bench.io import Unwritable, writable_dir
@@ -108,18 +108,13 @@ def describe(df: pd.DataFrame) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__.split("\n")[0])
     ap.add_argument("--signals", default="coordinated", choices=SIGNALS)
-    ap.add_argument("--mpr", type=float, default=1.0, help="CV share in (0, 1]")
-    ap.add_argument("--demand", type=float, default=CI_DEMAND, help="veh/h/lane in (0, 1000]")
-    ap.add_argument("--duration", type=float, default=CI_DURATION, help="simulated seconds (10-7200)")
-    ap.add_argument("--rep", type=int, default=0, help="repetition (seed = bench.experiments.mixed.MASTER_SEED + rep), >= 0")
-    ap.add_argument("--at", type=int, nargs="+", default=[20, 100, 250], help="stall lengths [steps] to record, >= 1")
+    ap.add_argument("--mpr", type=float_in(0, 1, lo_open=True), default=1.0, help="CV share in (0, 1]")
+    ap.add_argument("--demand", type=float_in(0, 1000, lo_open=True), default=CI_DEMAND, help="veh/h/lane in (0, 1000]")
+    ap.add_argument("--duration", type=float_in(10, 7200), default=CI_DURATION, help="simulated seconds (10-7200)")
+    ap.add_argument("--rep", type=int_in(0), default=0, help="repetition (seed = bench.experiments.mixed.MASTER_SEED + rep), >= 0")
+    ap.add_argument("--at", type=int_in(1), nargs="+", default=[20, 100, 250], help="stall lengths [steps] to record, >= 1")
     ap.add_argument("--out", type=Path, default=None, help="write the records as parquet (must not exist)")
     args = ap.parse_args(argv)
-    if not 0 < args.mpr <= 1 or not 0 < args.demand <= 1000 or not 10 <= args.duration <= 7200 \
-            or args.rep < 0 or min(args.at) < 1:
-        ap.error(f"out of range: mpr {args.mpr}, demand {args.demand}, duration {args.duration}, rep {args.rep}, "
-                 f"at {args.at}; accepted: mpr in (0, 1], demand in (0, 1000] veh/h/lane, duration in [10, 7200] s, "
-                 f"rep >= 0, at >= 1")
     if args.out is not None and args.out.exists():
         ap.error(f"--out {args.out} exists; not overwriting it")
     if args.out is not None:
@@ -130,8 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rows, summary = trace(args.signals, args.mpr, args.demand, args.duration, tuple(args.at), args.rep)
     except CheckpointError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        return fail(ap.prog, str(e))
     df = pd.DataFrame(rows)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         cols = ["time", "vehicle", "stalled_s", "lane", "distance", "red", "mask", "k", "accel",

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from pyarrow import ArrowException
 
 from bench.io import atomic_json, atomic_parquet
 from envs.config import ConfigError
@@ -60,6 +61,29 @@ def _read(path: Path) -> dict[str, Any]:
     return stored
 
 
+def read_parquet(path: Path) -> pd.DataFrame:
+    """A stored (or finished job's) parquet table; ConfigError naming the file when it is missing,
+    truncated or not parquet."""
+    try:
+        return pd.read_parquet(path)
+    except (OSError, ValueError, ArrowException) as e:  # ArrowInvalid: a truncated or foreign file
+        why = " ".join(str(e).replace(str(path), "the file").split())
+        raise ConfigError(f"{path}: not a readable parquet table ({type(e).__name__}: {why}); restore it, or "
+                          f"move its folder away to run the job again") from None
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    """A stored JSON object; ConfigError naming the file otherwise."""
+    try:
+        data = json.loads(path.read_text())
+        if not isinstance(data, dict):
+            raise ValueError(f"a JSON {type(data).__name__}, expected an object")
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"{path}: cannot be read ({e}); restore it from git or move its folder away to run "
+                          f"the job again") from None
+    return data
+
+
 def restore(store: Path, study: str, label: str, identity: dict[str, Any], log_dir: Path) -> bool:
     """Write a stored job's results into its (empty or unfinished) log folder; False when the store
     has no such job. ConfigError when the stored job cannot be read or holds another identity."""
@@ -70,8 +94,10 @@ def restore(store: Path, study: str, label: str, identity: dict[str, Any], log_d
     want = json.loads(json.dumps(identity, default=float))
     if stored["job"] != want:  # a hash collision, or an edited file
         raise ConfigError(f"{src}: holds a job with other values ({stored['job']}); move it away")
+    episodes = read_parquet(src / "episodes.parquet")  # every stored file read before anything is written
+    read_parquet(src / "metrics.parquet")
+    _read_json(src / "manifest.json")
     log_dir.mkdir(parents=True, exist_ok=True)
-    episodes = pd.read_parquet(src / "episodes.parquet")
     episodes["mcap"] = ""  # the store keeps no episode logs
     atomic_parquet(episodes, log_dir / "episodes.parquet")
     shutil.copyfile(src / "metrics.parquet", log_dir / "metrics.parquet")
@@ -84,7 +110,8 @@ def restore(store: Path, study: str, label: str, identity: dict[str, Any], log_d
 def save(store: Path, study: str, label: str, identity: dict[str, Any], log_dir: Path) -> Path | None:
     """Copy a finished job's small results from its log folder into the store, all at once (a
     folder renamed into place). A job already stored is left as it is; returns the folder, or None
-    when the log folder lacks a file (a job finished before its log folder kept one)."""
+    when the log folder lacks a file (a job finished before its log folder kept one). ConfigError
+    naming the file when one cannot be read (nothing is stored then)."""
     dst = folder(store, study, label, identity)
     if dst.is_dir():
         return dst
@@ -92,13 +119,19 @@ def save(store: Path, study: str, label: str, identity: dict[str, Any], log_dir:
             "metrics.parquet": log_dir / "metrics.parquet", "manifest.json": log_dir / POLICY_MANIFEST}
     if not all(p.is_file() for p in srcs.values()):
         return None
+    try:  # everything read before anything is written
+        stored = json.loads(srcs["job.json"].read_text())
+        if not isinstance(stored.get("job"), dict) or not isinstance(stored.get("row"), dict):
+            raise ValueError("no 'job' and 'row' objects")
+    except (OSError, ValueError, AttributeError) as e:
+        raise ConfigError(f"{srcs['job.json']}: a finished job's record that cannot be read "
+                          f"({type(e).__name__}: {e}); move its folder away to run the job again") from None
+    episodes = read_parquet(srcs["episodes.parquet"])
     tmp = dst.parent / f".{dst.name}.part-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    stored = json.loads(srcs["job.json"].read_text())
     row = {k: v for k, v in stored["row"].items() if k not in ("log_dir", "restored_from")}
     atomic_json({"job": stored["job"], "row": row}, tmp / "job.json", default=float)
-    episodes = pd.read_parquet(srcs["episodes.parquet"])
     atomic_parquet(episodes.drop(columns=["mcap"], errors="ignore"), tmp / "episodes.parquet")
     for name in ("metrics.parquet", "manifest.json"):
         shutil.copyfile(srcs[name], tmp / name)

@@ -38,9 +38,10 @@ from typing import Any
 import pandas as pd
 from tqdm import tqdm
 
-from bench.args import Parser, int_in, name
+from bench.args import Parser, fail, int_in, name, prog_name
 from bench.experiments import store
 from bench.harness.executors import EXECUTORS, run_local, run_ray
+from bench.harness.policies import CheckpointError
 from bench.io import atomic_json, atomic_parquet
 from bench.logs.mcaplog import episode_summary
 from bench.training.recipes import VALIDATION_CASES, recipe
@@ -203,12 +204,13 @@ def is_finished(job: Job) -> bool:
 
 
 def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
-    """``sweep.parquet`` and ``episodes.parquet`` of the study folder, replaced atomically."""
+    """``sweep.parquet`` and ``episodes.parquet`` of the study folder, replaced atomically; a
+    ConfigError naming a finished job's ``episodes.parquet`` that cannot be read."""
     df = pd.DataFrame(list(rows.values()))
     if not df.empty:
         df = df.sort_values(["config", "seed"], ignore_index=True)
     atomic_parquet(df, root / "sweep.parquet")
-    episodes = [pd.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()]
+    episodes = [store.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()]
     if episodes:
         atomic_parquet(pd.concat(episodes, ignore_index=True), root / "episodes.parquet")
     return df
@@ -218,7 +220,7 @@ def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
 def _store(root: Path, job: Job) -> None:
     try:
         store.save(root, job.study, job.label, _identity(job), Path(job.log_dir))
-    except OSError as e:  # the results stay in the log folder; the next sweep stores them
+    except (OSError, ConfigError) as e:  # the results stay in the log folder; the next sweep stores them
         print(f"warning: could not store {job.label} under {root}: {e}", file=sys.stderr)
 
 
@@ -262,13 +264,13 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--forms", nargs="+", default=list(REWARDS), help=f"reward study: forms among {', '.join(REWARDS)}")
     ap.add_argument("--phi", nargs="+", type=float, default=list(PHIS), help="reward study: phi values [Wh/s]")
     ap.add_argument("--values", nargs="+", type=float, default=list(HEATMAP_VALUES), help="heatmap: |r_p^s| = |r_p^j| grid")
-    ap.add_argument("--seeds", nargs="+", type=int, default=None, help="training seeds (reward: 0 1 2; heatmap: 0)")
-    ap.add_argument("--episodes", type=int, default=None,
+    ap.add_argument("--seeds", nargs="+", type=int_in(0), default=None, help="training seeds (reward: 0 1 2; heatmap: 0)")
+    ap.add_argument("--episodes", type=int_in(1, 100_000), default=None,
                     help="training episodes per job (1-100000; default: PRL's recipe's, or 1000 with --paper)")
     ap.add_argument("--paper", action="store_true",
                     help="train by the paper's Table 2 and 1000 episodes instead of PRL's recipe")
-    ap.add_argument("--cases", type=int, default=100, help="fixed test cases evaluated per job (0-100)")
-    ap.add_argument("--validation-cases", type=int, default=VALIDATION_CASES, help="validation cases per training checkpoint (1-100)")
+    ap.add_argument("--cases", type=int_in(0, 100), default=100, help="fixed test cases evaluated per job (0-100)")
+    ap.add_argument("--validation-cases", type=int_in(1, 100), default=VALIDATION_CASES, help="validation cases per training checkpoint (1-100)")
     ap.add_argument("--max-episode-time", type=float, default=None, help="episode truncation [s] (default: the scenario's)")
     ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
@@ -285,11 +287,6 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
             ap.error(f"{flag} {value!r} is not accepted; choose one of {', '.join(accepted)}")
     if args.seeds is None:
         args.seeds = [0, 1, 2] if args.study == "reward" else [0]
-    if (args.episodes is not None and not 1 <= args.episodes <= 100_000 or not 0 <= args.cases <= 100 or args.workers < 1 or min(args.seeds) < 0
-            or not 1 <= args.validation_cases <= 100):
-        ap.error(f"out of range: --episodes {'(default)' if args.episodes is None else args.episodes} (1-100000), --cases {args.cases} (0-100), "
-                 f"--workers {args.workers} (>= 1), --seeds {args.seeds} (>= 0), "
-                 f"--validation-cases {args.validation_cases} (1-100)")
     return args
 
 
@@ -298,22 +295,24 @@ def main(argv: list[str] | None = None) -> int:
     try:
         todo = jobs(args.study, args)
     except ConfigError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        return fail(prog_name(), str(e))
     root = Path(args.logs) / args.run_id / args.study
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        print(f"error: cannot write {root}: {e.strerror}", file=sys.stderr)
-        return 2
+        return fail(prog_name(), f"cannot write {root}: {e.strerror}")
     try:
-        done = [job for job in todo if is_finished(job)]
-        todo = [job for job in todo if job not in done]
-        restored = [job for job in todo if store.restore(args.store, job.study, job.label, _identity(job),
-                                                         Path(job.log_dir))]
-    except ConfigError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        return _sweep(args, todo, root)
+    except (ConfigError, CheckpointError) as e:  # a stored job, a finished table or a run's checkpoint
+        return fail(prog_name(), str(e))
+
+
+def _sweep(args: argparse.Namespace, todo: list[Job], root: Path) -> int:
+    """Restore, run and tabulate the jobs; a ConfigError or CheckpointError names the bad file."""
+    done = [job for job in todo if is_finished(job)]
+    todo = [job for job in todo if job not in done]
+    restored = [job for job in todo if store.restore(args.store, job.study, job.label, _identity(job),
+                                                     Path(job.log_dir))]
     if restored:
         print(f"{len(restored)} finished job(s) restored from {args.store / args.study}, not trained: "
               f"{', '.join(j.label for j in restored)}", flush=True)

@@ -17,14 +17,13 @@ of training.
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench.args import Parser
-from bench.harness.policies import MODELS, CheckpointError, load_policy, load_torch, policy_dir
+from bench.args import Parser, fail, int_in
+from bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
 from envs.action import LATERAL
 
 HEADS = {-1: "left", 0: "stay", 1: "right"}
@@ -79,8 +78,8 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
 
     from agents.registry import make_agent
     from bench.harness.episode import make_env
-    from bench.training.train import validation_cases
-    from envs.config import backfill
+    from bench.training.train import load_agent, read_checkpoint, validation_cases
+    from envs.config import ConfigError, backfill
 
     torch.set_num_threads(1)
     agent_config: dict[str, Any] = {}
@@ -88,22 +87,31 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
         ckpt = run / "checkpoint.pt"
         if not ckpt.is_file():
             raise CheckpointError(f"{run}: no checkpoint.pt (a training run folder has one)")
-        saved = load_torch(ckpt)
-        ident = saved.get("identity", {})
-        if (ident.get("method"), ident.get("signals")) != (method, signals):
-            raise CheckpointError(f"{ckpt}: a run of {ident.get('method')}/{ident.get('signals')}, "
+        saved = read_checkpoint(ckpt)  # its structure checked: a CheckpointError naming the file otherwise
+        ident = saved["identity"]
+        if (ident["method"], ident["signals"]) != (method, signals):
+            raise CheckpointError(f"{ckpt}: a run of {ident['method']}/{ident['signals']}, "
                                   f"not {method}/{signals}")
         state, scenario = saved["agent"], backfill(ident.get("scenario", {}))
         agent_config = ident.get("agent_config", {})  # e.g. a twin_q run's second critic
         source = f"{ckpt} (episode {saved['episode']})"
+        where = config_from = ckpt
     else:
         state, manifest = load_policy(policy_dir(method, signals, models), method)
         scenario = backfill(manifest.get("scenario", {}))
         source = f"models/{method}-{signals} (episode {manifest.get('selected_episode', '?')})"
-    env = make_env(method, signals, scenario)
-    agent = make_agent(method, env.observation_space, env.action_space, **agent_config)
-    agent.load_state_dict(state)
+        where = policy_dir(method, signals, models) / "policy.pt"
+        config_from = where.with_name("manifest.json")
     try:
+        env = make_env(method, signals, scenario)
+    except ConfigError as e:
+        raise CheckpointError(f"{config_from}: its scenario is not accepted ({e})") from None
+    try:
+        try:
+            agent = make_agent(method, env.observation_space, env.action_space, **agent_config)
+        except (TypeError, ValueError) as e:
+            raise CheckpointError(f"{config_from}: its agent_config is not accepted ({e})") from None
+        load_agent(agent, state, where)
         eps = [rollout(env, agent, case) for case in validation_cases(env.cfg, cases)]
     finally:
         env.close()
@@ -134,20 +142,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__.split("\n")[0])
     ap.add_argument("--method", default="prl", help="prl or mpdqn")
     ap.add_argument("--signals", default="coordinated", help="coordinated or uncoordinated")
-    ap.add_argument("--cases", type=int, default=10, help="validation cases to drive (1-100)")
+    ap.add_argument("--cases", type=int_in(1, 100), default=10, help="validation cases to drive (1-100)")
     ap.add_argument("--run", type=Path, default=None, help="a training run folder: use its latest networks")
     args = ap.parse_args(argv)
     if args.method not in ("prl", "mpdqn"):
         ap.error(f"--method {args.method!r} is not accepted; accepted: prl, mpdqn (P-DQN heads)")
     if args.signals not in SIGNALS:
         ap.error(f"--signals {args.signals!r} is not accepted; accepted: {', '.join(SIGNALS)}")
-    if not 1 <= args.cases <= 100:
-        ap.error(f"--cases {args.cases} is out of range; accepted: 1..100")
     try:
         print(format_report(check(args.method, args.signals, args.cases, args.run)))
     except CheckpointError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        return fail(ap.prog, str(e))
     return 0
 
 

@@ -29,6 +29,7 @@ import json
 import os
 import sys
 import time
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,7 @@ from tqdm import tqdm
 
 from agents.device import parse as parse_device
 from agents.registry import LEARNING, make_agent
-from bench.args import Parser, fail
+from bench.args import Parser, fail, int_in
 from bench.harness.cases import Case
 from bench.harness.episode import deep_merge, make_env, run_episode
 from bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
@@ -47,7 +48,7 @@ from bench.harness.provenance import git_sha, package_versions
 from bench.io import Unwritable, atomic_parquet, atomic_torch_save, writable_dir
 from bench.logs.mcaplog import write_train_log
 from bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
-from envs.config import SIGNALS, added_values, backfill, flat
+from envs.config import SIGNALS, ConfigError, added_values, backfill, flat
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
 VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/harness/cases.json's test cases)
@@ -57,6 +58,11 @@ FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
 # "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
 # "return" is the greedy return under the training reward, shaping penalties included.
 SELECTION = {"objective": -1, "return": +1}
+# What ``_checkpoint`` writes: key -> type. ``best`` (a dict) is optional; so are the identity's
+# ``agent_config`` and ``scenario`` (dicts), which older checkpoints lack.
+CHECKPOINT_KEYS: dict[str, type | tuple[type, ...]] = {
+    "identity": dict, "agent": dict, "replay": str, "rng": dict, "rows": list, "episode": int, "wall_time": (int, float)}
+IDENTITY_KEYS: dict[str, type] = {"method": str, "signals": str, "seed": int}
 
 
 def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
@@ -92,6 +98,61 @@ def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
     return out
 
 
+def read_checkpoint(path: Path) -> dict[str, Any]:
+    """A run folder's ``checkpoint.pt``, read as data (``load_torch``) and checked to have the
+    structure ``_checkpoint`` writes; anything else is a ``CheckpointError`` naming the file and
+    what was expected. Nothing in the folder is touched."""
+    state = load_torch(path)
+    expected = (f"ecodrive train writes a dict of {', '.join(CHECKPOINT_KEYS)}, "
+                f"its identity naming {', '.join(IDENTITY_KEYS)}")
+
+    def wrong(what: str) -> CheckpointError:
+        return CheckpointError(f"{path}: not a training checkpoint ({what}); {expected}")
+
+    def kind(value: Any) -> str:
+        return type(value).__name__
+
+    def bad(d: dict, keys: dict[str, Any], owner: str = "") -> list[str]:
+        whose, has = (f"{owner}'s ", f"{owner} has ") if owner else ("", "")
+        missing = [k for k in keys if k not in d]
+        typed = [f"{whose}{k} is a {kind(d[k])}" for k, t in keys.items()
+                 if k in d and (not isinstance(d[k], t) or (t is int and isinstance(d[k], bool)))]
+        return typed + ([f"{has}no {', '.join(missing)}"] if missing else [])
+
+    if not isinstance(state, dict):
+        raise wrong(f"it holds a {kind(state)}")
+    problems = bad(state, CHECKPOINT_KEYS)
+    if problems:
+        raise wrong("; ".join(problems))
+    ident = state["identity"]
+    problems = bad(ident, IDENTITY_KEYS, "identity")
+    problems += [f"identity's {k} is a {kind(ident[k])}" for k in ("agent_config", "scenario")
+                 if k in ident and not isinstance(ident[k], dict)]
+    if "best" in state and not isinstance(state["best"], dict):
+        problems.append(f"best is a {kind(state['best'])}")
+    if not all(isinstance(r, dict) for r in state["rows"]):
+        problems.append("rows holds something other than dicts")
+    if state["episode"] < 0:
+        problems.append(f"episode is {state['episode']}")
+    if Path(state["replay"]).name != state["replay"] or state["replay"] in ("", ".", ".."):
+        problems.append(f"replay {state['replay']!r} is not a file name in the run folder")
+    if problems:
+        raise wrong("; ".join(problems))
+    return state
+
+
+def load_agent(agent, state: dict[str, Any], path: Path) -> None:
+    """``agent.load_state_dict(state)``; a state that does not fit the agent (another method's,
+    other network shapes, missing entries) is a ``CheckpointError`` naming ``path``."""
+    try:
+        agent.load_state_dict(state)
+    except (KeyError, ValueError, RuntimeError, TypeError, AttributeError, IndexError) as e:
+        why = " ".join(str(e).split())  # torch's shape errors span lines
+        why = why if len(why) <= 300 else why[:297] + "..."
+        raise CheckpointError(f"{path}: its agent state does not fit a {agent.name} agent "
+                              f"({type(e).__name__}: {why})") from None
+
+
 def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
@@ -108,6 +169,8 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     holds the networks (``agents.device``; the CPU unless given)."""
     if select not in SELECTION:
         raise ValueError(f"select {select!r} is not accepted; choose one of {', '.join(SELECTION)}")
+    ckpt = out / "checkpoint.pt"
+    state = read_checkpoint(ckpt) if ckpt.exists() else None  # a file that is no checkpoint: refused before anything runs
     torch.set_num_threads(1)
     env = make_env(method, signals, scenario)
     decay = {} if method not in ("prl", "mpdqn", "dqn") else {"eps_decay_episodes": episodes}
@@ -120,33 +183,49 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     identity = {"method": method, "signals": signals, "seed": seed, "agent_config": agent_config or {},
                 "scenario": env.cfg.to_dict()}
     out.mkdir(parents=True, exist_ok=True)
-    ckpt = out / "checkpoint.pt"
     rng = np.random.default_rng([seed, 7919])  # episode seeds; separate stream from the agent's
     rows: list[dict[str, Any]] = []
     start, wall = 0, 0.0
     best: dict[str, Any] = {}
-    if ckpt.exists():
-        state = load_torch(ckpt)
-        kept = added_values(state["identity"].get("scenario", {}))
-        if deep_merge(env.cfg.to_dict(), kept) != env.cfg.to_dict():  # the run keeps what it started with
+    if state is not None:
+        try:
+            try:
+                kept = added_values(state["identity"].get("scenario", {}))
+                if deep_merge(env.cfg.to_dict(), kept) != env.cfg.to_dict():  # the run keeps what it started with
+                    env.close()
+                    env = make_env(method, signals, deep_merge(kept, scenario or {}))  # explicit settings still win
+                    identity["scenario"] = env.cfg.to_dict()
+                    if progress:
+                        print(f"note: this run keeps the behaviour it started with: {', '.join(f'{k}={v}' for k, v in flat(kept).items())}",
+                              file=sys.stderr)
+                saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
+            except (ConfigError, AttributeError, TypeError, KeyError) as e:
+                raise CheckpointError(f"{ckpt}: its identity's scenario is not accepted ({e})") from None
+            if saved != identity:
+                diff = [k for k in identity if saved.get(k) != identity[k]]
+                raise CheckpointError(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
+                                      f"use another --out or remove the folder")
+            replay = out / state["replay"]
+            if not replay.is_file():
+                raise CheckpointError(f"{ckpt}: names the replay buffer {state['replay']}, which is not in {out} "
+                                      f"(a partial run folder); use another --out or remove the folder")
+            load_agent(agent, state["agent"], ckpt)
+            try:
+                agent.replay.load(replay)
+            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+                raise CheckpointError(f"{replay}: replay buffer cannot be loaded ({type(e).__name__}: {e}); "
+                                      f"use another --out or remove the folder") from None
+            try:
+                rng.bit_generator.state = state["rng"]
+            except (ValueError, TypeError, KeyError) as e:
+                raise CheckpointError(f"{ckpt}: its rng state is not a PCG64 state ({e})") from None
+            rows, start, wall = state["rows"], state["episode"], state["wall_time"]
+            best = state.get("best", {})
+            if best and "episode" in best:  # a checkpoint that kept one criterion's best: return
+                best = {"return": best}
+        except CheckpointError:
             env.close()
-            env = make_env(method, signals, deep_merge(kept, scenario or {}))  # explicit settings still win
-            identity["scenario"] = env.cfg.to_dict()
-            if progress:
-                print(f"note: this run keeps the behaviour it started with: {', '.join(f'{k}={v}' for k, v in flat(kept).items())}",
-                      file=sys.stderr)
-        saved = {**state["identity"], "scenario": backfill(state["identity"].get("scenario", {}))}
-        if saved != identity:
-            diff = [k for k in identity if saved.get(k) != identity[k]]
-            raise CheckpointError(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
-                                  f"use another --out or remove the folder")
-        agent.load_state_dict(state["agent"])
-        agent.replay.load(out / state["replay"])
-        rng.bit_generator.state = state["rng"]
-        rows, start, wall = state["rows"], state["episode"], state["wall_time"]
-        best = state.get("best", {})
-        if best and "episode" in best:  # a checkpoint that kept one criterion's best: return
-            best = {"return": best}
+            raise
     bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
     done_here = 0
     t_call = time.perf_counter()
@@ -253,12 +332,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("--method", required=True, help=f"one of {', '.join(LEARNING)}")
     ap.add_argument("--signals", required=True, help=f"one of {', '.join(SIGNALS)}")
-    ap.add_argument("--episodes", type=int, default=None,
+    ap.add_argument("--episodes", type=int_in(1, 100_000), default=None,
                     help="training episodes (1-100000; default: the recipe's, bench.training.recipes)")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the agent and of the episode draws (>= 0)")
-    ap.add_argument("--checkpoint-every", type=int, default=25, help="episodes between checkpoints (>= 1)")
+    ap.add_argument("--seed", type=int_in(0), default=0, help="seed of the agent and of the episode draws (>= 0)")
+    ap.add_argument("--checkpoint-every", type=int_in(1), default=25, help="episodes between checkpoints (>= 1)")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
-    ap.add_argument("--validation-cases", type=int, default=VALIDATION_CASES, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
+    ap.add_argument("--validation-cases", type=int_in(0, 100), default=VALIDATION_CASES, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
     ap.add_argument("--select", default="objective", choices=list(SELECTION),
                     help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
     ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
@@ -278,12 +357,6 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--signals {args.signals!r} is not accepted; choose one of {', '.join(SIGNALS)}")
     rec, chosen = recipe(args.method, args.signals), recipe(args.method, args.signals, paper=args.paper)
     args.episodes = chosen.episodes if args.episodes is None else args.episodes
-    if not 1 <= args.episodes <= 100_000:
-        ap.error(f"--episodes {args.episodes} is out of range; accepted: 1..100000")
-    if args.seed < 0 or args.checkpoint_every < 1:
-        ap.error(f"--seed {args.seed} must be >= 0 and --checkpoint-every {args.checkpoint_every} >= 1")
-    if not 0 <= args.validation_cases <= 100:
-        ap.error(f"--validation-cases {args.validation_cases} is out of range; accepted: 0..100")
     try:
         given = agent_overrides(args.method, args.set)
         parse_device(args.device)
@@ -311,8 +384,7 @@ def main(argv: list[str] | None = None) -> int:
                    validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select,
                    device=args.device)
     except CheckpointError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        return fail(ap.prog, str(e))
     tail = df.tail(FINAL_WINDOW)
     print(json.dumps({"episodes": len(df), "energy": round(float(tail.energy.mean()), 2),
                       "travel_time": round(float(tail.travel_time.mean()), 2)}))

@@ -13,7 +13,6 @@ seed before any gets the next one.
 """
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import time
@@ -21,8 +20,8 @@ from pathlib import Path
 
 from agents.device import parse as parse_device
 from agents.registry import LEARNING
-from bench.args import Parser, int_in
-from bench.harness.policies import MODELS, policy_dir
+from bench.args import Parser, fail, int_in
+from bench.harness.policies import MODELS, CheckpointError, policy_dir, read_manifest
 from bench.training.recipes import is_recipe, recipe
 from bench.training.train import RUNS
 from envs.config import SIGNALS
@@ -38,18 +37,31 @@ def stale(trained: dict, method: str, signals: str) -> list[str]:
     return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict())
 
 
+def manifest(folder: Path) -> dict | None:
+    """A policy folder's manifest.json, None where there is none; a ``CheckpointError`` naming the
+    file where it is not a JSON object or its agent_config or scenario is not an object (it is never
+    trained over: that would replace the policy)."""
+    if not (folder / "manifest.json").is_file():
+        return None
+    m = read_manifest(folder)
+    for key in ("agent_config", "scenario"):
+        if m.get(key) is not None and not isinstance(m[key], dict):
+            raise CheckpointError(f"{folder / 'manifest.json'}: {key} is a JSON {type(m[key]).__name__}, "
+                                  f"expected an object; restore the file or move the folder away")
+    return m
+
+
 def is_reference_seed(method: str, signals: str, seed: int, episodes: int | None = None, models: Path = MODELS,
                       paper: bool = False) -> bool:
     """A policy in ``models`` from this seed, trained by the recipe (``paper``: the paper's;
     ``episodes`` given: that episode count instead of the recipe's) under today's scenario."""
-    man = policy_dir(method, signals, models, seed) / "manifest.json"
-    if not man.is_file():
+    m = manifest(policy_dir(method, signals, models, seed))
+    if m is None:
         return False
-    m = json.loads(man.read_text())
     r = recipe(method, signals, paper)
     return (m.get("seed") == seed and m.get("episodes") == (r.episodes if episodes is None else episodes)
             and is_recipe(method, signals, m.get("agent_config") or {}, paper)
-            and not stale(m.get("scenario", {}), method, signals))
+            and not stale(m.get("scenario") or {}, method, signals))
 
 
 def plan(methods: list[str], seeds: list[int], episodes: int | None = None, runs: Path = RUNS,
@@ -86,13 +98,16 @@ def main(argv: list[str] | None = None) -> int:
         if off:
             ap.error(f"{'--paper' if args.paper else f'--episodes {args.episodes}'} trains experiments, not the "
                      f"recipe, for {', '.join(off)}; give --models DIR (they never go to the shipped models/)")
-    todo = plan(args.methods, args.seeds, args.episodes, models=args.models, paper=args.paper)
+    try:
+        todo = plan(args.methods, args.seeds, args.episodes, models=args.models, paper=args.paper)
+    except CheckpointError as e:
+        return fail(ap.prog, str(e))
     for m, s, sd in todo:
-        man, diff = policy_dir(m, s, args.models, sd) / "manifest.json", []
-        if man.is_file():
-            diff = stale(json.loads(man.read_text()).get("scenario", {}), m, s)
+        folder = policy_dir(m, s, args.models, sd)
+        found = manifest(folder)  # read without error by plan()
+        diff = stale(found.get("scenario") or {}, m, s) if found is not None else []
         if diff:  # a policy from another seed or episode count is not "older"
-            print(f"note: {man.parent} was trained under an older scenario (differs in {', '.join(diff)}); "
+            print(f"note: {folder} was trained under an older scenario (differs in {', '.join(diff)}); "
                   f"retraining. If {RUNS / f'{m}-{s}-s{sd}'} holds that finished run, move it away "
                   f"first, or it is exported again", flush=True)
     running: list[tuple[subprocess.Popen, str]] = []

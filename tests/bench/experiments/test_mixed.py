@@ -1,7 +1,11 @@
 from __future__ import annotations
 
-import pandas as pd
+import sys
 
+import pandas as pd
+import pytest
+
+from bench.experiments import mixed
 from bench.experiments.mixed import Cell, _done, run_cell
 from bench.logs.mcaplog import read_log
 from bench.training.train import train
@@ -233,3 +237,28 @@ def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
                 str(policy_dir("prl", "uncoordinated")))
     row = run_cell(cell)
     assert row["cv_vehicles"] > 0 and row["collisions"] == 0 and row["teleports"] == 0
+
+@pytest.mark.parametrize("argv, flag, value, accepted", [
+    (["--reps", "0"], "--reps", "'0'", "1.."),
+    (["--reps", "nan"], "--reps", "'nan'", "1.."),
+    (["--duration", "5"], "--duration", "'5'", "[10, 7200]"),
+    (["--mpr", "nan"], "--mpr", "'nan'", "[0, 1]"),
+    (["--mpr", "0.2", "2"], "--mpr", "'2'", "[0, 1]"),
+    (["--demand", "0"], "--demand", "'0'", "(0, 1000]"),
+])
+def test_a_bad_mixed_flag_names_just_itself(argv, flag, value, accepted, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["ecodrive mixed"])
+    with pytest.raises(SystemExit) as e:
+        mixed.parse(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2
+    assert err == [f"ecodrive mixed: error: argument {flag}: {value} is out of range; accepted: {accepted}"]
+
+
+def test_mixed_errors_after_parsing_start_with_the_command(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["ecodrive mixed"])
+    monkeypatch.setattr(mixed, "policy_dir", lambda method, signals: tmp_path / "none" / f"{method}-{signals}")
+    assert mixed.main(["--signals", "coordinated", "--mpr", "0.5", "--logs", str(tmp_path / "logs")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ecodrive mixed: error: no trained PRL policy for coordinated")
+    assert not (tmp_path / "logs").exists()

@@ -241,3 +241,74 @@ def test_a_stored_job_is_restored_not_trained(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and str(kept) in err and "cannot be read" in err
     assert not (tmp_path / "d" / "t" / "reward" / "r-phi1-s0" / "job.json").exists()
+
+
+@pytest.mark.parametrize("flag, value, accepted", [
+    ("--seeds", "nan", "0.."), ("--seeds", "-1", "0.."),
+    ("--episodes", "0", "1..100000"), ("--episodes", "nan", "1..100000"),
+    ("--cases", "101", "0..100"), ("--validation-cases", "0", "1..100"),
+])
+def test_a_bad_count_names_just_its_flag_value_and_range(flag, value, accepted, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setattr(sys, "argv", ["ecodrive sweep"])
+    with pytest.raises(SystemExit) as e:
+        sweep.parse(["reward", flag, value])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2
+    assert err == [f"ecodrive sweep: error: argument {flag}: {value!r} is out of range; accepted: {accepted}"]
+
+
+def test_errors_after_parsing_start_with_the_command(tmp_path, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setattr(sys, "argv", ["ecodrive sweep"])
+    assert sweep.main(["heatmap", "--values", "2000", "--logs", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ecodrive sweep: error: ") and "2000" in err[0]
+    blocker = tmp_path / "blocker"
+    blocker.write_text("keep")
+    assert sweep.main(["heatmap", "--values", "10", "--logs", str(blocker)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ecodrive sweep: error: cannot write")
+
+
+@pytest.mark.parametrize("name", ["episodes.parquet", "metrics.parquet"])
+def test_a_truncated_stored_parquet_is_one_line_and_nothing_is_restored(name, tmp_path, monkeypatch, capsys):
+    """A stored job whose parquet file was cut short: one line naming it, exit 2, no job trained,
+    the log folder and the store as they were."""
+    import sys
+
+    monkeypatch.setattr(sys, "argv", ["ecodrive sweep"])
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(sweep, "run_local", lambda *a, **k: pytest.fail("a job was run"))
+    argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--episodes", "2", "--cases", "1",
+            "--validation-cases", "1", "--max-episode-time", "30", "--workers", "1", "--store", str(tmp_path / "kept"),
+            "--logs", str(tmp_path / "logs"), "--run-id", "t"]
+    (job,) = sweep.jobs("reward", sweep.parse(argv))
+    src = store.folder(tmp_path / "kept", job.study, job.label, sweep._identity(job))
+    src.mkdir(parents=True)
+    identity = json.loads(json.dumps(sweep._identity(job), default=float))
+    (src / "job.json").write_text(json.dumps({"job": identity, "row": {"config": job.name, "seed": 0}}))
+    pd.DataFrame({"energy": [1.0]}).to_parquet(src / "episodes.parquet")
+    pd.DataFrame({"episode": [0, 1]}).to_parquet(src / "metrics.parquet")
+    (src / "manifest.json").write_text("{}")
+    (src / name).write_bytes((src / name).read_bytes()[:30])
+    before = {p.name: p.read_bytes() for p in src.iterdir()}
+    assert sweep.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"ecodrive sweep: error: {src / name}: not a readable parquet table")
+    assert {p.name: p.read_bytes() for p in src.iterdir()} == before
+    assert not (tmp_path / "logs" / "t" / "reward" / job.label).exists() and not (tmp_path / "runs").exists()
+
+
+def test_a_truncated_finished_episodes_table_is_one_line(tmp_path, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setattr(sys, "argv", ["ecodrive sweep"])
+    root = tmp_path / "logs" / "t" / "heatmap"
+    (root / "old-s0").mkdir(parents=True)
+    (root / "old-s0" / "job.json").write_text(json.dumps({"job": {}, "row": {"config": "old", "seed": 0}}))
+    (root / "old-s0" / "episodes.parquet").write_bytes(b"PAR1")
+    with pytest.raises(ConfigError, match="old-s0/episodes.parquet: not a readable parquet table"):
+        sweep.write_tables(root, sweep.finished(root))

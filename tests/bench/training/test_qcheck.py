@@ -81,3 +81,49 @@ def test_a_run_folder_needs_no_shipped_policy(tmp_path):
     assert res["all"]["steps"] >= 1
     with pytest.raises(Exception, match="a run of mpdqn/coordinated, not prl/coordinated"):
         check("prl", "coordinated", 1, run=tmp_path / "run")
+
+
+def _run_folder(tmp_path, content):
+    import torch
+
+    run = tmp_path / "run"
+    run.mkdir()
+    torch.save(content, run / "checkpoint.pt")
+    return run
+
+
+_KEYS = {"replay": "replay-00001.npz", "rng": {}, "rows": [], "episode": 1, "wall_time": 0.0}
+_IDENT = {"method": "prl", "signals": "coordinated", "seed": 0}
+
+
+@pytest.mark.parametrize("content, words", [
+    ([1, 2], "not a training checkpoint (it holds a list)"),
+    ({"identity": "prl", "agent": {}, **_KEYS}, "not a training checkpoint (identity is a str)"),
+    ({"identity": _IDENT, **_KEYS}, "not a training checkpoint (no agent)"),
+    ({"identity": _IDENT, "agent": {"name": "prl"}, **_KEYS}, "its agent state does not fit a prl agent"),
+    ({"identity": {**_IDENT, "scenario": {"lanes": 99}}, "agent": {}, **_KEYS}, "its scenario is not accepted (lanes=99"),
+    ({"identity": {**_IDENT, "agent_config": {"frob": 1}}, "agent": {}, **_KEYS}, "its agent_config is not accepted"),
+])
+def test_a_run_folder_whose_checkpoint_is_no_checkpoint_is_one_line(content, words, tmp_path, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setattr(sys, "argv", ["ecodrive qcheck"])
+    run = _run_folder(tmp_path, content)
+    before = (run / "checkpoint.pt").read_bytes()
+    assert main(["--cases", "1", "--run", str(run)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ecodrive qcheck: error: ")
+    assert str(run / "checkpoint.pt") in err[0] and words in err[0]
+    assert (run / "checkpoint.pt").read_bytes() == before
+
+
+@pytest.mark.parametrize("value", ["nan", "0", "101"])
+def test_bad_cases_names_the_flag_value_and_range(value, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setattr(sys, "argv", ["ecodrive qcheck"])
+    with pytest.raises(SystemExit) as e:
+        main(["--cases", value])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1
+    assert err[0] == f"ecodrive qcheck: error: argument --cases: {value!r} is out of range; accepted: 1..100"
