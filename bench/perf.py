@@ -109,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("benchmark_json", type=Path, help="a file written by pytest --benchmark-json (nox -s perf)")
     args = ap.parse_args(argv)
     if not args.benchmark_json.is_file():
-        return fail(ap.prog, f"{args.benchmark_json}: no such file (expected a pytest-benchmark JSON)")
+        what = "not a file" if args.benchmark_json.exists() else "no such file"
+        return fail(ap.prog, f"{args.benchmark_json}: {what} (expected a pytest-benchmark JSON)")
     try:
         r = ratios(args.benchmark_json)
     except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as e:
