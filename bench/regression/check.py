@@ -167,14 +167,16 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     import bench.harness.run as br
 
-    br.PROFILES["regression"] = CI_CASES
     logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
+    br.PROFILES["regression"] = CI_CASES  # for this run only: `ecodrive run` offers no such profile
     try:
         df = run(parse(["--profile", "regression", "--logs", logs]), progress=False)
     except (UsageError, CheckpointError, AgentError) as e:  # a shipped policy that cannot drive included
         if not args.logs:
             _drop_if_empty(Path(logs))
         return fail(ap.prog, str(e))
+    finally:
+        del br.PROFILES["regression"]
     if args.write_reference:
         REFERENCE.parent.mkdir(exist_ok=True)
         atomic_csv(df[REF_COLUMNS], REFERENCE, float_format="%.10g")

@@ -98,3 +98,4 @@ def test_a_shipped_policy_that_cannot_drive_is_one_error_line(tmp_path, monkeypa
     assert rc == 2
     assert len(err.splitlines()) == 1 and str(path) in err
     assert not logs.exists()
+    assert "regression" not in br.PROFILES  # regress's profile is its own, not left for `ecodrive run`
