@@ -367,12 +367,24 @@ def _validate(obj: Any) -> None:
         _check_number(name, value, meta, want_int=f.type.startswith("int"))
 
 
+def _range_text(meta: Mapping[str, Any]) -> str:
+    lo, hi = meta["lo"], meta["hi"]
+    return (f"{'(' if meta['lo_open'] or lo is None else '['}{'-inf' if lo is None else lo}, "
+            f"{'inf)' if hi is None else f'{hi}]'}")
+
+
 def _check_number(name: str, value: Any, meta: Mapping[str, Any], want_int: bool) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or (want_int and not isinstance(value, int)):
-        raise ConfigError(f"{name}={value!r} must be {'an integer' if want_int else 'a number'}")
+        raise ConfigError(f"{name}={value!r} must be {'an integer' if want_int else 'a number'} "
+                          f"in {_range_text(meta)}")
     lo, hi = meta["lo"], meta["hi"]
     bad = (not math.isfinite(value)) or (lo is not None and (value <= lo if meta["lo_open"] else value < lo))
     bad = bad or (hi is not None and value > hi)
     if bad:
-        lb = "(" if meta["lo_open"] else "["
-        raise ConfigError(f"{name}={value!r} is out of range; accepted: {lb}{lo}, {hi}]")
+        raise ConfigError(f"{name}={value!r} is out of range; accepted: {_range_text(meta)}")
+
+
+def accepted_range(cls: type, name: str) -> tuple[float | None, float | None, bool]:
+    """(lo, hi, lo_open) of a numeric config field, for command-line parsers to check against."""
+    meta = {f.name: f.metadata for f in fields(cls)}[name]
+    return meta["lo"], meta["hi"], meta["lo_open"]

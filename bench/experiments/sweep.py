@@ -38,14 +38,14 @@ from typing import Any
 import pandas as pd
 from tqdm import tqdm
 
-from bench.args import Parser, fail, int_in, name, prog_name
+from bench.args import Parser, fail, float_in, int_in, name, prog_name
 from bench.experiments import store
 from bench.harness.executors import EXECUTORS, run_local, run_ray
 from bench.harness.policies import CheckpointError
 from bench.io import atomic_json, atomic_parquet
 from bench.logs.mcaplog import episode_summary
 from bench.training.recipes import VALIDATION_CASES, recipe
-from envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig
+from envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig, accepted_range
 
 STUDIES = ("reward", "heatmap")
 PHIS = (0.5, 1.0, 2.0)  # section 5.2 varies phi; our set
@@ -262,8 +262,10 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("study", help=f"one of {', '.join(STUDIES)}")
     ap.add_argument("--signals", default="uncoordinated", help=f"one of {', '.join(SIGNALS)}")
     ap.add_argument("--forms", nargs="+", default=list(REWARDS), help=f"reward study: forms among {', '.join(REWARDS)}")
-    ap.add_argument("--phi", nargs="+", type=float, default=list(PHIS), help="reward study: phi values [Wh/s]")
-    ap.add_argument("--values", nargs="+", type=float, default=list(HEATMAP_VALUES), help="heatmap: |r_p^s| = |r_p^j| grid")
+    ap.add_argument("--phi", nargs="+", type=float_in(*accepted_range(RewardConfig, "phi")), default=list(PHIS),
+                    help="reward study: phi values [Wh/s]")
+    ap.add_argument("--values", nargs="+", type=float_in(*accepted_range(RewardConfig, "speed_penalty")),
+                    default=list(HEATMAP_VALUES), help="heatmap: |r_p^s| = |r_p^j| grid")
     ap.add_argument("--seeds", nargs="+", type=int_in(0), default=None, help="training seeds (reward: 0 1 2; heatmap: 0)")
     ap.add_argument("--episodes", type=int_in(1, 100_000), default=None,
                     help="training episodes per job (1-100000; default: PRL's recipe's, or 1000 with --paper)")
@@ -271,7 +273,8 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                     help="train by the paper's Table 2 and 1000 episodes instead of PRL's recipe")
     ap.add_argument("--cases", type=int_in(0, 100), default=100, help="fixed test cases evaluated per job (0-100)")
     ap.add_argument("--validation-cases", type=int_in(1, 100), default=VALIDATION_CASES, help="validation cases per training checkpoint (1-100)")
-    ap.add_argument("--max-episode-time", type=float, default=None, help="episode truncation [s] (default: the scenario's)")
+    ap.add_argument("--max-episode-time", type=float_in(*accepted_range(ScenarioConfig, "max_episode_time")),
+                    default=None, help="episode truncation [s] (default: the scenario's)")
     ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
     ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
     ap.add_argument("--workers", type=int_in(1), default=2, help="parallel jobs (>= 1)")

@@ -178,8 +178,8 @@ def test_bad_sweep_input_is_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         sweep.parse(["heatmaps"])
     assert e.value.code == 2 and "choose one of reward, heatmap" in capsys.readouterr().err
-    rc = sweep.main(["heatmap", "--values", "2000", "--logs", str(tmp_path)])
-    assert rc == 2 and "2000" in capsys.readouterr().err
+    rc = sweep.main(["reward", "--forms", "r9", "--logs", str(tmp_path)])
+    assert rc == 2 and "r9" in capsys.readouterr().err and not tmp_path.joinpath("paper").exists()
 
 
 def test_sweep_table_keeps_earlier_jobs_and_refuses_a_mismatch(tmp_path, monkeypatch, capsys):
@@ -247,8 +247,11 @@ def test_a_stored_job_is_restored_not_trained(tmp_path, monkeypatch, capsys):
     ("--seeds", "nan", "0.."), ("--seeds", "-1", "0.."),
     ("--episodes", "0", "1..100000"), ("--episodes", "nan", "1..100000"),
     ("--cases", "101", "0..100"), ("--validation-cases", "0", "1..100"),
+    # the reward and scenario configs' own ranges
+    ("--phi", "abc", "[0.0, 100.0]"), ("--phi", "-1", "[0.0, 100.0]"), ("--values", "2000", "[0.0, 1000.0]"),
+    ("--max-episode-time", "nan", "[10.0, 7200.0]"),
 ])
-def test_a_bad_count_names_just_its_flag_value_and_range(flag, value, accepted, monkeypatch, capsys):
+def test_a_bad_value_names_just_its_flag_value_and_range(flag, value, accepted, monkeypatch, capsys):
     import sys
 
     monkeypatch.setattr(sys, "argv", ["ecodrive sweep"])
@@ -263,9 +266,9 @@ def test_errors_after_parsing_start_with_the_command(tmp_path, monkeypatch, caps
     import sys
 
     monkeypatch.setattr(sys, "argv", ["ecodrive sweep"])
-    assert sweep.main(["heatmap", "--values", "2000", "--logs", str(tmp_path)]) == 2
+    assert sweep.main(["reward", "--forms", "r9", "--logs", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("ecodrive sweep: error: ") and "2000" in err[0]
+    assert len(err) == 1 and err[0].startswith("ecodrive sweep: error: ") and "r9" in err[0]
     blocker = tmp_path / "blocker"
     blocker.write_text("keep")
     assert sweep.main(["heatmap", "--values", "10", "--logs", str(blocker)]) == 2
