@@ -22,7 +22,7 @@ import pandas as pd
 
 from bench.harness.generalisation import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
 from bench.harness.provenance import git_sha
-from bench.harness.run import UsageError, check_writable, run
+from bench.harness.run import UsageError, check_writable, preflight, run
 from bench.io import atomic_json, atomic_parquet, sha256
 
 TABLE = "generalisation.parquet"
@@ -34,13 +34,16 @@ def run_family(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     if (root / "results.parquet").is_file():
         raise UsageError(f"{root} holds a single-scenario run (results.parquet); the generalisation profile "
                          f"writes one sub-folder per variant: use another --run-id")
+    variants = [{**opts, "logs": root, "run_id": v.name, "scenario": v.scenario, "transfer": True,
+                 "cases": list(v.cases)} for v in opts["family"]]
+    checked: set[str] = set()  # each policy is loaded once, for all variants
+    checks = [preflight(o, checked) for o in variants]  # every variant is checked before anything is written
     check_writable(root)
     family = load()
     chosen = {v.name for v in opts["family"]}
-    for v in opts["family"]:
+    for v, o, c in zip(opts["family"], variants, checks):
         print(f"variant {v.name}: {len(v.cases)} cases per setting", flush=True)
-        run({**opts, "logs": root, "run_id": v.name, "scenario": v.scenario, "transfer": True,
-             "cases": list(v.cases)}, progress=progress)
+        run(o, progress=progress, checks=c)
     frames = []
     for v in family:  # every variant in the folder, this command's or an earlier one's
         path = root / v.name / "results.parquet"

@@ -184,13 +184,15 @@ def resolve_methods(opts: dict[str, Any]) -> tuple[list[tuple[str, str, int]], l
     return runs, skipped
 
 
-def check_policies(pdirs: dict[tuple[str, str, int], str]) -> None:
+def check_policies(pdirs: dict[tuple[str, str, int], str], checked: set[str] | None = None) -> None:
     """Load every policy of the command into its agent once, here in the parent: a file that
     cannot drive is a ``CheckpointError`` before the run folder is made or any episode starts
-    (``bench.harness.policies.check_policy``)."""
+    (``bench.harness.policies.check_policy``). Folders in ``checked`` are skipped and added to it."""
+    checked = set() if checked is None else checked
     for (method, _, _), pdir in pdirs.items():
-        if pdir:
+        if pdir and pdir not in checked:
             check_policy(Path(pdir), method)
+            checked.add(pdir)
 
 
 def check_writable(run_dir: Path) -> None:
@@ -200,7 +202,10 @@ def check_writable(run_dir: Path) -> None:
         raise UsageError(f"log {e}") from None
 
 
-def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
+def preflight(opts: dict[str, Any], checked: set[str] | None = None) -> dict[str, Any]:
+    """Every check of a run that writes nothing: methods, factories, policies (``checked``: policy
+    folders already loaded by an earlier call), the scenario each may drive, and the run folder's
+    scenario. Raises ``UsageError``, ``CheckpointError`` or ``AgentError``; returns what ``run`` needs."""
     runs, skipped = resolve_methods(opts)
     factories = opts.get("factories", {})
     overrides, transfer = opts.get("scenario") or {}, bool(opts.get("transfer"))
@@ -210,16 +215,27 @@ def run(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
             env.close()
         except AgentError as e:
             raise UsageError(str(e)) from None
-    methods = list(dict.fromkeys(m for m, _, _ in runs))
     run_dir = opts["logs"] / opts["run_id"]
     evals = {s: scenarios.setting(s, overrides) for s in opts["signals"]}
     pdirs = {(m, s, sd): str(policy_dir(m, s, opts["models"], sd)) if sd >= 0 else "" for m, s, sd in runs}
     # a policy that may not (or cannot) drive the scenario is refused before anything is written
     where = {r: scenarios.evaluation(r[0], r[1], pdirs[r], overrides, transfer) for r in runs}
-    check_policies(pdirs)
+    check_policies(pdirs, checked)
+    one_scenario(run_dir, {s: c.digest() for s, c in evals.items()})
+    return {"runs": runs, "skipped": skipped, "pdirs": pdirs, "where": where, "evals": evals}
+
+
+def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | None = None) -> pd.DataFrame:
+    """Run (or reuse) every episode of the command and write ``results.parquet`` and the manifest;
+    ``checks``: this command's ``preflight``, when the caller ran it already."""
+    checks = preflight(opts) if checks is None else checks
+    runs, skipped, pdirs, where, evals = (checks[k] for k in ("runs", "skipped", "pdirs", "where", "evals"))
+    factories = opts.get("factories", {})
+    overrides, transfer = opts.get("scenario") or {}, bool(opts.get("transfer"))
+    methods = list(dict.fromkeys(m for m, _, _ in runs))
+    run_dir = opts["logs"] / opts["run_id"]
     if skipped:  # after the checks: a refused command prints its one error line only
         print(f"note: no shipped policy for {', '.join(skipped)}; running the rest", file=sys.stderr)
-    one_scenario(run_dir, {s: c.digest() for s, c in evals.items()})
     check_writable(run_dir)
     cases = opts.get("cases") or load()[: PROFILES[opts["profile"]]]  # a variant's own (generalisation)
     rows, tasks = [], []

@@ -84,6 +84,18 @@ def test_ecodrive_run_refuses_a_policy_of_the_wrong_structure_before_anything_ru
     assert not logs.exists()  # refused before the run folder is made
 
 
+def test_the_generalisation_profile_checks_every_variant_before_it_writes(tmp_path, capsys):
+    """Each policy is loaded once for all variants, before the family folder is made."""
+    models = shipped_copy(tmp_path)
+    folder = policy_dir(METHOD, SIGNALS, models)
+    path = replace_policy(folder, saved(a_list({}), tmp_path))
+    logs = tmp_path / "logs"
+    rc = main(["--profile", "generalisation", "--variants", "g1", "g2", "--methods", METHOD, "--signals", SIGNALS,
+               "--train-seeds", "0", "--models", str(models), "--logs", str(logs), "--workers", "1"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and str(path) in err and not logs.exists()
+
+
 def test_a_raw_pickle_policy_is_refused_as_one_line_without_a_warning(tmp_path, capsys):
     models = shipped_copy(tmp_path)
     path = replace_policy(policy_dir(METHOD, SIGNALS, models), pickle.dumps({"name": METHOD}, protocol=4))
