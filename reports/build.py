@@ -24,7 +24,9 @@ from bench.logs.mcaplog import LogError, resolve_log
 from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
 from . import experiments, figures, generalisation, headline, metrics, tables
-from .html import Figure, Page, esc, experiment_caption, label, render
+from .html import render
+from .html_markdown import experiment_caption
+from .html_parts import Figure, Page, esc, label
 from .load import RunError, component_sums, load_plan, load_run, load_steps, stop_lines
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle")

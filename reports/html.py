@@ -5,151 +5,35 @@ paper prints it with the published values beside ours, the statistics with their
 intervals, every figure in a ``<figure>`` with a caption, the further experiments, and the run's
 provenance from ``manifest.json``. Only formatting lives here; the numbers come from
 ``reports.metrics`` and ``reports.tables``. A value that does not exist is an en dash, never NaN.
+The values and small pieces are ``reports.html_parts``, the experiments' markdown as HTML
+``reports.html_markdown``, the stylesheet and skeleton ``reports.html_style``.
 """
 from __future__ import annotations
 
-import html
 import math
-import re
-from dataclasses import dataclass, field
-from pathlib import Path
-from string import Template
 
-import pandas as pd
-
-DASH = "\u2013"
-MINUS = "\u2212"
-STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT IN THIS RUN": "absent", "NOT CHECKED": "absent",
-                "KNOWN FAIL": "fail", "OUTSIDE BAND": "fail"}
-METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
-                 "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",
-                 "dqn": "DQN", "oracle": "Oracle (energy-optimal plan replayed in traffic)"}
-METRIC_UNITS = {"energy": ("Energy", "Wh"), "travel_time": ("Travel time", "s")}
-
-
-@dataclass
-class Figure:
-    """One image of the page: its PNG (under the report's folder) and a caption."""
-    path: Path
-    caption: str
-    title: str = ""
-
-
-@dataclass
-class Page:
-    """Everything the page shows; a single-vehicle part is absent (None) for an experiments-only run."""
-    run_name: str
-    manifest: dict = field(default_factory=dict)
-    results: pd.DataFrame | None = None
-    claims: pd.DataFrame | None = None
-    mixed_claims: pd.DataFrame | None = None
-    table4: pd.DataFrame | None = None
-    statistics: pd.DataFrame | None = None
-    seeds: pd.DataFrame | None = None
-    parts: pd.DataFrame | None = None
-    partial_logs: int = 0
-    violins: list[Figure] = field(default_factory=list)
-    trajectories: list[Figure] = field(default_factory=list)
-    compare: str | None = None
-    experiments_md: list[str] = field(default_factory=list)
-    experiment_figures: list[Figure] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    bootstrap: str = ""
-    methods: list[str] = field(default_factory=list)  # the order of the tables' rows
-
-
-def ordered(page: Page, present) -> list[str]:
-    """The methods in ``present`` in the page's order, any others after them."""
-    present = list(dict.fromkeys(present))
-    return [m for m in page.methods if m in present] + [m for m in present if m not in page.methods]
-
-
-# ---------------------------------------------------------------- values
-def missing(v) -> bool:
-    if v is None:
-        return True
-    if isinstance(v, str):
-        return v.strip().lower() in ("", "nan", "none", "<na>", "nat")
-    try:
-        return bool(pd.isna(v))
-    except (TypeError, ValueError):
-        return False
-
-
-def num(v, digits: int = 2) -> str:
-    """A number with ``digits`` decimals and a true minus sign; an en dash where there is none."""
-    if missing(v):
-        return DASH
-    x = float(v)
-    if abs(x) < 0.5 * 10 ** -digits:  # no "-0.00"
-        x = 0.0
-    return f"{x:.{digits}f}".replace("-", MINUS)
-
-
-def pct(v, digits: int = 2) -> str:
-    """A fraction as a signed percent (0.237 -> '+23.70%'); an en dash where there is none."""
-    if missing(v):
-        return DASH
-    x = 100 * float(v)
-    if abs(x) < 0.5 * 10 ** -digits:
-        return f"{0:.{digits}f}%"
-    return f"{x:+.{digits}f}%".replace("-", MINUS)
-
-
-def ci(lo, hi, digits: int = 2) -> str:
-    return DASH if missing(lo) or missing(hi) else f"[{num(lo, digits)}, {num(hi, digits)}]"
-
-
-def label(method: str) -> str:
-    return METHOD_LABELS.get(method, method)
-
-
-def esc(v) -> str:
-    return html.escape(str(v), quote=True)
-
-
-def duration(seconds) -> str:
-    if missing(seconds):
-        return DASH
-    s = float(seconds)
-    if s < 60:
-        return f"{s:.1f} s"
-    h, rest = divmod(int(round(s)), 3600)
-    m, sec = divmod(rest, 60)
-    return (f"{h} h {m:02d} min" if h else f"{m} min {sec:02d} s") + f" ({s:,.0f} s)"
-
-
-def signed_class(v) -> str:
-    """'good' for an improvement (> 0), 'bad' for a loss, '' otherwise."""
-    if missing(v) or abs(float(v)) < 5e-5:
-        return ""
-    return "good" if float(v) > 0 else "bad"
-
-
-# ---------------------------------------------------------------- pieces
-def td(text: str, cls: str = "", raw: bool = False) -> str:
-    c = f" class='{cls.strip()}'" if cls.strip() else ""
-    return f"<td{c}>{text if raw else esc(text)}</td>"
-
-
-def badge(status: str) -> str:
-    return f"<span class='badge {STATUS_CLASS.get(status, 'absent')}'>{esc(status)}</span>"
-
-
-def method_cell(method: str) -> str:
-    lab = label(method)
-    extra = f" <code>{esc(method)}</code>" if lab != method else ""
-    return f"<th scope='row'>{esc(lab)}{extra}</th>"
-
-
-def figure(fig: Figure, fig_id: str) -> str:
-    # single quotes around src: other tests look for "<img src='figures/..."
-    return (f"<figure id='{esc(fig_id)}'><img src='figures/{esc(fig.path.name)}' alt='{esc(fig.title or fig.caption)}' "
-            f"loading='lazy'><figcaption>{fig.caption}</figcaption></figure>")
-
-
-def settings_of(df: pd.DataFrame) -> list[str]:
-    return sorted(set(df.signals))
+from .html_markdown import experiments_html
+from .html_parts import (
+    DASH,
+    METRIC_UNITS,
+    STATUS_CLASS,
+    Page,
+    badge,
+    ci,
+    duration,
+    esc,
+    figure,
+    label,
+    method_cell,
+    missing,
+    num,
+    ordered,
+    pct,
+    settings_of,
+    signed_class,
+    td,
+)
+from .html_style import CSS, TEMPLATE
 
 
 # ---------------------------------------------------------------- sections
@@ -457,233 +341,7 @@ def _value(v) -> str:
     return DASH if missing(v) else str(v)
 
 
-# ---------------------------------------------------------------- the experiments' markdown
-EXPERIMENT_CAPTIONS = {
-    "reward study": "<b>fig:rwd_compare.</b> Energy [Wh] (left) and travel time [s] (right) of each training "
-                    "episode, smoothed as in the paper (D<sub>k</sub> = 0.98 D<sub>k\u22121</sub> + 0.02 d<sub>k</sub>), "
-                    "one line per reward configuration (mean over training seeds; band: min\u2013max over seeds).",
-    "sensitivity heatmap": "<b>fig:heatmap.</b> Mean test-case energy [Wh] and travel time [s] of the policy "
-                           "trained with each pair of penalties |r<sub>p</sub><sup>s</sup>| (rows) \u00d7 "
-                           "|r<sub>p</sub><sup>j</sup>| (columns), in reward units, averaged over training seeds; "
-                           "|r<sub>p</sub><sup>c</sup>| = 50.",
-    "mixed traffic": "<b>fig:dd / fig:avg.</b> Fleet metrics against arterial demand [veh/h/lane], one line per CV "
-                     "market-penetration rate (MPR), one column per signal setting: energy per finished vehicle "
-                     "[Wh/veh] and mean speed of the finished vehicles [m/s] (the paper's), then, when recorded, "
-                     "energy per km [Wh/km] and space-mean speed [m/s] over every vehicle inserted.",
-}
-LATERAL = {"A": "HDV1 ahead brakes at \u22122 m/s\u00b2 for three steps, HDV2 in the left lane",
-           "B": "a platoon of five queues at a red light, two vehicles queue in the left lane"}
-
-
-def experiment_caption(title: str) -> str:
-    if title in EXPERIMENT_CAPTIONS:
-        return EXPERIMENT_CAPTIONS[title]
-    m = re.fullmatch(r"generalisation, (\w+)", title)
-    if m:
-        return (f"<b>Generalisation, {esc(m.group(1))} signals.</b> Each method's mean energy (left) and travel time "
-                "(right) on each held-out corridor, as the change against SUMO's driver on the same corridor and "
-                "cases [%]: blue is less than the baseline, red more.")
-    m = re.fullmatch(r"lateral scenario (\w+)", title)
-    if m:
-        what = LATERAL.get(m.group(1), "")
-        return (f"<b>fig:scenario_compare, scenario {esc(m.group(1))}</b>{': ' + what if what else ''}. Left: the "
-                "ego's lane index (0 = rightmost) against position x [m], scripted HDVs' lanes in grey; middle: "
-                "distance [m] against time [s]; right: speed [m/s] against time [s]; one line per method.")
-    return esc(title)
-
-
-_ROW = re.compile(r"^\|\s.*\|\s*$|^\|(-+\|)+\s*$")
-_IMG = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)\s*$")
-_NUM = re.compile(r"^[+\-\u2212]?\d[\d,]*(\.\d+)?(e[+\-]?\d+)?%?$")
-
-
-def inline(text: str) -> str:
-    """Escaped text with the markdown the report writes: `code` and **bold**."""
-    s = esc(text)
-    s = re.sub(r"`([^`]+)`", r"<code>\1</code>", s)
-    return re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
-
-
-def md_cell(text: str, column: str) -> tuple[str, str]:
-    """(html, class) of one markdown table cell; a column of changes (``*_change*``, fractions) as
-    signed percents."""
-    t = text.strip()
-    if missing(t):
-        return DASH, "num"
-    if t in STATUS_CLASS:
-        return badge(t), ""
-    if _NUM.match(t):
-        if "_change" in column and not t.endswith("%"):
-            try:
-                return pct(float(t), 0), "num"
-            except ValueError:
-                pass
-        return esc(t.replace("-", MINUS)), "num"
-    return inline(t), ""
-
-
-def md_table(lines: list[str]) -> str:
-    split = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in lines]
-    head, body = split[0], [r for r in split[1:] if not all(set(c) <= set("-: ") for c in r)]
-    cols = "".join(f"<th>{esc(c.replace('_', ' '))}</th>" for c in head)
-    rows = []
-    for r in body:
-        cells = []
-        for i, c in enumerate(r):
-            h, cls = md_cell(c, head[i] if i < len(head) else "")
-            cells.append(f"<td class='{cls}'>{h}</td>" if cls else f"<td>{h}</td>")
-        rows.append("<tr>" + "".join(cells) + "</tr>")
-    return f"<div class='scroll'><table class='md'><thead><tr>{cols}</tr></thead><tbody>{''.join(rows)}</tbody></table></div>"
-
-
-def experiments_html(lines: list[str], figs: list[Figure]) -> tuple[str, list[tuple[str, str]]]:
-    """The experiments' markdown (headings, paragraphs, tables, images, lists) as HTML, each image
-    a captioned figure; and the (anchor, title) of each section for the navigation."""
-    by_name = {f.path.name: f for f in figs}
-    out, toc, para, table, items = [], [], [], [], []
-    open_section = False
-
-    def flush() -> None:
-        if para:
-            out.append(f"<p>{inline(' '.join(para))}</p>")
-            para.clear()
-        if table:
-            out.append(md_table(table))
-            table.clear()
-        if items:
-            out.append("<ul>" + "".join(f"<li>{inline(i)}</li>" for i in items) + "</ul>")
-            items.clear()
-
-    for ln in "\n".join(lines).split("\n"):  # an element may hold a whole table
-        if _ROW.match(ln):
-            if para or items:
-                flush()
-            table.append(ln)
-            continue
-        if table:
-            flush()
-        if ln.startswith("## "):
-            flush()
-            title = ln[3:].strip()
-            short = re.sub(r"\s*\(.*\)$", "", title)  # "Mixed traffic (fig:dd, fig:avg)" -> "Mixed traffic"
-            anchor = "x-" + re.sub(r"[^a-z0-9]+", "-", short.lower()).strip("-")
-            out.append(("</section>" if open_section else "") + f"<section id='{anchor}'><h2>{inline(title)}</h2>")
-            open_section = True
-            toc.append((anchor, short))
-        elif ln.startswith("# "):
-            flush()
-        elif (m := _IMG.match(ln.strip())):
-            flush()
-            name = Path(m.group(2)).name
-            f = by_name.get(name, Figure(Path(name), esc(m.group(1)), m.group(1)))
-            out.append(figure(f, f"fig-{Path(name).stem}"))
-        elif ln.startswith("- "):
-            if para:
-                flush()
-            items.append(ln[2:])
-        elif not ln.strip():
-            flush()
-        else:
-            para.append(ln.strip())
-    flush()
-    if open_section:
-        out.append("</section>")
-    return "".join(out), toc
-
-
 # ---------------------------------------------------------------- the page
-CSS = """
-:root { --fg:#1d2327; --muted:#5f6b73; --line:#d9dee2; --bg:#ffffff; --band:#f5f7f9; --accent:#1f5f99;
-        --pass:#1a7f37; --pass-bg:#e6f4ea; --fail:#b42318; --fail-bg:#fdecea; --absent:#6b7280; --absent-bg:#eef0f2; }
-* { box-sizing: border-box; }
-body { margin:0; font:15px/1.5 -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif;
-       color:var(--fg); background:var(--bg); }
-main { max-width:1240px; margin:0 auto; padding:24px 32px 64px; }
-header h1 { font-size:26px; margin:8px 0 12px; }
-h2 { font-size:21px; margin:40px 0 10px; padding-bottom:4px; border-bottom:2px solid var(--line); }
-h3 { font-size:17px; margin:26px 0 8px; }
-code { font:13px/1.4 ui-monospace, SFMono-Regular, Menlo, Consolas, monospace; background:var(--band);
-       padding:1px 4px; border-radius:3px; }
-code.sha { word-break:break-all; }
-a { color:var(--accent); }
-.facts { display:flex; flex-wrap:wrap; gap:8px; }
-.fact { background:var(--band); border:1px solid var(--line); border-radius:6px; padding:6px 12px; }
-.fact span { display:block; font-size:11px; text-transform:uppercase; letter-spacing:.04em; color:var(--muted); }
-.fact b { font-weight:600; }
-nav { margin:18px 0 0; padding:10px 14px; border:1px solid var(--line); border-radius:6px; background:var(--band); }
-nav ol { margin:0; padding-left:20px; columns:3; }
-nav li { margin:1px 0; }
-.lead { font-size:15px; }
-.scroll { overflow-x:auto; margin:10px 0 18px; }
-table { border-collapse:collapse; font-size:13.5px; width:100%; }
-caption { caption-side:top; text-align:left; color:var(--muted); font-size:13px; padding:0 0 6px; line-height:1.45; }
-caption b { color:var(--fg); }
-th, td { padding:5px 9px; border-bottom:1px solid var(--line); vertical-align:top; }
-thead th { background:var(--band); font-weight:600; text-align:center; border-bottom:1px solid #b9c1c7; }
-thead tr + tr th { white-space:nowrap; font-weight:500; }
-thead th[rowspan] { vertical-align:bottom; }
-tbody th { text-align:left; font-weight:600; white-space:nowrap; }
-tbody th code { font-weight:400; font-size:11.5px; color:var(--muted); background:none; padding:0; }
-tbody tr:nth-child(even) { background:#fafbfc; }
-td.num { text-align:right; font-variant-numeric:tabular-nums; white-space:nowrap; }
-th.first, td.first { border-left:1px solid var(--line); }
-th.group { border-bottom:1px solid var(--line); }
-td.paper { color:#475467; background:rgba(31,95,153,.05); }
-td.dev { color:var(--muted); }
-td.good { color:var(--pass); }
-td.bad { color:var(--fail); }
-tr.published th { border-left:3px solid var(--accent); }
-.ci { color:var(--muted); font-size:12px; }
-.badge { display:inline-block; padding:1px 7px; border-radius:10px; font-size:11.5px; font-weight:700;
-         letter-spacing:.02em; white-space:nowrap; }
-.badge.pass { color:var(--pass); background:var(--pass-bg); }
-.badge.fail { color:var(--fail); background:var(--fail-bg); }
-.badge.absent { color:var(--absent); background:var(--absent-bg); }
-table.claims td.detail { color:var(--muted); font-size:12.5px; }
-table.claims tr.absent td { color:var(--absent); }
-table.kv { width:auto; margin:10px 0 18px; }
-table.kv th { min-width:180px; }
-.pair { display:flex; flex-wrap:wrap; gap:0 40px; align-items:flex-start; }
-.pair table.kv th { min-width:0; }
-table.kv tr.hl th, table.kv tr.hl td { background:#fff8e1; }
-table.scenario tr.differs th, table.scenario tr.differs td { background:#fff8e1; }
-table.md { width:auto; min-width:40%; }
-table.md td, table.md th { font-size:13px; }
-figure { margin:14px 0 26px; padding:10px; border:1px solid var(--line); border-radius:6px; background:#fff; }
-figure img { display:block; max-width:100%; max-height:1000px; width:auto; height:auto; margin:0 auto; }
-figcaption { color:var(--muted); font-size:13px; margin-top:8px; line-height:1.45; }
-figcaption b { color:var(--fg); }
-details { margin:10px 0; }
-summary { cursor:pointer; color:var(--accent); }
-.warn { color:#8a4b00; }
-ul.warn li { margin:3px 0; word-break:break-word; }
-footer { margin-top:48px; color:var(--muted); font-size:12px; border-top:1px solid var(--line); padding-top:10px; }
-@media print { nav { display:none; } figure { break-inside:avoid; } main { max-width:none; padding:0; } }
-"""
-
-TEMPLATE = Template("""<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>$title</title>
-<style>$css</style>
-</head>
-<body>
-<main>
-$header
-$nav
-$body
-<footer>Written by <code>ecodrive report</code> from the run folder's <code>results.parquet</code>,
-<code>manifest.json</code> and step logs; the same content as <code>index.md</code>, with the tables and figures
-beside it (<code>table4.csv</code>, <code>statistics.csv</code>, <code>seeds.csv</code>, <code>figures/*.pdf</code>).
-Self-contained: no script, nothing fetched.</footer>
-</main>
-</body>
-</html>
-""")
-
-
 def render(page: Page) -> str:
     """The whole page as a string."""
     body, toc = [claims_section(page)], [("claims", "Claims")]

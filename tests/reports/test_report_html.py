@@ -15,7 +15,7 @@ import pytest
 
 from bench.harness.run import parse, run
 from bench.paper import TABLE4, improvement
-from reports import html as page_html
+from reports import html_markdown, html_parts
 from reports.build import build
 from reports.tables import NOT_IN_RUN, paper_claims
 
@@ -189,9 +189,9 @@ def test_table4_is_the_papers_with_signed_percents_units_and_published_values(re
         assert f"{paper_t:.2f}" in base
         # improvement as a signed percent: + = less than the baseline
         imp = improvement(means.loc[("glosa", signals), "energy"], means.loc[("baseline", signals), "energy"])
-        want = f"{100 * imp:+.2f}%".replace("-", page_html.MINUS)
+        want = f"{100 * imp:+.2f}%".replace("-", html_parts.MINUS)
         assert want in glosa
-        assert glosa[3] == glosa[4] == page_html.DASH  # no published GLOSA energy: an en dash, not NaN
+        assert glosa[3] == glosa[4] == html_parts.DASH  # no published GLOSA energy: an en dash, not NaN
     assert "231.13" in doc.sections["table4"] and "253.79" in doc.sections["table4"]
     caption = doc.sections["table4"]
     assert "+ means the method uses less energy" in caption and "\u2212 means more" in caption
@@ -222,7 +222,7 @@ def test_statistics_show_cis_with_units_and_one_seed(report):
     rows = doc.rows["stats-coordinated"]
     base = next(r for r in rows if r[0].startswith("Baseline"))
     assert re.search(r"\d+\.\d\d \[\d+\.\d\d, \d+\.\d\d\]", base[2])  # mean [CI]
-    assert base[4] == page_html.DASH  # P(improve) of the baseline against itself does not exist
+    assert base[4] == html_parts.DASH  # P(improve) of the baseline against itself does not exist
     seeds = doc.rows["seeds-coordinated"]
     assert all("one seed" in r[3] for r in seeds[2:])  # rule-based methods: one "seed", no CI
 
@@ -243,11 +243,11 @@ def test_the_markdown_is_unchanged(report):
 
 # ---------------------------------------------------------------- pure helpers
 def test_formatting():
-    assert page_html.pct(0.237) == "+23.70%" and page_html.pct(-0.0793) == "\u22127.93%"
-    assert page_html.pct(float("nan")) == page_html.num(None) == page_html.ci(1.0, np.nan) == page_html.DASH
-    assert page_html.pct(-1e-9) == "0.00%" and page_html.num(-3.14159) == "\u22123.14"
-    assert page_html.md_cell("nan", "x") == (page_html.DASH, "num")
-    assert page_html.md_cell("-0.14", "all_energy_change")[0] == "\u221214%"
+    assert html_parts.pct(0.237) == "+23.70%" and html_parts.pct(-0.0793) == "\u22127.93%"
+    assert html_parts.pct(float("nan")) == html_parts.num(None) == html_parts.ci(1.0, np.nan) == html_parts.DASH
+    assert html_parts.pct(-1e-9) == "0.00%" and html_parts.num(-3.14159) == "\u22123.14"
+    assert html_markdown.md_cell("nan", "x") == (html_parts.DASH, "num")
+    assert html_markdown.md_cell("-0.14", "all_energy_change")[0] == "\u221214%"
 
 
 def test_paper_claims_on_made_up_results():

@@ -1,0 +1,143 @@
+"""The report page's values and small pieces: numbers with a true minus sign, an en dash for a value
+that does not exist, method labels, table cells, badges and figures; and the ``Page`` the sections draw."""
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+DASH = "\u2013"
+MINUS = "\u2212"
+STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT IN THIS RUN": "absent", "NOT CHECKED": "absent",
+                "KNOWN FAIL": "fail", "OUTSIDE BAND": "fail"}
+METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
+                 "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",
+                 "dqn": "DQN", "oracle": "Oracle (energy-optimal plan replayed in traffic)"}
+METRIC_UNITS = {"energy": ("Energy", "Wh"), "travel_time": ("Travel time", "s")}
+
+
+@dataclass
+class Figure:
+    """One image of the page: its PNG (under the report's folder) and a caption."""
+    path: Path
+    caption: str
+    title: str = ""
+
+
+@dataclass
+class Page:
+    """Everything the page shows; a single-vehicle part is absent (None) for an experiments-only run."""
+    run_name: str
+    manifest: dict = field(default_factory=dict)
+    results: pd.DataFrame | None = None
+    claims: pd.DataFrame | None = None
+    mixed_claims: pd.DataFrame | None = None
+    table4: pd.DataFrame | None = None
+    statistics: pd.DataFrame | None = None
+    seeds: pd.DataFrame | None = None
+    parts: pd.DataFrame | None = None
+    partial_logs: int = 0
+    violins: list[Figure] = field(default_factory=list)
+    trajectories: list[Figure] = field(default_factory=list)
+    compare: str | None = None
+    experiments_md: list[str] = field(default_factory=list)
+    experiment_figures: list[Figure] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    bootstrap: str = ""
+    methods: list[str] = field(default_factory=list)  # the order of the tables' rows
+
+
+def ordered(page: Page, present) -> list[str]:
+    """The methods in ``present`` in the page's order, any others after them."""
+    present = list(dict.fromkeys(present))
+    return [m for m in page.methods if m in present] + [m for m in present if m not in page.methods]
+
+
+# ---------------------------------------------------------------- values
+def missing(v) -> bool:
+    if v is None:
+        return True
+    if isinstance(v, str):
+        return v.strip().lower() in ("", "nan", "none", "<na>", "nat")
+    try:
+        return bool(pd.isna(v))
+    except (TypeError, ValueError):
+        return False
+
+
+def num(v, digits: int = 2) -> str:
+    """A number with ``digits`` decimals and a true minus sign; an en dash where there is none."""
+    if missing(v):
+        return DASH
+    x = float(v)
+    if abs(x) < 0.5 * 10 ** -digits:  # no "-0.00"
+        x = 0.0
+    return f"{x:.{digits}f}".replace("-", MINUS)
+
+
+def pct(v, digits: int = 2) -> str:
+    """A fraction as a signed percent (0.237 -> '+23.70%'); an en dash where there is none."""
+    if missing(v):
+        return DASH
+    x = 100 * float(v)
+    if abs(x) < 0.5 * 10 ** -digits:
+        return f"{0:.{digits}f}%"
+    return f"{x:+.{digits}f}%".replace("-", MINUS)
+
+
+def ci(lo, hi, digits: int = 2) -> str:
+    return DASH if missing(lo) or missing(hi) else f"[{num(lo, digits)}, {num(hi, digits)}]"
+
+
+def label(method: str) -> str:
+    return METHOD_LABELS.get(method, method)
+
+
+def esc(v) -> str:
+    return html.escape(str(v), quote=True)
+
+
+def duration(seconds) -> str:
+    if missing(seconds):
+        return DASH
+    s = float(seconds)
+    if s < 60:
+        return f"{s:.1f} s"
+    h, rest = divmod(int(round(s)), 3600)
+    m, sec = divmod(rest, 60)
+    return (f"{h} h {m:02d} min" if h else f"{m} min {sec:02d} s") + f" ({s:,.0f} s)"
+
+
+def signed_class(v) -> str:
+    """'good' for an improvement (> 0), 'bad' for a loss, '' otherwise."""
+    if missing(v) or abs(float(v)) < 5e-5:
+        return ""
+    return "good" if float(v) > 0 else "bad"
+
+
+# ---------------------------------------------------------------- pieces
+def td(text: str, cls: str = "", raw: bool = False) -> str:
+    c = f" class='{cls.strip()}'" if cls.strip() else ""
+    return f"<td{c}>{text if raw else esc(text)}</td>"
+
+
+def badge(status: str) -> str:
+    return f"<span class='badge {STATUS_CLASS.get(status, 'absent')}'>{esc(status)}</span>"
+
+
+def method_cell(method: str) -> str:
+    lab = label(method)
+    extra = f" <code>{esc(method)}</code>" if lab != method else ""
+    return f"<th scope='row'>{esc(lab)}{extra}</th>"
+
+
+def figure(fig: Figure, fig_id: str) -> str:
+    # single quotes around src: other tests look for "<img src='figures/..."
+    return (f"<figure id='{esc(fig_id)}'><img src='figures/{esc(fig.path.name)}' alt='{esc(fig.title or fig.caption)}' "
+            f"loading='lazy'><figcaption>{fig.caption}</figcaption></figure>")
+
+
+def settings_of(df: pd.DataFrame) -> list[str]:
+    return sorted(set(df.signals))
