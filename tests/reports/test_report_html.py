@@ -4,7 +4,6 @@ beside ours, the claims are checked, and the provenance is the manifest's. Parse
 library's ``html.parser``; the checks are functions, and a bad page is shown to fail them."""
 from __future__ import annotations
 
-import json
 import re
 from html.parser import HTMLParser
 from pathlib import Path
@@ -13,7 +12,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.harness.run import parse, run
 from bench.paper import TABLE4, improvement
 from reports import html_markdown, html_parts
 from reports.build import build
@@ -145,15 +143,8 @@ def test_the_checks_catch_a_bad_page(tmp_path):
 
 # ---------------------------------------------------------------- the page of a smoke run
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("html")
-    run(parse(["--profile", "smoke", "--logs", str(tmp), "--methods", "baseline", "glosa", "--workers", "2"]),
-        progress=False)
-    index, warnings = build(tmp / "smoke", tmp / "report")
-    text = (tmp / "report" / "index.html").read_text()
-    return {"dir": tmp / "report", "run": tmp / "smoke", "doc": Doc(text), "text": text, "md": index.read_text(),
-            "results": pd.read_parquet(tmp / "smoke" / "results.parquet"),
-            "manifest": json.loads((tmp / "smoke" / "manifest.json").read_text())}
+def report(smoke_report):
+    return {**smoke_report, "doc": Doc(smoke_report["text"])}
 
 
 def test_every_image_exists_and_sits_in_a_captioned_figure(report):
