@@ -36,7 +36,7 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
     if not sweep.empty:
         train = _train_logs(sweep, warnings)
         md += ["## Reward study (fig:rwd_compare)", "",
-               f"{sweep.config.nunique()} configurations x {sweep.seed.nunique()} seeds, "
+               f"{_jobs_text(sweep)}, "
                f"{_budget(sweep)} each; each validation-selected policy is "
                f"evaluated greedily on the first {int(sweep.cases.max())} test cases.", ""]
         if not train.empty:
@@ -170,6 +170,15 @@ def _train_logs(sweep: pd.DataFrame, warnings: list[str]) -> pd.DataFrame:
             continue
         frames.append(m.assign(config=r.config, seed=r.seed))
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def _jobs_text(sweep: pd.DataFrame) -> str:
+    """'18 jobs: 9 configurations, 1-3 training seeds each' (or 'x 3 seeds' when every one has them all)."""
+    per = sweep.groupby("config").seed.nunique()
+    lo, hi = int(per.min()), int(per.max())
+    if lo == hi == sweep.seed.nunique():
+        return f"{len(per)} configurations x {hi} seed{'s' if hi > 1 else ''}"
+    return f"{len(sweep)} jobs: {len(per)} configurations, {lo}-{hi} training seeds each"
 
 
 def _table(df: pd.DataFrame) -> str:

@@ -56,15 +56,15 @@ def inline(text: str) -> str:
 
 
 def md_cell(text: str, column: str) -> tuple[str, str]:
-    """(html, class) of one markdown table cell; a column of changes (``*_change*``, fractions) as
-    signed percents."""
+    """(html, class) of one markdown table cell; a column of changes (a ``change`` word in its name:
+    ``all_energy_change``, ``..._change_mean``; fractions) as signed percents."""
     t = text.strip()
     if missing(t):
         return DASH, "num"
     if t in STATUS_CLASS:
         return badge(t), ""
     if _NUM.match(t):
-        if "_change" in column and not t.endswith("%"):
+        if _CHANGE.search(column) and not t.endswith("%"):
             try:
                 return pct(float(t), 0), "num"
             except ValueError:
@@ -73,8 +73,20 @@ def md_cell(text: str, column: str) -> tuple[str, str]:
     return inline(t), ""
 
 
+_CELL_SEP = re.compile(r"(?<!\\)\|")  # a "|" not escaped as "\|"
+_CHANGE = re.compile(r"(^|_)change(_|$)")  # a column of changes (fractions): all_energy_change, ..._change_mean
+
+
+def md_cells(line: str) -> list[str]:
+    r"""The cells of one markdown table row; an escaped ``\|`` is a "|" inside a cell."""
+    inner = line.strip()
+    inner = inner[1:] if inner.startswith("|") else inner
+    inner = inner[:-1] if inner.endswith("|") and not inner.endswith("\\|") else inner
+    return [c.strip().replace("\\|", "|") for c in _CELL_SEP.split(inner)]
+
+
 def md_table(lines: list[str]) -> str:
-    split = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in lines]
+    split = [md_cells(ln) for ln in lines]
     head, body = split[0], [r for r in split[1:] if not all(set(c) <= set("-: ") for c in r)]
     cols = "".join(f"<th>{esc(c.replace('_', ' '))}</th>" for c in head)
     rows = []

@@ -55,9 +55,9 @@ def stats_markdown(st: pd.DataFrame) -> str:
 def frame_markdown(df: pd.DataFrame, digits: int = 2) -> str:
     """Any table (index included) as a markdown table; floats with ``digits`` decimals."""
     flat = df.reset_index() if any(n is not None for n in df.index.names) else df
-    def cell(v):
-        return _f(v, f"{{:.{digits}f}}") if isinstance(v, float) else str(v)
-    head = "| " + " | ".join(str(c) for c in flat.columns) + " |"
+    def cell(v):  # a "|" inside a cell is escaped, as GitHub's and mkdocs' tables read it
+        return (_f(v, f"{{:.{digits}f}}") if isinstance(v, float) else str(v)).replace("|", "\\|")
+    head = "| " + " | ".join(str(c).replace("|", "\\|") for c in flat.columns) + " |"
     rows = ["| " + " | ".join(cell(v) for v in row) + " |" for row in flat.itertuples(index=False)]
     return "\n".join([head, "|" + "---|" * len(flat.columns), *rows]) + "\n"
 

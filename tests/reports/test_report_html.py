@@ -15,7 +15,7 @@ import pytest
 from bench.paper import TABLE4, improvement
 from reports import html_markdown, html_parts
 from reports.build import build
-from reports.tables import NOT_IN_RUN, paper_claims
+from reports.tables import NOT_IN_RUN, frame_markdown, paper_claims
 
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
 BAD_CELL = re.compile(r"^(nan|none|null|inf|-inf|<na>|nat)$|\bnan\b|\bNone\b", re.IGNORECASE)
@@ -239,6 +239,17 @@ def test_formatting():
     assert html_parts.pct(-1e-9) == "0.00%" and html_parts.num(-3.14159) == "\u22123.14"
     assert html_markdown.md_cell("nan", "x") == (html_parts.DASH, "num")
     assert html_markdown.md_cell("-0.14", "all_energy_change")[0] == "\u221214%"
+    assert html_markdown.md_cell("0.05", "all_speed_change_max")[0] == "+5%"
+    assert html_markdown.md_cell("3.96", "lane_changes") == ("3.96", "num")  # a count, not a change
+
+
+def test_a_pipe_inside_a_cell_stays_in_its_cell():
+    """Claims name |r_p^s|: the markdown escapes the pipes and the page shows one cell per column."""
+    df = pd.DataFrame({"claim": ["a larger |r_p^s| shortens trips"], "status": ["PASS"]}).set_index("claim")
+    md = frame_markdown(df)
+    assert "a larger \\|r_p^s\\| shortens trips" in md
+    doc = Doc(html_markdown.md_table(md.strip().splitlines()))
+    assert [c["text"] for c in doc.cells if c["tag"] == "td"] == ["a larger |r_p^s| shortens trips", "PASS"]
 
 
 def test_paper_claims_on_made_up_results():

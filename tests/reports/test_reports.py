@@ -104,3 +104,12 @@ def test_optimality_gaps_by_hand():
     assert g.loc["prl", "share_closed"] == pytest.approx((500 - 450) / (500 - 300))
     assert g.loc["baseline", "share_closed"] == pytest.approx(0.0)
     assert g.loc["prl", "energy_gap_equal_time"] == pytest.approx(np.mean([200 / 90 - 1, 210 / 90 - 1]))
+
+
+def test_the_sweep_header_counts_jobs_when_seeds_differ_between_configurations():
+    from reports.experiments import _jobs_text
+
+    full = pd.DataFrame({"config": ["a", "a", "b", "b"], "seed": [0, 1, 0, 1]})
+    assert _jobs_text(full) == "2 configurations x 2 seeds"
+    uneven = pd.DataFrame({"config": ["a", "a", "a", "b"], "seed": [0, 1, 2, 0]})
+    assert _jobs_text(uneven) == "4 jobs: 2 configurations, 1-3 training seeds each"
