@@ -30,7 +30,7 @@ def violins(groups: pd.DataFrame, methods: list[str], signals: str, out: Path) -
     for ax, metric in zip(axes, ("energy", "travel_time")):
         data = [groups[(groups.method == m) & (groups.signals == signals)][metric].to_numpy() for m in methods]
         ax.violinplot(data, showmedians=True)
-        ax.set_xticks(range(1, len(methods) + 1), methods)
+        ax.set_xticks(range(1, len(methods) + 1), methods, rotation=30, ha="right")  # 8 names fit a panel
         ax.set_xlabel("method")
         ax.set_ylabel(LABELS[metric])
         ax.grid(alpha=0.3)
@@ -54,8 +54,11 @@ def trajectories(trajs: dict[str, pd.DataFrame], bands: pd.DataFrame, title: str
         ax.set_xlabel("time since entry [s]")
         ax.set_ylabel(ylab)
         ax.grid(alpha=0.3)
-        ax.legend()
+    # one legend for the three panels, below them, so that it hides no curve or signal band
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False)
     fig.suptitle(title)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     return save(fig, out, name)
 
 
