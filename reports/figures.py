@@ -13,6 +13,13 @@ import pandas as pd  # noqa: E402
 LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
 
 
+def shared_legend(fig, ax, bottom: float = 0.08) -> None:
+    """One legend for a row of panels, below them, so that it hides no curve (``ax``'s entries)."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), frameon=False)
+    fig.tight_layout(rect=(0, bottom, 1, 1))
+
+
 def save(fig, out: Path, name: str) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}.png", out / f"{name}.pdf"]
@@ -54,11 +61,8 @@ def trajectories(trajs: dict[str, pd.DataFrame], bands: pd.DataFrame, title: str
         ax.set_xlabel("time since entry [s]")
         ax.set_ylabel(ylab)
         ax.grid(alpha=0.3)
-    # one legend for the three panels, below them, so that it hides no curve or signal band
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False)
     fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    shared_legend(fig, axes[0])
     return save(fig, out, name)
 
 
@@ -135,8 +139,8 @@ def lateral(trajs: dict[str, pd.DataFrame], scenario: str, out: Path) -> list[Pa
         ax.set_xlabel(xl)
         ax.set_ylabel(yl)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
     fig.suptitle(f"scenario {scenario} (grey: scripted HDVs)")
+    shared_legend(fig, axes[0])
     return save(fig, out, f"lateral-{scenario}")
 
 
