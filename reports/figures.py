@@ -13,11 +13,11 @@ import pandas as pd  # noqa: E402
 LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
 
 
-def shared_legend(fig, ax, bottom: float = 0.08) -> None:
-    """One legend for a row of panels, below them, so that it hides no curve (``ax``'s entries)."""
+def shared_legend(fig, ax) -> None:
+    """One legend for all panels, below them, so that it hides no curve (``ax``'s entries)."""
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), frameon=False)
-    fig.tight_layout(rect=(0, bottom, 1, 1))
+    fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))  # a 0.35 in strip for it
 
 
 def save(fig, out: Path, name: str) -> list[Path]:
@@ -116,7 +116,7 @@ def mixed_panels(cells: pd.DataFrame, out: Path) -> list[Path]:
             ax.set_ylabel(label)
             ax.set_title(signals)
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
+    shared_legend(fig, axes[0][0])
     return save(fig, out, "mixed-traffic")
 
 
