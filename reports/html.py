@@ -271,22 +271,28 @@ def provenance_section(page: Page) -> str:
     sha = str(man.get("git_sha", ""))
     dirty = " <span class='badge fail'>uncommitted changes</span>" if sha.endswith("-dirty") else ""
     overhead = man.get("harness_overhead")
+    earlier = [c for c in (man.get("commands") or [])[:-1] if isinstance(c, dict)]
     rows = [("Run folder", f"<code>{esc(page.run_name)}</code>"),
-            ("Command", f"<code>{esc(man.get('command', DASH))}</code>"),
-            ("Git SHA", f"<code class='sha'>{esc(sha or DASH)}</code>{dirty}"),
-            ("Profile", esc(man.get("profile", DASH))),
-            ("Signal settings", esc(", ".join(man.get("signals", [])) or DASH)),
-            ("Cases per setting", esc(man.get("cases_per_setting", DASH))),
-            ("Methods", esc(", ".join(man.get("methods", [])) or DASH)),
-            ("Not in this run (no shipped policy)", esc(", ".join(man.get("skipped_methods", [])) or "no method skipped")),
-            ("Executor", esc(f"{man.get('executor', DASH)}, {man.get('workers', DASH)} worker(s)")),
-            ("Episodes", esc(f"{man.get('episodes_run', DASH)} run, {man.get('episodes_reused', DASH)} reused from "
-                             f"complete logs, {man.get('episodes_kept_from_earlier_commands', DASH)} kept from earlier "
-                             "commands")),
-            ("Wall time", esc(duration(man.get("wall_time_s")))),
-            ("Sum of episode times", esc(duration(man.get("episode_time_sum_s")))),
-            ("Harness overhead", esc(pct(overhead, 1) if not missing(overhead) else DASH)
-             + " <span class='ci'>(wall time \u00d7 workers / sum of episode times \u2212 1)</span>")]
+            ("Command" + (" (the latest; the rows below are its own)" if earlier else ""),
+             f"<code>{esc(man.get('command', DASH))}</code>")]
+    if earlier:
+        rows.append((f"Earlier commands on this folder ({len(earlier)}, oldest first)", "<br>".join(
+            f"<code>{esc(c.get('command') or DASH)}</code> <span class='ci'>(git {esc(str(c.get('git_sha') or DASH)[:12])}, "
+            f"{esc(c.get('episodes_run', DASH))} episodes run)</span>" for c in earlier)))
+    rows += [("Git SHA", f"<code class='sha'>{esc(sha or DASH)}</code>{dirty}"),
+             ("Profile", esc(man.get("profile", DASH))),
+             ("Signal settings", esc(", ".join(man.get("signals", [])) or DASH)),
+             ("Cases per setting", esc(man.get("cases_per_setting", DASH))),
+             ("Methods", esc(", ".join(man.get("methods", [])) or DASH)),
+             ("Not in this run (no shipped policy)", esc(", ".join(man.get("skipped_methods", [])) or "no method skipped")),
+             ("Executor", esc(f"{man.get('executor', DASH)}, {man.get('workers', DASH)} worker(s)")),
+             ("Episodes", esc(f"{man.get('episodes_run', DASH)} run, {man.get('episodes_reused', DASH)} reused from "
+                              f"complete logs, {man.get('episodes_kept_from_earlier_commands', DASH)} kept from earlier "
+                              "commands")),
+             ("Wall time", esc(duration(man.get("wall_time_s")))),
+             ("Sum of episode times", esc(duration(man.get("episode_time_sum_s")))),
+             ("Harness overhead", esc(pct(overhead, 1) if not missing(overhead) else DASH)
+              + " <span class='ci'>(wall time \u00d7 workers / sum of episode times \u2212 1)</span>")]
     out.append("<table class='kv'><caption>From the run's <code>manifest.json</code> (written by "
                "<code>ecodrive run</code>).</caption><tbody>"
                + "".join(f"<tr><th scope='row'>{k}</th><td>{v}</td></tr>" for k, v in rows) + "</tbody></table>")

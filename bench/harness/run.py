@@ -34,7 +34,7 @@ from bench.harness.external import GROUP, AgentError, registered
 from bench.harness.generalisation import CASES_PER_VARIANT, FamilyError
 from bench.harness.oracle import NAME as ORACLE
 from bench.harness.policies import MODELS, CheckpointError, check_policy, family_dir, policy_dir, shipped_seeds
-from bench.harness.provenance import git_sha, package_versions
+from bench.harness.provenance import carry_forward, git_sha, package_versions
 from bench.harness.sb3 import ALGOS as SB3_ALGOS
 from bench.io import Unwritable, atomic_json, atomic_parquet, sha256, writable_dir
 from bench.logs.mcaplog import episode_summary, resolve_log
@@ -295,7 +295,8 @@ def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | No
     manifest.update(scenario_overrides=overrides, transfer=transfer, train_scenarios=trained)
     if opts.get("bounds"):  # the DP's per-case time, as measured in this run's workers
         manifest["bound_wall_s_median"] = round(float(pd.read_parquet(run_dir / "bounds.parquet").bound_wall_s.median()), 3)
-    atomic_json(manifest, run_dir / "manifest.json")
+    kept_keys = {f"{m}-{s}" + (f"/s{sd}" if sd >= 0 else "") for m, s, sd in zip(kept.method, kept.signals, kept.train_seed)}
+    atomic_json(carry_forward(manifest, run_dir / "manifest.json", kept_keys), run_dir / "manifest.json")
     return df
 
 

@@ -224,6 +224,21 @@ def test_provenance_is_the_manifests(report):
     assert f"eclipse-sumo{man['packages']['eclipse-sumo']}" in prov.replace(" ", "")
     assert "smoke" in prov and "speed_limit" in prov  # the profile and the scenario
     assert "No learned policy" in prov  # baseline and glosa have no checkpoint
+    assert "Earlier commands" not in prov  # one command wrote the folder
+
+
+def test_provenance_lists_the_earlier_commands_of_a_folder():
+    from reports.html import render
+    from reports.html_parts import Page
+
+    man = {"command": "ecodrive run --methods baseline", "git_sha": "b" * 40,
+           "checkpoint_sha256": {"prl-coordinated/s0": "c" * 64},
+           "commands": [{"command": "ecodrive run --methods prl", "git_sha": "a" * 40, "episodes_run": 3},
+                        {"command": "ecodrive run --methods baseline", "git_sha": "b" * 40, "episodes_run": 3}]}
+    prov = Doc(render(Page(run_name="x", manifest=man))).sections["provenance"]
+    assert "Earlier commands on this folder (1, oldest first)" in prov
+    assert "ecodrive run --methods prl (git aaaaaaaaaaaa, 3 episodes run)" in prov
+    assert "prl-coordinated/s0" in prov and "c" * 64 in prov
 
 
 def test_the_markdown_is_unchanged(report):

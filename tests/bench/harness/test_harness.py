@@ -132,6 +132,21 @@ def test_unwritable_log_folder(tmp_path):
     assert blocker.read_text() == "not a folder"
 
 
+def test_the_manifest_keeps_the_provenance_of_rows_kept_from_earlier_commands(tmp_path):
+    """A folder built by two commands (PRL coordinated, then the baseline uncoordinated) records
+    both: the PRL policy's sha256, both settings' scenarios and both commands, oldest first."""
+    common = ["--profile", "smoke", "--logs", str(tmp_path), "--workers", "2"]
+    run(parse([*common, "--methods", "prl", "--signals", "coordinated", "--train-seeds", "0"]), progress=False)
+    first = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
+    run(parse([*common, "--methods", "baseline", "--signals", "uncoordinated"]), progress=False)
+    man = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
+    assert man["methods"] == ["baseline"] and man["episodes_kept_from_earlier_commands"] == 3
+    assert man["checkpoint_sha256"] == first["checkpoint_sha256"] and list(man["checkpoint_sha256"]) == ["prl-coordinated/s0"]
+    assert sorted(man["scenario"]) == ["coordinated", "uncoordinated"]
+    assert [c["methods"] for c in man["commands"]] == [["prl"], ["baseline"]]
+    assert man["commands"][0]["command"] == first["command"]
+
+
 def test_a_rerun_with_fewer_methods_keeps_the_finished_rows(tmp_path):
     common = ["--profile", "smoke", "--logs", str(tmp_path), "--signals", "coordinated", "--workers", "2"]
     first = run(parse([*common, "--methods", "baseline", "glosa"]), progress=False)
