@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from reports.sweep_claims import heatmap_claims, reward_claims
+from reports.sweep_claims import complete_block, heatmap_claims, reward_claims
 
 
 def _reward(rows: list[tuple[str, float, int, float, float]]) -> pd.DataFrame:
@@ -36,3 +36,20 @@ def test_heatmap_claims_pass_fail_and_wait():
     assert heatmap_claims(reversed_).status.tolist() == ["FAIL", "FAIL", "FAIL"]
     assert heatmap_claims(papers.iloc[:1]).status.tolist() == ["NOT CHECKED"] * 3
     assert heatmap_claims(papers.iloc[:0]).status.tolist() == ["NOT CHECKED"] * 3
+
+
+def test_heatmap_claims_use_the_complete_block_of_a_partly_finished_grid():
+    """A row of five |r_p^j| cells at |r_p^s| = 10 and one cell at 20: the factors are not crossed,
+    so nothing is judged; the block grows as cells land, and cells outside it are not used."""
+    def cells(pairs):
+        return pd.DataFrame([(s, j, 200.0 + s - j, 250.0 - s + j) for s, j in pairs],
+                            columns=["reward_speed_penalty", "reward_jerk_penalty", "energy", "travel_time"])
+    row = [(10.0, j) for j in (10.0, 20.0, 30.0, 40.0, 50.0)]
+    partial = heatmap_claims(cells(row + [(20.0, 10.0)]))
+    assert partial.status.tolist() == ["NOT CHECKED"] * 3 and "largest has 1 x 5" in partial.detail.iloc[0]
+    block = complete_block(cells(row + [(20.0, 10.0), (20.0, 20.0)]))
+    assert sorted(zip(block.reward_speed_penalty, block.reward_jerk_penalty)) == [
+        (10.0, 10.0), (10.0, 20.0), (20.0, 10.0), (20.0, 20.0)]
+    judged = heatmap_claims(cells(row + [(20.0, 10.0), (20.0, 20.0)]))
+    assert judged.status.tolist() == ["PASS", "PASS", "FAIL"]  # |r_p^j| moves these made-up cells as much as |r_p^s|
+    assert "4 cells: |r_p^s| 10, 20 x |r_p^j| 10, 20" in judged.detail.iloc[0]
