@@ -3,6 +3,7 @@ naming the value and the accepted range, exit code 2, and nothing touched."""
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import sys
 from collections.abc import Callable
@@ -45,15 +46,18 @@ def int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:
     return parse
 
 
-def float_in(lo: float, hi: float, lo_open: bool = False) -> Callable[[str], float]:
-    """A float in [lo, hi] (or (lo, hi] with lo_open)."""
+def float_in(lo: float | None, hi: float | None, lo_open: bool = False) -> Callable[[str], float]:
+    """A finite float in [lo, hi] (or (lo, hi] with lo_open; None: no bound on that side)."""
     def parse(value: str) -> float:
         try:
             v = float(value)
         except ValueError:
             v = float("nan")
-        if not (v > lo if lo_open else v >= lo) or not v <= hi:
-            raise argparse.ArgumentTypeError(f"{value!r} is out of range; accepted: {'(' if lo_open else '['}{lo}, {hi}]")
+        low = lo is None or (v > lo if lo_open else v >= lo)
+        if not (math.isfinite(v) and low and (hi is None or v <= hi)):
+            left = "(-inf" if lo is None else f"{'(' if lo_open else '['}{lo}"
+            right = "inf)" if hi is None else f"{hi}]"
+            raise argparse.ArgumentTypeError(f"{value!r} is out of range; accepted: {left}, {right}")
         return v
     parse.__name__ = "number"
     return parse

@@ -178,7 +178,7 @@ def _jobs_text(sweep: pd.DataFrame) -> str:
     lo, hi = int(per.min()), int(per.max())
     if lo == hi == sweep.seed.nunique():
         return f"{len(per)} configurations x {hi} seed{'s' if hi > 1 else ''}"
-    return f"{len(sweep)} jobs: {len(per)} configurations, {lo}-{hi} training seeds each"
+    return f"{len(sweep)} jobs: {len(per)} configurations, {lo if lo == hi else f'{lo}-{hi}'} training seeds each"
 
 
 def _table(df: pd.DataFrame) -> str:

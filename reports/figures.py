@@ -13,11 +13,16 @@ import pandas as pd  # noqa: E402
 LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
 
 
-def shared_legend(fig, ax) -> None:
-    """One legend for all panels, below them, so that it hides no curve (``ax``'s entries)."""
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 8), frameon=False)
-    fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))  # a 0.35 in strip for it
+def shared_legend(fig, *axes) -> None:
+    """One legend for all panels, below them, so that it hides no curve: the entries of ``axes``,
+    each label once (in the order met); none where no line has a label."""
+    entries: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    if entries:
+        fig.legend(list(entries.values()), list(entries), loc="lower center", ncol=min(len(entries), 8), frameon=False)
+    fig.tight_layout(rect=(0, 0.35 / fig.get_figheight() if entries else 0, 1, 1))  # a 0.35 in strip for it
 
 
 def save(fig, out: Path, name: str) -> list[Path]:
@@ -106,17 +111,18 @@ def mixed_panels(cells: pd.DataFrame, out: Path) -> list[Path]:
               ("all_space_mean_speed", "space-mean speed, all inserted [m/s]")]
     panels = [p for p in panels if p[0] in cells.columns]
     fig, axes = plt.subplots(len(panels), len(settings), figsize=(6 * len(settings), 4 * len(panels)), squeeze=False)
+    colour = {mpr: f"C{i}" for i, mpr in enumerate(sorted(set(cells.mpr)))}  # the same MPR, the same colour
     for col, signals in enumerate(settings):
         sub = cells[cells.signals == signals]
         for row, (metric, label) in enumerate(panels):
             ax = axes[row][col]
             for mpr, g in sub.groupby("mpr"):
-                ax.plot(g.demand, g[metric], marker="o", label=f"MPR {mpr:g}")
+                ax.plot(g.demand, g[metric], marker="o", label=f"MPR {mpr:g}", color=colour[mpr])
             ax.set_xlabel("demand [veh/h/lane]")
             ax.set_ylabel(label)
             ax.set_title(signals)
             ax.grid(alpha=0.3)
-    shared_legend(fig, axes[0][0])
+    shared_legend(fig, *axes[0])  # a setting may lack an MPR level the other has (a sweep cut short)
     return save(fig, out, "mixed-traffic")
 
 

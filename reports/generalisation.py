@@ -41,6 +41,12 @@ def load(run_dir: Path) -> tuple[pd.DataFrame, dict]:
     return table, manifest if isinstance(manifest, dict) else {}
 
 
+def _percent(fraction: float) -> str:
+    """A change as signed percent text ('-12.3%'); empty where there is none. Text, so that a
+    renderer does not scale it again."""
+    return "" if pd.isna(fraction) else f"{100 * fraction:+.1f}%"
+
+
 def section(run_dir: Path, out: Path, methods_order: tuple[str, ...],
             in_distribution: pd.DataFrame | None = None) -> tuple[list[str], list[tuple[str, Path]]]:
     """Markdown lines and (title, PNG) figures; CSVs ``generalisation.csv`` (per variant) and
@@ -70,14 +76,17 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...],
              "in-distribution column."), ""]
     pct = summary.copy()
     for c in pct.columns:
-        if c.endswith("change") or c.endswith("worst") or c.endswith("gap"):
-            pct[c] = 100 * pct[c]
-    md += ["Family mean per method [%]:", "", tables.frame_markdown(pct.set_index(["signals", "method"]), digits=1)]
+        if c.endswith("change") or c.endswith("worst"):
+            pct[c] = pct[c].map(_percent)
+        elif c.endswith("gap"):
+            pct[c] = 100 * pct[c]  # a difference of two changes [percentage points]
+    md += ["Family mean per method (changes [%], gaps [percentage points]):", "",
+           tables.frame_markdown(pct.set_index(["signals", "method"]), digits=1)]
     if variants:
         md += ["Variants:", ""] + [f"- `{n}`: " + ", ".join(f"{k}={v}" for k, v in sc.items())
                                    for n, sc in variants.items()] + [""]
     per = per_variant.copy()
-    per["energy_change"], per["time_change"] = 100 * per.energy_change, 100 * per.time_change
+    per["energy_change"], per["time_change"] = per.energy_change.map(_percent), per.time_change.map(_percent)
     md += ["Per variant (energy [Wh], travel time [s], changes [%]):", "",
            tables.frame_markdown(per.set_index(["signals", "variant", "method"]), digits=1)]
     images = []

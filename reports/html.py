@@ -271,7 +271,8 @@ def provenance_section(page: Page) -> str:
     sha = str(man.get("git_sha", ""))
     dirty = " <span class='badge fail'>uncommitted changes</span>" if sha.endswith("-dirty") else ""
     overhead = man.get("harness_overhead")
-    earlier = [c for c in (man.get("commands") or [])[:-1] if isinstance(c, dict)]
+    commands = man.get("commands")
+    earlier = [c for c in commands[:-1] if isinstance(c, dict)] if isinstance(commands, list) else []
     rows = [("Run folder", f"<code>{esc(page.run_name)}</code>"),
             ("Command" + (" (the latest; the rows below are its own)" if earlier else ""),
              f"<code>{esc(man.get('command', DASH))}</code>")]

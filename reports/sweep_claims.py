@@ -66,21 +66,26 @@ def reward_claims(sweep: pd.DataFrame, baseline_energy: float | None = None) -> 
 def complete_block(cells: pd.DataFrame) -> pd.DataFrame:
     """The cells of the largest complete block of the grid: a set of |r_p^s| values x a set of
     |r_p^j| values whose every pair is finished; a block with two values of each first, then the
-    most cells, then the most |r_p^s| values, then the smallest values.
-    On a partly finished grid the two factors are not crossed, so a comparison over all finished
-    cells would mix |r_p^s|'s effect with |r_p^j|'s; over a complete block they are independent."""
+    most cells, then the most |r_p^s| values, then the smallest values. On a partly finished grid
+    the two factors are not crossed, so a comparison over all finished cells would mix |r_p^s|'s
+    effect with |r_p^j|'s; over a complete block they are independent.
+
+    A largest block's |r_p^j| set is the intersection of some rows' |r_p^j| sets, so only those
+    intersections are tried (few on a grid filled row by row)."""
     if cells.empty:
         return cells
-    have = set(zip(cells.reward_speed_penalty, cells.reward_jerk_penalty))
-    js = sorted(set(cells.reward_jerk_penalty))
-    best: tuple = (False, 0, 0, [], [])
-    for mask in range(1, 2 ** len(js)):
-        cols = [j for k, j in enumerate(js) if mask >> k & 1]
-        rows = sorted(s for s in set(cells.reward_speed_penalty) if all((s, j) in have for j in cols))
-        key = (len(rows) >= 2 and len(cols) >= 2, len(rows) * len(cols), len(rows))
-        if rows and key > best[:3]:
-            best = (*key, rows, cols)
-    rows, cols = best[3], best[4]
+    rows_of = cells.groupby("reward_speed_penalty").reward_jerk_penalty.agg(frozenset).to_dict()
+    candidates: set[frozenset] = set()
+    for js in rows_of.values():
+        candidates |= {js} | {js & c for c in candidates}
+    best: tuple | None = None
+    for cols in filter(None, candidates):
+        rows = sorted(s for s, js in rows_of.items() if cols <= js)
+        key = (len(rows) >= 2 and len(cols) >= 2, len(rows) * len(cols), len(rows),
+               tuple(-v for v in rows), tuple(-v for v in sorted(cols)))
+        if best is None or key > best[0]:
+            best = (key, rows, cols)
+    _, rows, cols = best
     return cells[cells.reward_speed_penalty.isin(rows) & cells.reward_jerk_penalty.isin(cols)]
 
 

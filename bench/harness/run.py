@@ -247,7 +247,7 @@ def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | No
             sha = (sha256(Path(pdir) / "policy.pt") if pdir  # a log of another policy is rerun
                    else opts.get("agent_sha256", {}).get(method, ""))
             if sha:
-                shas[f"{method}-{signals}" + (f"/s{seed}" if seed >= 0 else "")] = sha
+                shas[policy_key(method, signals, seed)] = sha
             folder = run_dir / signals / method / (f"s{seed}" if seed >= 0 else "")
             for case in cases:
                 path = folder / f"case-{case.index:03d}.mcap"
@@ -270,7 +270,7 @@ def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | No
     for i, col in enumerate(SCENARIO_COLUMNS):
         df[col] = [(ev.eval_hash, ev.train_hash)[i] for ev in map(where.get, zip(df.method, df.signals, df.train_seed))]
     ran = df["episode_wall_s"].dropna()
-    kept = earlier_rows(run_dir, df)
+    kept = earlier_rows(run_dir, df, shas)
     df = pd.concat([df[list(KEEP)], kept], ignore_index=True) if len(kept) else df[list(KEEP)]
     df = df.sort_values(["signals", "method", "train_seed", "case"], ignore_index=True)
     df["mcap"] = [_relative(run_dir, m) for m in df.mcap]  # the run folder moves as a whole
@@ -295,15 +295,23 @@ def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | No
     manifest.update(scenario_overrides=overrides, transfer=transfer, train_scenarios=trained)
     if opts.get("bounds"):  # the DP's per-case time, as measured in this run's workers
         manifest["bound_wall_s_median"] = round(float(pd.read_parquet(run_dir / "bounds.parquet").bound_wall_s.median()), 3)
-    kept_keys = {f"{m}-{s}" + (f"/s{sd}" if sd >= 0 else "") for m, s, sd in zip(kept.method, kept.signals, kept.train_seed)}
+    kept_keys = {policy_key(m, s, sd) for m, s, sd in zip(kept.method, kept.signals, kept.train_seed)}
     atomic_json(carry_forward(manifest, run_dir / "manifest.json", kept_keys), run_dir / "manifest.json")
     return df
 
 
-def earlier_rows(run_dir: Path, df: pd.DataFrame) -> pd.DataFrame:
+def policy_key(method: str, signals: str, seed: int) -> str:
+    """A policy's key in the manifest's ``checkpoint_sha256`` (``prl-coordinated/s0``; no seed for a rule)."""
+    return f"{method}-{signals}" + (f"/s{int(seed)}" if seed >= 0 else "")
+
+
+def earlier_rows(run_dir: Path, df: pd.DataFrame, shas: dict[str, str] | None = None) -> pd.DataFrame:
     """Rows of ``results.parquet`` from earlier commands on this run folder that this command did
     not run (other methods, settings or cases) and whose step log is still complete: a rerun with
-    fewer methods keeps them instead of shrinking the table."""
+    fewer methods keeps them instead of shrinking the table. A row of a policy this command ran
+    (``shas``, by ``policy_key``) is kept only if its log was written by the same policy file: rows
+    of a replaced policy are dropped, never mixed with the new one's."""
+    shas = shas or {}
     path = run_dir / "results.parquet"
     if not path.is_file():
         return pd.DataFrame(columns=list(KEEP))
@@ -318,7 +326,8 @@ def earlier_rows(run_dir: Path, df: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame(columns=list(KEEP))
     now = set(zip(df.signals, df.method, df.train_seed, df.case))
     rows = [r for r in old.itertuples(index=False) if (r.signals, r.method, r.train_seed, r.case) not in now]
-    keep = [r._asdict() for r in rows if episode_summary(resolve_log(run_dir, r.mcap)) is not None]
+    keep = [r._asdict() for r in rows if episode_summary(
+        resolve_log(run_dir, r.mcap), agent_sha256=shas.get(policy_key(r.method, r.signals, r.train_seed))) is not None]
     return pd.DataFrame(keep, columns=list(KEEP))
 
 

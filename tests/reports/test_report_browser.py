@@ -9,6 +9,7 @@ tests skip, unless ``ECODRIVE_REQUIRE_BROWSER=1`` (set by ``.ci/run``, which ins
 they fail."""
 from __future__ import annotations
 
+import html
 import json
 import os
 import re
@@ -78,7 +79,7 @@ def probe(exe: str, page: Path, width: int, tmp: Path) -> dict:
         copy.unlink()
     m = re.search(r'<pre id="probe">([^<]*)</pre>', out.stdout)
     assert m, f"{exe} printed no probe (exit {out.returncode}): {out.stderr[-500:]}"
-    return json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    return json.loads(html.unescape(m.group(1)))
 
 
 @pytest.mark.parametrize("width", WIDTHS)

@@ -53,3 +53,11 @@ def test_heatmap_claims_use_the_complete_block_of_a_partly_finished_grid():
     judged = heatmap_claims(cells(row + [(20.0, 10.0), (20.0, 20.0)]))
     assert judged.status.tolist() == ["PASS", "PASS", "FAIL"]  # |r_p^j| moves these made-up cells as much as |r_p^s|
     assert "4 cells: |r_p^s| 10, 20 x |r_p^j| 10, 20" in judged.detail.iloc[0]
+
+
+def test_the_block_tie_goes_to_the_smaller_penalties():
+    pairs = [(10, 10), (10, 40), (20, 10), (20, 40), (30, 20), (30, 30), (40, 20), (40, 30)]
+    cells = pd.DataFrame(pairs, columns=["reward_speed_penalty", "reward_jerk_penalty"]).astype(float)
+    block = complete_block(cells)
+    assert sorted(zip(block.reward_speed_penalty, block.reward_jerk_penalty)) == [
+        (10.0, 10.0), (10.0, 40.0), (20.0, 10.0), (20.0, 40.0)]

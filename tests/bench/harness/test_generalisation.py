@@ -87,6 +87,26 @@ def test_a_tampered_family_file_stops_the_profile_in_one_line(tmp_path, monkeypa
     assert e.value.code == 2 and len(err) == 1 and "differs from the generator" in err[0]
 
 
+def test_a_later_variant_that_is_refused_stops_the_profile_before_the_first_runs(tmp_path, monkeypatch, capsys):
+    """g2's folder holds another scenario's episodes: the command is refused before g1's folder is
+    made, and each policy is loaded once for both variants."""
+    import bench.harness.run as harness_run
+
+    loads = []
+    real = harness_run.check_policy
+    monkeypatch.setattr(harness_run, "check_policy", lambda folder, method: loads.append(folder) or real(folder, method))
+    g1, g2 = load()[:2]
+    (tmp_path / "generalisation" / g2.name).mkdir(parents=True)
+    pd.DataFrame({"signals": ["coordinated"], "eval_scenario_hash": ["another"]}).to_parquet(
+        tmp_path / "generalisation" / g2.name / "results.parquet")
+    monkeypatch.setattr(sys, "argv", ["ecodrive run"])
+    rc = main(["--profile", "generalisation", "--variants", "g1", "g2", "--methods", "prl", "--signals", "coordinated",
+               "--train-seeds", "0", "--logs", str(tmp_path), "--workers", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "another scenario" in err[0] and g2.name in err[0]
+    assert not (tmp_path / "generalisation" / g1.name).exists() and len(loads) == 1
+
+
 def test_the_profile_plans_every_method_with_the_oracle_and_transfer(tmp_path):
     opts = parse(["--profile", "generalisation", "--logs", str(tmp_path)])
     assert opts["transfer"] is True and opts["run_id"] == "generalisation" and len(opts["family"]) == 6
@@ -135,7 +155,14 @@ def test_the_report_of_a_generalisation_run(tiny, tmp_path):
     md = (tmp_path / "r" / "index.md").read_text()
     assert "## Generalisation: held-out corridors" in md and opts["family"][0].name in md
     assert (tmp_path / "r" / "generalisation.csv").is_file() and (tmp_path / "r" / "figures" / "generalisation-coordinated.png").is_file()
-    assert "Generalisation" in (tmp_path / "r" / "index.html").read_text()
+    page = (tmp_path / "r" / "index.html").read_text()
+    assert "Generalisation" in page
+    # a change is shown once as a percent, in the markdown and on the page (not scaled twice)
+    per = pd.read_csv(tmp_path / "r" / "generalisation.csv")
+    change = per.loc[per.method == "prl", "energy_change"].iloc[0]
+    text = f"{100 * change:+.1f}%"
+    assert f"| {text} |" in md and text.replace("-", "\u2212") in page
+    assert f"{10000 * change:+.0f}%".replace("-", "\u2212") not in page
 
 
 def test_the_docs_list_the_family():

@@ -147,6 +147,28 @@ def test_the_manifest_keeps_the_provenance_of_rows_kept_from_earlier_commands(tm
     assert man["commands"][0]["command"] == first["command"]
 
 
+def test_rows_of_a_replaced_policy_are_not_kept_beside_the_new_ones(tmp_path):
+    """PRL seed 0 on three cases; its policy file is then replaced and one case rerun: the two
+    other rows (the old policy's) leave the table, so the manifest's sha256 covers every row."""
+    import shutil
+
+    from bench.harness.cases import load as load_cases
+    from bench.harness.policies import policy_dir
+
+    models = tmp_path / "models"
+    shutil.copytree(policy_dir("prl", "coordinated"), policy_dir("prl", "coordinated", models))
+    common = ["--profile", "smoke", "--logs", str(tmp_path), "--workers", "2", "--methods", "prl",
+              "--signals", "coordinated", "--train-seeds", "0", "--models", str(models)]
+    assert len(run(parse(common), progress=False)) == 3
+    shutil.rmtree(policy_dir("prl", "coordinated", models))
+    shutil.copytree(policy_dir("prl", "coordinated", seed=1), policy_dir("prl", "coordinated", models))
+    again = run({**parse(common), "cases": load_cases()[:1]}, progress=False)
+    man = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
+    assert len(again) == 1 and man["episodes_kept_from_earlier_commands"] == 0
+    assert man["checkpoint_sha256"]["prl-coordinated/s0"] == json.loads(
+        (policy_dir("prl", "coordinated", seed=1) / "manifest.json").read_text())["sha256"]
+
+
 def test_a_rerun_with_fewer_methods_keeps_the_finished_rows(tmp_path):
     common = ["--profile", "smoke", "--logs", str(tmp_path), "--signals", "coordinated", "--workers", "2"]
     first = run(parse([*common, "--methods", "baseline", "glosa"]), progress=False)
