@@ -25,7 +25,8 @@ nav { margin:18px 0 0; padding:10px 14px; border:1px solid var(--line); border-r
 nav ol { margin:0; padding-left:20px; columns:3; }
 nav li { margin:1px 0; }
 .lead { font-size:15px; }
-.scroll { overflow-x:auto; margin:10px 0 18px; }
+.scroll { overflow-x:auto; margin:10px 0 18px; container-type:inline-size; }
+.scroll > table > caption { position:sticky; left:0; max-width:100cqw; }  /* readable while the table scrolls */
 table { border-collapse:collapse; font-size:13.5px; width:100%; }
 caption { caption-side:top; text-align:left; color:var(--muted); font-size:13px; padding:0 0 6px; line-height:1.45; }
 caption b { color:var(--fg); }

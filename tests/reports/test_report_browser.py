@@ -33,6 +33,8 @@ window.addEventListener('load', () => {
     overflow: document.documentElement.scrollWidth - vw,
     wide: [...document.querySelectorAll('table, figure, pre, img')]
       .filter(e => e.getBoundingClientRect().right > vw + 1 && !scrolled(e)).map(e => e.tagName.toLowerCase()),
+    cut_captions: [...document.querySelectorAll('caption')]
+      .filter(c => c.getBoundingClientRect().right > vw + 1).map(c => c.textContent.slice(0, 40)),
     dangling: [...document.querySelectorAll('a[href^="#"]')]
       .filter(a => !document.getElementById(decodeURIComponent(a.getAttribute('href').slice(1))))
       .map(a => a.getAttribute('href')),
@@ -88,6 +90,7 @@ def test_the_report_renders_in_chromium(chromium, smoke_report, width, tmp_path)
     assert r["width"] >= width * 0.9  # the window was opened at about the asked width
     assert r["images"] == 8 and r["broken"] == []  # a violin per setting, 3 trajectory cases per setting
     assert r["overflow"] <= 0 and r["wide"] == []  # wide tables scroll inside their own box
+    assert r["cut_captions"] == []  # while their captions stay within the window
     assert r["dangling"] == []
 
 
@@ -105,7 +108,8 @@ def test_the_probe_catches_a_bad_page(chromium, tmp_path):
     cells = "".join(f"<td>{'x' * 40}</td>" for _ in range(40))
     page = tmp_path / "index.html"
     page.write_text("<html><body><img src='figures/ok.png'><img src='figures/missing.png'>"
-                    f"<a href='#nowhere'>x</a><table><tr>{cells}</tr></table></body></html>")
+                    f"<a href='#nowhere'>x</a><table><caption>{'words ' * 400}</caption><tr>{cells}</tr></table>"
+                    "</body></html>")
     r = probe(chromium, page, WIDTHS[0], tmp_path)
     assert r["images"] == 2 and r["broken"] == ["figures/missing.png"]
-    assert r["overflow"] > 0 and "table" in r["wide"] and r["dangling"] == ["#nowhere"]
+    assert r["overflow"] > 0 and "table" in r["wide"] and r["dangling"] == ["#nowhere"] and len(r["cut_captions"]) == 1
