@@ -1,8 +1,8 @@
 """The HTML report in a real browser: headless Chromium loads a copy of the page with a probe
 script appended (the page itself has none), and the probe reports what a reader would see: every
-image decoded, no part of the page wider than the window at a desktop and a narrow width, every
-in-page link landing on an element. A page with a missing image and an unwrapped wide table is
-shown to fail the same probe.
+image decoded, no part of the page wider than the window at a desktop and a narrow width (a wide
+table scrolls in its own box, its caption stays in view), every in-page link landing on an element.
+A page with a missing image, an unwrapped wide table and its caption is shown to fail the probe.
 
 Needs Chromium (Debian's ``chromium``; ``$ECODRIVE_BROWSER`` names another binary). Without one the
 tests skip, unless ``ECODRIVE_REQUIRE_BROWSER=1`` (set by ``.ci/run``, which installs Chromium), where
