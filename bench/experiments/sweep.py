@@ -224,6 +224,33 @@ def _store(root: Path, job: Job) -> None:
         print(f"warning: could not store {job.label} under {root}: {e}", file=sys.stderr)
 
 
+def coarse_to_fine(values: list[float]) -> list[float]:
+    """The distinct values, ends first, then by bisection: 10 20 30 40 50 -> 10 50 30 20 40."""
+    vals = sorted(set(values))
+    out: list[int] = []
+    spans = [(0, len(vals) - 1)]
+    while spans:
+        lo, hi = spans.pop(0)
+        for i in (lo, hi, (lo + hi) // 2):
+            if i not in out:
+                out.append(i)
+        if hi - lo > 1:
+            mid = (lo + hi) // 2
+            spans += [(lo, mid), (mid, hi)]
+    return [vals[i] for i in out]
+
+
+def coarse_to_fine_cells(values: list[float]) -> list[tuple[float, float]]:
+    """The heatmap's (|r_p^s|, |r_p^j|) cells in an order whose every prefix of k^2 cells is a complete
+    k x k block over the first k values of ``coarse_to_fine``: a study cut short still has a
+    crossed grid over the widest range (what its claims are judged on), not one row of it."""
+    seq = coarse_to_fine(values)
+    cells = []
+    for k, v in enumerate(seq):
+        cells += [(v, w) for w in seq[:k]] + [(w, v) for w in seq[:k]] + [(v, v)]
+    return cells
+
+
 def order(todo: list[Job]) -> list[Job]:
     """Started jobs first (their checkpoints resume), the rest as ``jobs`` lists them (seed by seed)."""
     return sorted(todo, key=lambda j: not (Path(j.run_dir) / "checkpoint.pt").is_file())
@@ -245,7 +272,7 @@ def jobs(study: str, args: argparse.Namespace) -> list[Job]:
         configs = [(f"{form}-phi{phi:g}", {"form": form, "phi": phi}) for form in args.forms for phi in args.phi]
     else:
         configs = [(f"s{s:g}-j{j:g}", {"speed_penalty": s, "jerk_penalty": j, "lane_change_penalty": HEATMAP_LANE_CHANGE})
-                   for s in args.values for j in args.values]
+                   for s, j in coarse_to_fine_cells(args.values)]
     for _, reward in configs:
         RewardConfig(**reward)  # raises ConfigError naming the value and its range
     if args.max_episode_time is not None:

@@ -114,6 +114,18 @@ def test_a_recipe_jobs_folder_is_not_taken_for_a_paper_jobs(tmp_path, capsys):
         sweep.is_finished(paper)
 
 
+def test_heatmap_cells_run_coarse_to_fine(tmp_path, monkeypatch):
+    """The corners first, then the middle, then the rest: every k^2 first jobs of a seed are a
+    complete k x k block, the grid the heatmap claims are judged on."""
+    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    labels = [j.label for j in sweep.order(sweep.jobs("heatmap", sweep.parse(["heatmap", "--seeds", "0"])))]
+    assert labels[:4] == ["s10-j10-s0", "s50-j10-s0", "s10-j50-s0", "s50-j50-s0"] and len(set(labels)) == 25
+    cells = sweep.coarse_to_fine_cells([10.0, 20.0, 30.0, 40.0, 50.0])
+    for k in range(1, 6):
+        first = cells[: k * k]
+        assert set(first) == {(s, j) for s in {c[0] for c in first} for j in {c[1] for c in first}}
+
+
 def test_jobs_run_started_first_then_lowest_seed_first(tmp_path, monkeypatch):
     monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
     todo = sweep.jobs("reward", sweep.parse(["reward", "--forms", "r", "r2", "--phi", "1", "--seeds", "0", "1"]))
