@@ -43,8 +43,9 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
             p = figures.reward_study(metrics.reward_curves(train), figs)
             images.append(("reward study", p[0]))
             md += [f"![reward study](figures/{p[0].name})", ""]
-        md += [_table(sweep.groupby("config")[["energy", "travel_time", "lane_changes", "collisions",
-                                               "selected_episode"]].mean()), ""]
+        cols = ["energy", "travel_time", "lane_changes", "collisions", "selected_episode"]
+        cols += ["finished"] if "finished" in sweep else []  # share of test trips that reached the end
+        md += [_table(sweep.groupby("config")[cols].mean()), ""]
         md += ["The paper's claims on these jobs (`reports/sweep_claims.py`):", "",
                _table(sweep_claims.reward_claims(sweep, _baseline_energy(run_dir, sweep)).set_index("claim")), ""]
     heat = run_dir / "heatmap" / "sweep.parquet"

@@ -28,30 +28,52 @@ def _effect_and_noise(sweep: pd.DataFrame, factor: str, metric: str) -> tuple[fl
     return float(means.max() - means.min()), float((g.max() - g.min()).mean())
 
 
+def unfinished_jobs(sweep: pd.DataFrame) -> pd.DataFrame:
+    """The jobs whose policy leaves test trips unfinished (``finished`` < 1: cut at the episode's
+    truncation). Their mean energy counts trips that never arrived, so it is no saving; the claims
+    compare energy over the other jobs and name these."""
+    if "finished" not in sweep:
+        return sweep.iloc[:0]
+    return sweep[sweep.finished < 1.0]
+
+
+def _unfinished_text(jobs: pd.DataFrame) -> str:
+    if jobs.empty:
+        return ""
+    return "; left trips unfinished (not compared): " + ", ".join(
+        f"{r.config} seed {r.seed} ({100 * r.finished:.0f}% finished)" for r in jobs.itertuples())
+
+
 def reward_claims(sweep: pd.DataFrame, baseline_energy: float | None = None) -> pd.DataFrame:
     """Section 5.2, fig:rwd_compare: (1) with the terminal reward r1 the agent "cannot learn
     effective information": r1's mean test energy is no lower than SUMO's driver's on the same
-    cases (``baseline_energy`` [Wh]); (2) r2 and the paper's r converge to much lower energy: r1's
-    mean test energy is the highest of the forms; (3) phi hardly matters: for the paper's form r,
-    the spread of the per-phi means is no larger than the spread over training seeds within a phi,
-    for energy and travel time."""
+    cases (``baseline_energy`` [Wh]), or no r1 job finishes its trips; (2) r2 and the paper's r
+    converge to much lower energy: r1's mean test energy is the highest of the forms; (3) phi hardly
+    matters: for the paper's form r, the spread of the per-phi means is no larger than the spread
+    over training seeds within a phi, for energy and travel time. Energy is compared over the jobs
+    whose policy finishes every test trip (``unfinished_jobs`` are named, not averaged)."""
     out = []
-    by_form = sweep.groupby("reward_form").energy.mean() if "reward_form" in sweep else pd.Series(dtype=float)
+    lost = unfinished_jobs(sweep)
+    done = sweep.drop(lost.index)
+    by_form = done.groupby("reward_form").energy.mean() if "reward_form" in done else pd.Series(dtype=float)
+    r1_lost = lost[lost.reward_form == "r1"] if "reward_form" in lost else lost
     claim = "r1 (terminal reward only) learns no saving: no less energy than SUMO's driver"
-    if "r1" not in by_form or baseline_energy is None:
+    if "r1" not in by_form and len(r1_lost):
+        out.append(_row(claim, True, "no r1 job finishes its test trips" + _unfinished_text(r1_lost)))
+    elif "r1" not in by_form or baseline_energy is None:
         out.append(_row(claim, None, "needs r1 and the baseline on the same test cases"))
     else:
         e = by_form["r1"]
         out.append(_row(claim, bool(e >= baseline_energy), f"r1 {e:.1f} Wh against SUMO's driver's "
-                        f"{baseline_energy:.1f} Wh ({100 * (e / baseline_energy - 1):+.1f}%)"))
+                        f"{baseline_energy:.1f} Wh ({100 * (e / baseline_energy - 1):+.1f}%)" + _unfinished_text(r1_lost)))
     claim = "r1 (terminal reward only) ends with more energy than r2 and r"
     if "r1" not in by_form or len(by_form) < 2:
-        out.append(_row(claim, None, "needs r1 and another form"))
+        out.append(_row(claim, None, "needs r1 and another form, with jobs that finish their trips"))
     else:
         others = by_form.drop("r1")
         out.append(_row(claim, bool(by_form["r1"] > others.max()),
-                        ", ".join(f"{f} {e:.1f} Wh" for f, e in by_form.items())))
-    r = sweep[sweep.reward_form == "r"] if "reward_form" in sweep else sweep.iloc[:0]
+                        ", ".join(f"{f} {e:.1f} Wh" for f, e in by_form.items()) + _unfinished_text(lost)))
+    r = done[done.reward_form == "r"] if "reward_form" in done else done.iloc[:0]
     found = {m: _effect_and_noise(r, "reward_phi", m) for m, _ in METRICS}
     claim = "phi hardly matters (form r): its effect is within the spread over training seeds"
     if any(v is None for v in found.values()):
@@ -94,16 +116,20 @@ def heatmap_claims(sweep: pd.DataFrame) -> pd.DataFrame:
     (``complete_block``), which needs at least two values of each penalty: (1) a larger |r_p^s|
     shortens the travel time (negative Spearman rank correlation over the cells) and (2) raises
     the energy (positive); (3) |r_p^j| matters less than |r_p^s|: the range of the per-|r_p^j|
-    means is smaller than the range of the per-|r_p^s| means, for energy and travel time."""
+    means is smaller than the range of the per-|r_p^s| means, for energy and travel time. Jobs
+    that leave test trips unfinished (``unfinished_jobs``) are named, not averaged."""
     out = []
-    cells = (sweep.groupby(["reward_speed_penalty", "reward_jerk_penalty"])[["energy", "travel_time"]].mean()
-             .reset_index() if len(sweep) else pd.DataFrame())
+    lost = unfinished_jobs(sweep)  # a cell's jobs that crawl to the truncation are named, not averaged
+    done = sweep.drop(lost.index)
+    cells = (done.groupby(["reward_speed_penalty", "reward_jerk_penalty"])[["energy", "travel_time"]].mean()
+             .reset_index() if len(done) else pd.DataFrame())
     block = complete_block(cells)
     enough = not block.empty and block.reward_speed_penalty.nunique() >= 2 and block.reward_jerk_penalty.nunique() >= 2
     wait = (f"needs a complete block of two |r_p^s| x two |r_p^j| values; the largest has "
             f"{block.reward_speed_penalty.nunique() if len(block) else 0} x {block.reward_jerk_penalty.nunique() if len(block) else 0}")
     where = (f"{len(block)} cells: |r_p^s| {', '.join(f'{v:g}' for v in sorted(set(block.reward_speed_penalty)))} x "
              f"|r_p^j| {', '.join(f'{v:g}' for v in sorted(set(block.reward_jerk_penalty)))}" if enough else "")
+    where += _unfinished_text(lost) if "config" in lost else ""
     for metric, sign, what in (("travel_time", -1, "shortens the travel time"), ("energy", 1, "raises the energy")):
         claim = f"a larger |r_p^s| {what}"
         if not enough:

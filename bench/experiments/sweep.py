@@ -135,6 +135,7 @@ def run_job(job: Job) -> dict[str, Any]:
            **{f"agent_{k}": v for k, v in job.agent_config.items()}, "episodes": job.episodes,
            "selected_episode": manifest.get("selected_episode"), "cases": len(ep),
            "energy": ep.energy.mean(), "travel_time": ep.travel_time.mean(),
+           "finished": float(ep.terminated.mean()),  # share of test trips that reached the corridor's end
            "collisions": int(ep.collisions.sum()), "lane_changes": ep.lane_changes_applied.mean(),
            "policy_from": "" if shipped is None else f"models/{shipped.parent.name}/{shipped.name}",
            "job_wall_s": time.perf_counter() - t0, "log_dir": str(log_dir)}
@@ -206,11 +207,14 @@ def is_finished(job: Job) -> bool:
 def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
     """``sweep.parquet`` and ``episodes.parquet`` of the study folder, replaced atomically; a
     ConfigError naming a finished job's ``episodes.parquet`` that cannot be read."""
-    df = pd.DataFrame(list(rows.values()))
+    episodes = {d: store.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()}
+    # a job finished before rows recorded ``finished``: its share of trips that reached the end, from its episodes
+    df = pd.DataFrame([{**row, "finished": float(episodes[d].terminated.mean())}
+                       if "finished" not in row and d in episodes else row for d, row in rows.items()])
     if not df.empty:
         df = df.sort_values(["config", "seed"], ignore_index=True)
     atomic_parquet(df, root / "sweep.parquet")
-    episodes = [store.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()]
+    episodes = list(episodes.values())
     if episodes:
         atomic_parquet(pd.concat(episodes, ignore_index=True), root / "episodes.parquet")
     return df

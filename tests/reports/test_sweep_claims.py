@@ -61,3 +61,18 @@ def test_the_block_tie_goes_to_the_smaller_penalties():
     block = complete_block(cells)
     assert sorted(zip(block.reward_speed_penalty, block.reward_jerk_penalty)) == [
         (10.0, 10.0), (10.0, 40.0), (20.0, 10.0), (20.0, 40.0)]
+
+
+def test_a_job_that_leaves_its_trips_unfinished_is_no_saving():
+    """A policy that crawls to the truncation has a tiny energy (its trips never arrive): it is named,
+    not averaged, and a form none of whose jobs finish has learned no saving."""
+    grid = [("r1", 1.0, 0, 260.0, 300.0), ("r2", 1.0, 0, 205.0, 250.0), ("r", 1.0, 0, 200.0, 250.0)]
+    df = _reward(grid).assign(finished=1.0, config=["r1-phi1", "r2-phi1", "r-phi1"])
+    crawl = pd.DataFrame([{"reward_form": "r1", "reward_phi": 0.5, "seed": 1, "energy": 8.6, "travel_time": 888.0,
+                           "finished": 0.02, "config": "r1-phi0.5"}])
+    claims = reward_claims(pd.concat([df, crawl], ignore_index=True), baseline_energy=255.0)
+    assert claims.status.tolist()[:2] == ["PASS", "PASS"]  # 260 Wh over the finished r1 job, not (260 + 8.6) / 2
+    assert "r1 260.0 Wh" in claims.detail.iloc[0] and "r1-phi0.5 seed 1 (2% finished)" in claims.detail.iloc[0]
+    only_crawl = pd.concat([df[df.reward_form != "r1"], crawl], ignore_index=True)
+    first = reward_claims(only_crawl, baseline_energy=255.0).iloc[0]
+    assert first.status == "PASS" and first.detail.startswith("no r1 job finishes its test trips")

@@ -327,3 +327,16 @@ def test_a_truncated_finished_episodes_table_is_one_line(tmp_path, monkeypatch, 
     (root / "old-s0" / "episodes.parquet").write_bytes(b"PAR1")
     with pytest.raises(ConfigError, match="old-s0/episodes.parquet: not a readable parquet table"):
         sweep.write_tables(root, sweep.finished(root))
+
+
+def test_the_table_gives_older_jobs_their_share_of_finished_trips(tmp_path):
+    """A job row written before rows recorded ``finished`` gets it from its episodes."""
+    old, new = tmp_path / "r1-phi1-s0", tmp_path / "r-phi1-s0"
+    for d, terminated in ((old, [True, False, False, False]), (new, [True, True])):
+        d.mkdir()
+        pd.DataFrame({"terminated": terminated, "energy": 1.0}).to_parquet(d / "episodes.parquet")
+    rows = {str(old): {"config": "r1-phi1", "seed": 0, "energy": 5.0},
+            str(new): {"config": "r-phi1", "seed": 0, "energy": 5.0, "finished": 1.0}}
+    table = sweep.write_tables(tmp_path, rows).set_index("config")
+    assert table.loc["r1-phi1", "finished"] == 0.25 and table.loc["r-phi1", "finished"] == 1.0
+    assert "finished" not in rows[str(old)]  # the job's own row is left as it was
