@@ -162,7 +162,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
     page.experiments_md = _gaps(results, manifest, out)
     md += page.experiments_md
-    warnings = []
+    warnings = unfinished_warnings(results)
     parts, partial = _return_parts(results, run_dir, warnings)
     if partial:
         md += [f"**{partial} step log(s) are partial** (cut short after the results were written); they are left "
@@ -221,6 +221,21 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
                                                     f"{signals} case {case}"))
                     md += [f"![{name}](figures/{p[0].name})", ""]
     return md, warnings
+
+
+def unfinished_warnings(results: pd.DataFrame) -> list[str]:
+    """One warning per method and setting with episodes that did not reach the corridor's end
+    (truncated at the scenario's ``max_episode_time``): their energy counts trips that never
+    arrived, so a method that crawls would otherwise read as a saving in Table 4."""
+    if "terminated" not in results:
+        return []
+    out = []
+    for (method, signals), g in results.groupby(["method", "signals"]):
+        left = int((~g.terminated.astype(bool)).sum())
+        if left:
+            out.append(f"{method}, {signals}: {left} of {len(g)} episodes did not reach the corridor's end "
+                       "(truncated); their energy counts trips that never arrived, so it is no saving")
+    return out
 
 
 def _bound_plan(run_dir: Path, sub: pd.DataFrame, case: int, warnings: list[str]) -> pd.DataFrame | None:

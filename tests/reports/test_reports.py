@@ -113,3 +113,22 @@ def test_the_sweep_header_counts_jobs_when_seeds_differ_between_configurations()
     assert _jobs_text(full) == "2 configurations x 2 seeds"
     uneven = pd.DataFrame({"config": ["a", "a", "a", "b"], "seed": [0, 1, 2, 0]})
     assert _jobs_text(uneven) == "4 jobs: 2 configurations, 1-3 training seeds each"
+
+
+def test_a_method_whose_trips_do_not_finish_is_warned_about(smoke_report, tmp_path):
+    """A results table where one baseline episode was cut at the truncation: the report says so
+    under Warnings instead of letting its energy pass for a saving."""
+    import shutil
+
+    from reports.build import unfinished_warnings
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(smoke_report["run"], run_dir)
+    results = pd.read_parquet(run_dir / "results.parquet")
+    assert unfinished_warnings(results) == []
+    first = results.index[(results.method == "baseline") & (results.signals == "coordinated")][0]
+    results.loc[first, ["terminated", "truncated"]] = [False, True]
+    results.to_parquet(run_dir / "results.parquet")
+    index, warnings = build(run_dir, tmp_path / "report")
+    assert any(w.startswith("baseline, coordinated: 1 of 3 episodes did not reach") for w in warnings)
+    assert "did not reach the corridor's end" in index.read_text()
