@@ -214,9 +214,8 @@ def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
     if not df.empty:
         df = df.sort_values(["config", "seed"], ignore_index=True)
     atomic_parquet(df, root / "sweep.parquet")
-    episodes = list(episodes.values())
     if episodes:
-        atomic_parquet(pd.concat(episodes, ignore_index=True), root / "episodes.parquet")
+        atomic_parquet(pd.concat(episodes.values(), ignore_index=True), root / "episodes.parquet")
     return df
 
 
