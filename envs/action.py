@@ -23,12 +23,45 @@ class Command:
     lateral: int | None  # requested k in {-1, 0, 1}; None: LC2013 decides
 
 
+class InvalidAction(ValueError):
+    """An action outside the env's action space; its message names the action and the space."""
+
+
+def _index(x, n: int) -> bool:
+    """``x`` is an integer (Python, numpy, or a 0-d integer array; not a bool) in [0, n)."""
+    if isinstance(x, np.ndarray) and x.shape == ():
+        x = x[()]
+    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_)) and 0 <= int(x) < n
+
+
+def _vector(x, box: spaces.Box) -> bool:
+    """``x`` is real, finite, of the box's shape and inside its bounds once cast to its dtype
+    (so a float64 a hair past a float32 bound, which the cast rounds onto it, is inside)."""
+    try:
+        a = np.asarray(x)
+    except Exception:  # ragged sequences and the like
+        return False
+    if a.dtype.kind not in "iuf" or a.shape != box.shape or not np.isfinite(a).all():
+        return False
+    a = a.astype(box.dtype)
+    return bool(np.all(a >= box.low) and np.all(a <= box.high))
+
+
 class ActionType:
     name = ""
     space: spaces.Space
 
     def __init__(self, cfg: ScenarioConfig) -> None:
         self.cfg = cfg
+
+    def contains(self, action) -> bool:  # pragma: no cover - interface
+        """Whether ``action`` lies in ``space`` (numpy or Python numbers of any width)."""
+        raise NotImplementedError
+
+    def check(self, action) -> None:
+        """Raise ``InvalidAction`` naming ``action`` and the space unless it lies in the space."""
+        if not self.contains(action):
+            raise InvalidAction(f"action {action!r} is outside the action space {self.space}")
 
     def decode(self, action) -> Command:  # pragma: no cover - interface
         raise NotImplementedError
@@ -45,6 +78,11 @@ class ParameterizedAction(ActionType):
             spaces.Discrete(3),
             spaces.Box(cfg.a_min, cfg.a_max, shape=(3,), dtype=np.float32),
         ))
+
+    def contains(self, action) -> bool:
+        if isinstance(action, np.ndarray) or not isinstance(action, (tuple, list)) or len(action) != 2:
+            return False
+        return _index(action[0], 3) and _vector(action[1], self.space[1])
 
     def decode(self, action) -> Command:
         k_idx, params = action
@@ -66,6 +104,9 @@ class Discrete27Action(ActionType):
         self.table = dqn_table(cfg.a_min, cfg.a_max)
         self.space = spaces.Discrete(len(self.table))
 
+    def contains(self, action) -> bool:
+        return _index(action, len(self.table))
+
     def decode(self, action) -> Command:
         a, k = self.table[int(action)]
         return Command(a, k)
@@ -80,6 +121,9 @@ class LongitudinalAction(ActionType):
         super().__init__(cfg)
         self.space = spaces.Box(cfg.a_min, cfg.a_max, shape=(1,), dtype=np.float32)
 
+    def contains(self, action) -> bool:
+        return _vector(action, self.space)
+
     def decode(self, action) -> Command:
         return Command(float(np.clip(np.asarray(action).reshape(-1)[0], self.cfg.a_min, self.cfg.a_max)), None)
 
@@ -92,6 +136,9 @@ class SumoAction(ActionType):
     def __init__(self, cfg: ScenarioConfig) -> None:
         super().__init__(cfg)
         self.space = spaces.Discrete(1)
+
+    def contains(self, action) -> bool:
+        return _index(action, 1)
 
     def decode(self, action) -> Command:
         return Command(None, None)

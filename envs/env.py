@@ -17,6 +17,8 @@ from .vehicle import ControlledVehicle, StepMeasure
 
 EGO_ID = "ego"
 SEED_BOUND = 2**31 - 1  # SUMO seeds are drawn in [0, SEED_BOUND)
+INSERT_MAX = 86400.0  # [s] latest ego insertion time a reset accepts
+RESET_OPTIONS = ("sumo_seed", "insert_time")
 
 
 class EcoDriveEnv(gym.Env):
@@ -54,7 +56,15 @@ class EcoDriveEnv(gym.Env):
 
     ## Episode end
     Terminates when the ego has left the last intersection (or left the simulation); truncated
-    after ``max_episode_time`` s. Collisions and teleports are counted in ``info``.
+    after ``max_episode_time`` s. Collisions and teleports are counted in ``info``. ``step()``
+    after the end raises until the next ``reset()``; an action outside ``action_space`` raises
+    ``envs.action.InvalidAction`` naming it, and nothing is simulated.
+
+    ## Several envs in one process
+    Each env drives its own simulation. The first to reset runs in libsumo (in-process); one
+    that resets while another is mid-episode there runs its own SUMO through TraCI (same SUMO,
+    same numbers, slower per step). For throughput, give each env its own process:
+    ``gym.make_vec("EcoDrive-v0", n, vectorization_mode="async")``.
     """
 
     metadata = {"render_modes": []}
@@ -84,6 +94,7 @@ class EcoDriveEnv(gym.Env):
         self.observation_space = self.obs_type.space
         self.action_space = self.action_type.space
         self.ego: ControlledVehicle | None = None
+        self._ended = False  # the episode terminated or truncated: step() refuses until reset()
         self._last_obs: dict[str, np.ndarray] = {}
         self.recorder: Callable[[dict[str, Any]], None] | None = None
         self.case: dict[str, float] = {}
@@ -98,10 +109,20 @@ class EcoDriveEnv(gym.Env):
         super().reset(seed=seed)
         options = dict(options or {})
         cfg = self.cfg
-        sumo_seed = int(options.get("sumo_seed", self.np_random.integers(0, SEED_BOUND)))
-        t_ins = float(options.get("insert_time", self.np_random.uniform(cfg.insert_min, cfg.insert_max)))
-        if not 0 <= t_ins <= 86400:
-            raise ValueError(f"insert_time={t_ins} is out of range; accepted: [0, 86400] s")
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            raise ValueError(f"reset option(s) {', '.join(map(repr, unknown))} not accepted; accepted: "
+                             f"{', '.join(RESET_OPTIONS)}")
+        sumo_seed = options.get("sumo_seed", int(self.np_random.integers(0, SEED_BOUND)))
+        if isinstance(sumo_seed, (bool, np.bool_)) or not isinstance(sumo_seed, (int, np.integer)) \
+                or not 0 <= sumo_seed < SEED_BOUND:
+            raise ValueError(f"sumo_seed={sumo_seed!r} is not accepted; accepted: an integer in [0, {SEED_BOUND})")
+        sumo_seed = int(sumo_seed)
+        t_ins = options.get("insert_time", float(self.np_random.uniform(cfg.insert_min, cfg.insert_max)))
+        if isinstance(t_ins, (bool, np.bool_)) or not isinstance(t_ins, (int, float, np.integer, np.floating)) \
+                or not 0 <= t_ins <= INSERT_MAX:
+            raise ValueError(f"insert_time={t_ins!r} is not accepted; accepted: a number in [0, {INSERT_MAX:g}] s")
+        t_ins = float(t_ins)
         self.case = {"sumo_seed": sumo_seed, "insert_time": t_ins}
         s = self.session
         dt = cfg.step_length
@@ -121,6 +142,7 @@ class EcoDriveEnv(gym.Env):
         self.t_depart = s.time()
         self.collisions = self.teleports = self.collisions_all = self.teleports_all = 0
         self.ego = ControlledVehicle(EGO_ID, s, self.obs_type, cfg)
+        self._ended = False
         obs = self.ego.observe()
         self._last_obs = obs
         info = self._info(None, {}, 0.0)
@@ -131,6 +153,9 @@ class EcoDriveEnv(gym.Env):
     def step(self, action):
         if self.ego is None:
             raise RuntimeError("call reset() before step()")
+        if self._ended:
+            raise RuntimeError("the episode has ended (terminated or truncated): call reset() before step()")
+        self.action_type.check(action)  # InvalidAction (a ValueError) names the action and the space
         s, ego = self.session, self.ego
         cmd = self.action_type.decode(action)
         ego.apply(cmd)
@@ -150,6 +175,9 @@ class EcoDriveEnv(gym.Env):
             terminated = ego.kin.edge == self.files.exit_edge
         travel_time = s.time() - self.t_depart
         truncated = not terminated and travel_time >= self.cfg.max_episode_time
+        if terminated or truncated:
+            self._ended = True
+            s.busy = False  # another env of this process may take libsumo over (envs.sumo)
         r, comps = rewards.reward(
             self.cfg.reward, speed=m.speed, jerk=m.jerk, lane_changed=m.lane_change_charged, distance=m.distance,
             energy=m.energy, terminated=terminated, total_energy=ego.energy, travel_time=travel_time,

@@ -1,13 +1,23 @@
-"""The single libsumo session of a process: the only module that imports libsumo.
+"""SUMO sessions: the only module that talks to SUMO (libsumo in-process, or TraCI).
 
 Every query and command takes a vehicle ID, so the same session serves one ego or hundreds of
-controlled vehicles. libsumo allows one simulation per process; a second ``start`` closes the
-first.
+controlled vehicles.
+
+libsumo holds one simulation per process. The first session of a process to start takes it (the
+fast path: no socket, about 1 ms per step on the corridor); a session that starts while another
+one holds libsumo runs its own SUMO process through TraCI with its own label instead, so several
+envs in one process (``gymnasium``'s sync vector env, Stable-Baselines3's ``DummyVecEnv``) each
+drive their own simulation. The two paths run the same SUMO build on the same inputs and give
+the same numbers (``tests/envs/test_sessions.py`` compares every step's energy); TraCI is slower
+per call, so for throughput use one process per env (``gym.make_vec(...,
+vectorization_mode="async")``).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import NamedTuple
+
+from typing import Any
 
 import libsumo as ls
 from libsumo import constants as tc
@@ -15,7 +25,37 @@ from libsumo import constants as tc
 from .config import ScenarioConfig
 from .scenario import EGO_ROUTE, EGO_TYPE, GLOSA_TYPE, HDV_TYPE, ScenarioFiles
 
-_ACTIVE: SumoSession | None = None
+_LIBSUMO_OWNER: SumoSession | None = None  # the session running in this process's libsumo
+TRACI_CONNECT_TIMEOUT = 60.0  # [s] for a TraCI-run SUMO to load the scenario and accept the connection
+
+
+def _traci_start(args: list[str]) -> Any:
+    """A SUMO process of its own on a free local port, and the TraCI connection to it (polled every
+    10 ms: ``traci.start`` waits whole seconds between tries and prints each)."""
+    import socket
+    import subprocess
+    import time
+
+    import sumolib  # noqa: PLC0415  (pure Python: finds the SUMO binary of the installed wheel)
+    from traci.connection import Connection  # noqa: PLC0415
+
+    port = sumolib.miscutils.getFreeSocketPort()
+    proc = subprocess.Popen([sumolib.checkBinary("sumo"), *args, "--remote-port", str(port)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + TRACI_CONNECT_TIMEOUT
+    while True:
+        try:
+            return Connection("localhost", port, proc, None, False)
+        except OSError as e:
+            if proc.poll() is not None:
+                err = (proc.stderr.read() if proc.stderr else b"").decode(errors="replace").strip()
+                raise RuntimeError(f"SUMO (TraCI, port {port}) exited with code {proc.returncode}: "
+                                   f"{err.splitlines()[-1] if err else 'no message'}") from None
+            if time.monotonic() > deadline:
+                proc.kill()
+                raise RuntimeError(f"SUMO (TraCI) did not accept a connection on port {port} within "
+                                   f"{TRACI_CONNECT_TIMEOUT:g} s ({e})") from None
+            time.sleep(0.01)
 # context-subscription variables, as keys of ``neighbours()`` results
 VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_SPEED
 _GREEN = frozenset("gG")
@@ -63,6 +103,9 @@ class SumoSession:
         self.cfg = cfg
         self.files = files
         self.running = False
+        self.backend = ""  # "libsumo" or "traci" while running
+        self._api: Any = _Closed()  # the libsumo module, or this session's TraCI connection
+        self.busy = False  # in the middle of an episode: its libsumo is not handed to another session
         self._plans: dict[str, TlsPlan] = {}
         self._context_range = max(cfg.grid_ahead, cfg.grid_behind) + 2 * cfg.vehicle_length
 
@@ -78,165 +121,156 @@ class SumoSession:
         ]
 
     def start(self, seed: int) -> None:
-        global _ACTIVE
-        if _ACTIVE is not None and _ACTIVE.running:
-            _ACTIVE.close()
-        ls.start(self.command(seed))
-        _ACTIVE = self
+        """(Re)start this session's simulation: in libsumo if no other session of the process
+        is in the middle of an episode there (one whose episode is over gives libsumo up and is
+        closed), else in a SUMO process of its own through TraCI."""
+        global _LIBSUMO_OWNER
+        self.close()
+        owner = _LIBSUMO_OWNER
+        if owner is not None and not owner.busy:
+            owner.close()
+        if _LIBSUMO_OWNER is None:
+            ls.start(self.command(seed))
+            _LIBSUMO_OWNER, self._api, self.backend = self, ls, "libsumo"
+        else:
+            self._api, self.backend = _traci_start(self.command(seed)[1:]), "traci"
+        self.busy = True
         self.running = True
         if not self._plans:
+            api = self._api
             for tls in self.files.tls_ids:
-                logic = ls.trafficlight.getAllProgramLogics(tls)
-                prog = ls.trafficlight.getProgram(tls)
+                logic = api.trafficlight.getAllProgramLogics(tls)
+                prog = api.trafficlight.getProgram(tls)
                 lg = next(lo for lo in logic if lo.programID == prog)
                 self._plans[tls] = TlsPlan([p.duration for p in lg.phases], [p.state for p in lg.phases])
 
     def close(self) -> None:
-        global _ACTIVE
+        global _LIBSUMO_OWNER
         if self.running:
-            ls.close()
+            self._api.close()
             self.running = False
-        if _ACTIVE is self:
-            _ACTIVE = None
+        self.busy = False
+        if _LIBSUMO_OWNER is self:
+            _LIBSUMO_OWNER = None
+        self._api, self.backend = _Closed(), ""
 
     # ------------------------------------------------------------------ simulation
-    @staticmethod
-    def time() -> float:
-        return ls.simulation.getTime()
+    def time(self) -> float:
+        return self._api.simulation.getTime()
 
-    @staticmethod
-    def step(until: float = 0.0) -> None:
-        ls.simulationStep(until)
+    def step(self, until: float = 0.0) -> None:
+        self._api.simulationStep(until)
 
-    @staticmethod
-    def departed() -> tuple[str, ...]:
-        return ls.simulation.getDepartedIDList()
+    def departed(self) -> tuple[str, ...]:
+        return self._api.simulation.getDepartedIDList()
 
-    @staticmethod
-    def arrived() -> tuple[str, ...]:
-        return ls.simulation.getArrivedIDList()
+    def arrived(self) -> tuple[str, ...]:
+        return self._api.simulation.getArrivedIDList()
 
-    @staticmethod
-    def collisions() -> list[tuple[str, str]]:
-        return [(c.collider, c.victim) for c in ls.simulation.getCollisions()]
+    def collisions(self) -> list[tuple[str, str]]:
+        return [(c.collider, c.victim) for c in self._api.simulation.getCollisions()]
 
-    @staticmethod
-    def teleports() -> tuple[str, ...]:
-        return ls.simulation.getStartingTeleportIDList()
+    def teleports(self) -> tuple[str, ...]:
+        return self._api.simulation.getStartingTeleportIDList()
 
-    @staticmethod
-    def pending() -> tuple[str, ...]:
+    def pending(self) -> tuple[str, ...]:
         """Vehicles due to depart that SUMO could not insert yet (the entry is blocked)."""
-        return ls.simulation.getPendingVehicles()
+        return self._api.simulation.getPendingVehicles()
 
-    @staticmethod
-    def vehicle_ids() -> tuple[str, ...]:
-        return ls.vehicle.getIDList()
+    def vehicle_ids(self) -> tuple[str, ...]:
+        return self._api.vehicle.getIDList()
 
     # ------------------------------------------------------------------ vehicles
     def add_vehicle(self, vid: str, controlled: bool, glosa: bool = False) -> None:
         """Insert a vehicle of the EV type at the arterial's start, now."""
         vtype = GLOSA_TYPE if glosa else EGO_TYPE
-        ls.vehicle.add(vid, EGO_ROUTE, typeID=vtype, depart="now", departLane="best", departSpeed="max")
+        self._api.vehicle.add(vid, EGO_ROUTE, typeID=vtype, depart="now", departLane="best", departSpeed="max")
         self.subscribe(vid)
         if controlled:
             self.take_control(vid)
 
     def subscribe(self, vid: str) -> None:
         """Context subscription of the vehicles around ``vid`` (read by ``neighbours``)."""
-        ls.vehicle.subscribeContext(vid, tc.CMD_GET_VEHICLE_VARIABLE, self._context_range,
+        self._api.vehicle.subscribeContext(vid, tc.CMD_GET_VEHICLE_VARIABLE, self._context_range,
                                     [VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED])
 
-    @staticmethod
-    def add_scripted(vid: str, lane: int, pos: float, speed: float) -> None:
+    def add_scripted(self, vid: str, lane: int, pos: float, speed: float) -> None:
         """Insert a human-driven vehicle at an exact spot of the arterial's first edge, held at
         ``speed`` with its own safety checks off and no lane changes (scripted scenarios, tests)."""
-        ls.vehicle.add(vid, EGO_ROUTE, typeID=HDV_TYPE, depart="now", departLane=str(lane),
+        self._api.vehicle.add(vid, EGO_ROUTE, typeID=HDV_TYPE, depart="now", departLane=str(lane),
                        departPos=f"{pos:.2f}", departSpeed=f"{speed:.3f}")
-        ls.vehicle.setSpeedMode(vid, 0)
-        ls.vehicle.setLaneChangeMode(vid, 0)
-        ls.vehicle.setSpeed(vid, speed)
+        self._api.vehicle.setSpeedMode(vid, 0)
+        self._api.vehicle.setLaneChangeMode(vid, 0)
+        self._api.vehicle.setSpeed(vid, speed)
 
-    @staticmethod
-    def release_speed(vid: str) -> None:
+    def release_speed(self, vid: str) -> None:
         """Hand a scripted vehicle back to Krauss (safety checks on, no commanded speed)."""
-        ls.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
-        ls.vehicle.setSpeed(vid, -1)
+        self._api.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
+        self._api.vehicle.setSpeed(vid, -1)
 
-    @staticmethod
-    def take_control(vid: str) -> None:
-        ls.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
-        ls.vehicle.setLaneChangeMode(vid, LC_MODE_EXTERNAL)
+    def take_control(self, vid: str) -> None:
+        self._api.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
+        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_EXTERNAL)
 
-    @staticmethod
-    def lateral_to_sumo(vid: str, lc2013: bool) -> None:
-        ls.vehicle.setLaneChangeMode(vid, LC_MODE_DEFAULT if lc2013 else LC_MODE_EXTERNAL)
+    def lateral_to_sumo(self, vid: str, lc2013: bool) -> None:
+        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_DEFAULT if lc2013 else LC_MODE_EXTERNAL)
 
-    @staticmethod
-    def kinematics(vid: str) -> Kinematics:
-        v = ls.vehicle
+    def kinematics(self, vid: str) -> Kinematics:
+        v = self._api.vehicle
         x, y = v.getPosition(vid)
         return Kinematics(x, y, v.getAngle(vid), v.getSpeed(vid), v.getAcceleration(vid), v.getLaneIndex(vid),
                           v.getRoadID(vid))
 
-    @staticmethod
-    def neighbours(vid: str) -> dict[str, dict[int, object]]:
+    def neighbours(self, vid: str) -> dict[str, dict[int, object]]:
         """Vehicles within the context range: id -> {var: value} (the vehicle itself included)."""
-        return ls.vehicle.getContextSubscriptionResults(vid)
+        return self._api.vehicle.getContextSubscriptionResults(vid)
 
-    @staticmethod
-    def odometer(vid: str) -> float:
+    def odometer(self, vid: str) -> float:
         """Distance [m] driven since insertion."""
-        return ls.vehicle.getDistance(vid)
+        return self._api.vehicle.getDistance(vid)
 
-    @staticmethod
-    def energy_rate(vid: str) -> float:
+    def energy_rate(self, vid: str) -> float:
         """Electric power drawn now [Wh/s]; negative while recuperating."""
-        return ls.vehicle.getElectricityConsumption(vid)
+        return self._api.vehicle.getElectricityConsumption(vid)
 
-    @staticmethod
-    def battery_totals(vid: str) -> tuple[float, float]:
+    def battery_totals(self, vid: str) -> tuple[float, float]:
         """(consumed, regenerated) [Wh] from the battery device."""
-        g = ls.vehicle.getParameter
+        g = self._api.vehicle.getParameter
         return (float(g(vid, "device.battery.totalEnergyConsumed")),
                 float(g(vid, "device.battery.totalEnergyRegenerated")))
 
-    @staticmethod
-    def set_speed(vid: str, speed: float) -> None:
-        ls.vehicle.setSpeed(vid, speed)
+    def set_speed(self, vid: str, speed: float) -> None:
+        self._api.vehicle.setSpeed(vid, speed)
 
     def change_lane(self, vid: str, direction: int) -> None:
         """Request a change by ``direction`` lanes (SUMO sign: +1 left, -1 right)."""
-        ls.vehicle.changeLaneRelative(vid, direction, self.cfg.step_length)
+        self._api.vehicle.changeLaneRelative(vid, direction, self.cfg.step_length)
 
-    @staticmethod
-    def could_change(vid: str, direction: int) -> bool:
+    def could_change(self, vid: str, direction: int) -> bool:
         """LC2013's safety verdict for a change in ``direction`` (SUMO sign: +1 left)."""
-        return ls.vehicle.couldChangeLane(vid, direction)
+        return self._api.vehicle.couldChangeLane(vid, direction)
 
-    @staticmethod
-    def leader(vid: str, dist: float) -> tuple[str, float] | None:
-        res = ls.vehicle.getLeader(vid, dist)
+    def leader(self, vid: str, dist: float) -> tuple[str, float] | None:
+        res = self._api.vehicle.getLeader(vid, dist)
         return None if res is None or res[0] == "" else (res[0], res[1])
 
-    @staticmethod
-    def follow_speed(vid: str, speed: float, gap: float, leader_speed: float, leader_decel: float) -> float:
+    def follow_speed(self, vid: str, speed: float, gap: float, leader_speed: float, leader_decel: float) -> float:
         """Krauss safe following speed [m/s] of ``vid`` for the given situation."""
-        return ls.vehicle.getFollowSpeed(vid, speed, gap, leader_speed, leader_decel)
+        return self._api.vehicle.getFollowSpeed(vid, speed, gap, leader_speed, leader_decel)
 
     # ------------------------------------------------------------------ signals
     def next_signal(self, vid: str) -> tuple[str, int, float, str] | None:
         """(tls id, link index, distance to stop line [m], state char) of the next signal."""
-        nxt = ls.vehicle.getNextTLS(vid)
+        nxt = self._api.vehicle.getNextTLS(vid)
         return nxt[0] if nxt else None
 
     def time_to_green(self, tls: str, link: int) -> float:
         """Seconds until ``link`` of ``tls`` turns green (0 when green now)."""
         plan = self._plans[tls]
-        phase = ls.trafficlight.getPhase(tls)
+        phase = self._api.trafficlight.getPhase(tls)
         if plan.states[phase][link] in _GREEN:
             return 0.0
-        t = ls.trafficlight.getNextSwitch(tls) - ls.simulation.getTime()
+        t = self._api.trafficlight.getNextSwitch(tls) - self._api.simulation.getTime()
         n = len(plan.states)
         for i in range(1, n):
             j = (phase + i) % n
@@ -245,6 +279,12 @@ class SumoSession:
             t += plan.durations[j]
         return t
 
-    @staticmethod
-    def signal_states(tls_ids: tuple[str, ...]) -> list[str]:
-        return [ls.trafficlight.getRedYellowGreenState(t) for t in tls_ids]
+    def signal_states(self, tls_ids: tuple[str, ...]) -> list[str]:
+        return [self._api.trafficlight.getRedYellowGreenState(t) for t in tls_ids]
+
+
+class _Closed:
+    """Stands for the simulation of a session that is not running: any call is one clear error."""
+
+    def __getattr__(self, name: str) -> Any:
+        raise RuntimeError("the SUMO session is not running: call reset() first (or it was closed)")
