@@ -15,9 +15,7 @@ vectorization_mode="async")``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
-
-from typing import Any
+from typing import Any, NamedTuple
 
 import libsumo as ls
 from libsumo import constants as tc
@@ -32,7 +30,6 @@ TRACI_CONNECT_TIMEOUT = 60.0  # [s] for a TraCI-run SUMO to load the scenario an
 def _traci_start(args: list[str]) -> Any:
     """A SUMO process of its own on a free local port, and the TraCI connection to it (polled every
     10 ms: ``traci.start`` waits whole seconds between tries and prints each)."""
-    import socket
     import subprocess
     import time
 
