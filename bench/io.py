@@ -1,14 +1,30 @@
-"""Atomic writes and checksums: a killed process leaves the old file or the new one, never half
-of either (``os.replace`` after writing a hidden temporary beside the target; no fsync, so not
-proof against power loss)."""
+"""Atomic writes, writes that stay in their folder, and checksums: the one home of file safety.
+
+- A killed process leaves the old file or the new one, never half of either: every write goes to
+  a temporary created exclusively (``tempfile.mkstemp``: ``O_CREAT | O_EXCL | O_NOFOLLOW``, a
+  random name) in the target's folder, then ``os.replace`` renames it over the target, replacing a
+  symbolic link planted there rather than writing through it. No fsync, so not proof against
+  power loss.
+- A file written under a fixed name while it grows (a step log's ``.part``) is opened with
+  ``exclusive_open``: whatever stands under that name (a stale ``.part``, a planted link) is
+  removed first, and the open refuses to follow a link.
+- ``refuse_links`` refuses a run or output folder that is, or holds, a symbolic link.
+"""
 from __future__ import annotations
 
 import hashlib
 import io
 import json
 import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
+
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+FILE_MODE = 0o666 & ~_UMASK  # what open() would give a new file
 
 
 class Unwritable(OSError):
@@ -32,14 +48,53 @@ def sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def _tmp(path: Path) -> Path:
-    return path.with_name(f".{path.name}.tmp")
+def refuse_links(folder: Path, what: str = "folder") -> None:
+    """Raise ``Unwritable`` if ``folder`` or anything below it is a symbolic link: a run or
+    output folder is written only inside itself (its parent, e.g. the logs root, may be a link)."""
+    folder = Path(folder)
+    if folder.is_symlink():
+        raise Unwritable(f"{what} {folder} is a symbolic link; refusing to write through it (give a real folder)")
+    if not folder.is_dir():
+        return
+    for root, dirs, files in os.walk(folder):  # does not descend into linked folders
+        for n in (*dirs, *files):
+            p = Path(root) / n
+            if p.is_symlink():
+                raise Unwritable(f"{what} {folder} holds a symbolic link, {p}; refusing to write through it "
+                                 f"(remove the link)")
+
+
+@contextmanager
+def atomic_file(path: Path, mode: str = "wb", **kw: Any) -> Iterator[IO[Any]]:
+    """An open temporary beside ``path`` that becomes ``path`` when the block ends without an
+    error; on an error (a full disk, a file-size limit) it is removed and ``path`` is untouched."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, FILE_MODE)
+        with os.fdopen(fd, mode, **kw) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        with suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def exclusive_open(path: Path) -> IO[bytes]:
+    """Open ``path`` for writing as a new file: whatever stands under the name (a stale file, a
+    planted symbolic link) is removed first, and the open neither follows a link nor shares the
+    file with a writer that created it in between."""
+    path = Path(path)
+    with suppress(FileNotFoundError):
+        os.unlink(path)  # removes a link itself, never its target
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), FILE_MODE)
+    return os.fdopen(fd, "wb")
 
 
 def atomic_bytes(data: bytes, path: Path) -> None:
-    tmp = _tmp(path)
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    with atomic_file(path) as f:
+        f.write(data)
 
 
 def atomic_text(text: str, path: Path) -> None:
@@ -51,15 +106,13 @@ def atomic_json(obj: Any, path: Path, **kw: Any) -> None:
 
 
 def atomic_parquet(df: Any, path: Path) -> None:
-    tmp = _tmp(path)
-    df.to_parquet(tmp, index=False)
-    os.replace(tmp, path)
+    with atomic_file(path) as f:
+        df.to_parquet(f, index=False)
 
 
 def atomic_csv(df: Any, path: Path, **kw: Any) -> None:
-    tmp = _tmp(path)
-    df.to_csv(tmp, index=False, **kw)
-    os.replace(tmp, path)
+    with atomic_file(path, "w", newline="") as f:
+        df.to_csv(f, index=False, **kw)
 
 
 def atomic_torch_save(obj: Any, path: Path) -> None:

@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import importlib
 import re
+import sys
 from collections.abc import Callable
 from importlib import metadata
 from typing import Any
 
 from agents.base import Agent
+from bench.args import NAME
 
 GROUP = "ecodrive_bench.agents"
 INTERFACES = ("parameterized", "discrete27", "longitudinal")
@@ -32,9 +34,22 @@ class AgentError(ValueError):
     """A user agent that cannot be loaded or acts outside its space; one line."""
 
 
+_WARNED: set[str] = set()  # entry-point names already reported as left out
+
+
 def registered() -> dict[str, str]:
-    """Agent name -> ``module:factory`` of every installed entry point in ``GROUP``."""
-    return {ep.name: ep.value for ep in metadata.entry_points(group=GROUP)}
+    """Agent name -> ``module:factory`` of every installed entry point in ``GROUP``. A name is a
+    folder name of the run (``<run>/<signals>/<name>/``), so one that is not a plain name
+    (``bench.args.NAME``: no path separator, not ``.`` or ``..``) is left out, with one line."""
+    out = {}
+    for ep in metadata.entry_points(group=GROUP):
+        if NAME.fullmatch(ep.name) and ep.name not in (".", ".."):
+            out[ep.name] = ep.value
+        elif ep.name not in _WARNED:
+            _WARNED.add(ep.name)
+            print(f"warning: installed agent {ep.name!r} ({ep.value}, entry-point group {GROUP}) is left out: a method "
+                  f"name is made of letters, digits, '.', '_' and '-'", file=sys.stderr)
+    return out
 
 
 def load_factory(spec: str) -> Callable[..., Any]:

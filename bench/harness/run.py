@@ -36,7 +36,7 @@ from bench.harness.oracle import NAME as ORACLE
 from bench.harness.policies import MODELS, CheckpointError, check_policy, family_dir, policy_dir, shipped_seeds
 from bench.harness.provenance import carry_forward, git_sha, package_versions
 from bench.harness.sb3 import ALGOS as SB3_ALGOS
-from bench.io import Unwritable, atomic_json, atomic_parquet, sha256, writable_dir
+from bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
 from bench.logs.mcaplog import episode_summary, resolve_log
 from envs.config import SIGNALS
 
@@ -197,6 +197,7 @@ def check_policies(pdirs: dict[tuple[str, str, int], str], checked: set[str] | N
 
 def check_writable(run_dir: Path) -> None:
     try:
+        refuse_links(run_dir, "run folder")
         writable_dir(run_dir)
     except Unwritable as e:
         raise UsageError(f"log {e}") from None

@@ -24,6 +24,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import build_file_descriptor_set
 
+from bench.io import exclusive_open
 from bench.logs import schema
 
 CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
@@ -51,7 +52,7 @@ class EpisodeLog:
         self.path = Path(path)
         self.part = self.path.with_name(self.path.name + PART)
         self.part.parent.mkdir(parents=True, exist_ok=True)
-        self._f = open(self.part, "wb")
+        self._f = exclusive_open(self.part)
         self._w = McapWriter(self._f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
         self._w.start(profile="", library="ecodrive-bench")
         self._channels = {
@@ -204,7 +205,7 @@ def write_records(path: Path, messages: list[tuple[str, Any, int]], meta: dict[s
     time ns) records, written as ``.part`` and renamed."""
     tmp = path.with_name(path.name + PART)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(tmp, "wb") as f:
+    with exclusive_open(tmp) as f:
         w = McapWriter(f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
         w.start(profile="", library="ecodrive-bench")
         channels: dict[str, int] = {}

@@ -1,0 +1,100 @@
+"""Writes stay inside their folder: a planted symbolic link is replaced or refused, never written
+through, and a method label never becomes a path (``bench.io``, ``bench.harness.external``)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from bench.harness.run import main
+from bench.io import atomic_bytes, atomic_json, atomic_parquet, exclusive_open
+
+SMOKE = ["--profile", "smoke", "--methods", "baseline", "--signals", "coordinated", "--workers", "1"]
+
+
+@pytest.fixture
+def victim(tmp_path: Path) -> Path:
+    v = tmp_path / "victim.txt"
+    v.write_text("precious\n")
+    return v
+
+
+def test_atomic_writes_replace_a_planted_link_and_leave_its_target(tmp_path, victim):
+    out = tmp_path / "out"
+    out.mkdir()
+    for name in ("results.parquet", ".results.parquet.tmp", "manifest.json", ".manifest.json.tmp"):
+        (out / name).symlink_to(victim)
+    atomic_parquet(pd.DataFrame({"a": [1]}), out / "results.parquet")
+    atomic_json({"a": 1}, out / "manifest.json")
+    assert victim.read_text() == "precious\n"
+    assert not (out / "results.parquet").is_symlink() and pd.read_parquet(out / "results.parquet").a.tolist() == [1]
+    assert not (out / "manifest.json").is_symlink()
+    assert oct((out / "manifest.json").stat().st_mode & 0o777) != "0o600"  # the umask's mode, not mkstemp's
+
+
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    target = tmp_path / "t.bin"
+    atomic_bytes(b"old", target)
+
+    with pytest.raises(TypeError):
+        atomic_bytes(object(), target)  # type: ignore[arg-type]  # fails inside the write
+    assert target.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.bin"]
+
+
+def test_exclusive_open_removes_a_planted_link(tmp_path, victim):
+    part = tmp_path / "case-000.mcap.part"
+    part.symlink_to(victim)
+    with exclusive_open(part) as f:
+        f.write(b"log")
+    assert victim.read_text() == "precious\n" and part.read_bytes() == b"log" and not part.is_symlink()
+
+
+def test_a_run_writes_through_no_planted_part_link(tmp_path, victim):
+    logs = tmp_path / "logs"
+    folder = logs / "r" / "coordinated" / "baseline"
+    folder.mkdir(parents=True)
+    (folder / "case-000.mcap.part").symlink_to(victim)
+    # a link anywhere in the run folder is refused before anything is written
+    assert main([*SMOKE, "--logs", str(logs), "--run-id", "r"]) == 2
+    assert victim.read_text() == "precious\n"
+    # the episode writer itself removes such a link rather than writing through it
+    (folder / "case-000.mcap.part").unlink()
+    assert main([*SMOKE, "--logs", str(logs), "--run-id", "r"]) == 0
+    mcap = folder / "case-000.mcap"
+    assert mcap.is_file() and not mcap.is_symlink() and victim.read_text() == "precious\n"
+
+
+@pytest.mark.parametrize("link", ["run", "method"])
+def test_a_linked_run_or_method_folder_is_refused_in_one_line(tmp_path, capsys, link):
+    logs, elsewhere = tmp_path / "logs", tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    if link == "run":
+        logs.mkdir()
+        (logs / "r").symlink_to(elsewhere, target_is_directory=True)
+    else:
+        (logs / "r" / "coordinated").mkdir(parents=True)
+        (logs / "r" / "coordinated" / "baseline").symlink_to(elsewhere, target_is_directory=True)
+    assert main([*SMOKE, "--logs", str(logs), "--run-id", "r"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "symbolic link" in err
+    assert list(elsewhere.iterdir()) == []
+
+
+def test_an_entry_point_name_that_is_a_path_is_left_out(tmp_path, monkeypatch, capsys):
+    from bench.harness import external
+
+    info = tmp_path / "evil-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: evil\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[ecodrive_bench.agents]\n../../../victim/ep = myagents:make\nok_name = m:f\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    names = external.registered()
+    assert "ok_name" in names and not any("/" in n for n in names)
+    assert "'../../../victim/ep'" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main([*SMOKE, "--logs", str(tmp_path / "logs"), "--methods", "../../../victim/ep"])
+    assert e.value.code == 2
+    assert not os.path.exists(tmp_path / "victim")
