@@ -3,6 +3,7 @@ module's ``main`` (``python -m <module>`` runs the same thing)."""
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 
@@ -26,6 +27,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "perf": ("bench.perf", "ratios from a pytest-benchmark JSON (env step vs raw SUMO, update vs FLOP floor)"),
 }
 
+# storage that refuses a write: no space, over quota, over the file-size limit (ulimit -f), read-only
+STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
+
 
 def parser() -> Parser:
     width = max(map(len, COMMANDS))
@@ -47,7 +51,16 @@ def main(argv: list[str] | None = None) -> int:
         ns = parser().parse_args(argv)
     module = importlib.import_module(COMMANDS[ns.command][0])
     sys.argv[0] = f"ecodrive {ns.command}"  # argparse's prog in the command's help and errors
-    return int(module.main(ns.args) or 0)
+    try:
+        return int(module.main(ns.args) or 0)
+    except OSError as e:
+        if e.errno not in STORAGE_ERRORS:
+            raise
+        # a full disk, a quota or a file-size limit: what was finished is kept (atomic writes)
+        where = f" {e.filename}" if e.filename else ""
+        print(f"ecodrive {ns.command}: error: cannot write{where}: {e.strerror or e}; what finished before is kept, "
+              f"rerun the same command once there is room", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -75,9 +75,11 @@ def atomic_file(path: Path, mode: str = "wb", **kw: Any) -> Iterator[IO[Any]]:
         with os.fdopen(fd, mode, **kw) as f:
             yield f
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         with suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(e, OSError) and e.filename is None:
+            e.filename = str(path)  # a failed write names its file (a full disk, a file-size limit)
         raise
 
 

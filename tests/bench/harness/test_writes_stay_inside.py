@@ -98,3 +98,29 @@ def test_an_entry_point_name_that_is_a_path_is_left_out(tmp_path, monkeypatch, c
         main([*SMOKE, "--logs", str(tmp_path / "logs"), "--methods", "../../../victim/ep"])
     assert e.value.code == 2
     assert not os.path.exists(tmp_path / "victim")
+
+
+def test_a_file_size_limit_is_one_line_naming_the_file_and_keeps_the_table(tmp_path):
+    """``ulimit -f`` (EFBIG; a full disk, ENOSPC, takes the same path): the rewrite of
+    ``results.parquet`` fails, the earlier table stays whole and no temporary is left behind."""
+    import resource
+    import subprocess
+    import sys
+
+    logs = tmp_path / "logs"
+    assert main([*SMOKE, "--logs", str(logs), "--run-id", "r"]) == 0
+    table = logs / "r" / "results.parquet"
+    before = table.read_bytes()
+    limit = 4096  # [bytes] above every file the rerun writes except the results table
+
+    def small_files() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    assert len(before) > limit
+    p = subprocess.run([sys.executable, "-m", "bench.cli", "run", *SMOKE, "--logs", str(logs), "--run-id", "r"],
+                       capture_output=True, text=True, preexec_fn=small_files, timeout=300)
+    assert p.returncode == 2, p.stderr
+    lines = [line for line in p.stderr.splitlines() if "error" in line]
+    assert len(lines) == 1 and str(table) in lines[0] and "File too large" in lines[0], p.stderr
+    assert table.read_bytes() == before
+    assert not [q for q in (logs / "r").iterdir() if q.name.endswith(".tmp")]
