@@ -3,6 +3,7 @@ the n-step window that turns consecutive transitions into n-step ones."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import torch
@@ -50,7 +51,7 @@ class Replay:
             np.take(getattr(self, f), idx, axis=0, out=a)
         return tensors
 
-    def save(self, path: Path) -> None:
+    def save(self, path: Path | BinaryIO) -> None:
         n = self.size
         np.savez(path, size=n, pos=self.pos, **{f: getattr(self, f)[:n] for f in self.FIELDS})
 

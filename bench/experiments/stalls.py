@@ -22,7 +22,7 @@ import pandas as pd
 from bench.args import Parser, fail, float_in, int_in
 from bench.experiments.mixed import CI_DEMAND, CI_DURATION, MASTER_SEED, cell_scenario
 from bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
-from bench.io import Unwritable, writable_dir
+from bench.io import Unwritable, atomic_parquet, writable_dir
 from envs.action import LATERAL
 from envs.config import SIGNALS
 
@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{summary['all']['unfinished']} vehicles unfinished")
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        df.to_parquet(args.out, index=False)
+        atomic_parquet(df, args.out)
     return 0
 
 

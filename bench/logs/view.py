@@ -150,6 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     done = False
     try:
         if part is not None:
+            part.unlink(missing_ok=True)  # a stale one, or a link planted under its name: never written through
             rec.save(part)  # renamed to --save once complete: no half-written recording under its name
         else:
             rec.spawn()

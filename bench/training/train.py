@@ -45,7 +45,7 @@ from bench.harness.cases import Case
 from bench.harness.episode import deep_merge, make_env, run_episode
 from bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from bench.harness.provenance import git_sha, package_versions
-from bench.io import Unwritable, atomic_parquet, atomic_torch_save, writable_dir
+from bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
 from bench.logs.mcaplog import write_train_log
 from bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
 from envs.config import SIGNALS, ConfigError, added_values, backfill, flat
@@ -316,7 +316,8 @@ def validate(env, agent, n: int) -> dict[str, float]:
 
 def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict, best: dict) -> None:
     replay_name = f"replay-{episode:05d}.npz"
-    agent.replay.save(out / replay_name)
+    with atomic_file(out / replay_name) as f:  # never through a link planted under the name
+        agent.replay.save(f)
     state = {"identity": identity, "agent": agent.state_dict(), "replay": replay_name, "best": best,
              "rng": rng.bit_generator.state, "rows": rows, "episode": episode, "wall_time": wall}
     atomic_torch_save(state, out / "checkpoint.pt")  # the commit point: it names the replay file
