@@ -1,7 +1,7 @@
 """Pure functions on arrays and tables: the numbers of the report (nothing here plots).
 
-Lower is better for both energy and travel time. Confidence intervals come from
-``scipy.stats.bootstrap`` (BCa, seeded); the IQM is the 25%-trimmed mean (as in rliable).
+Lower is better for both energy and travel time. The statistics themselves (CIs, IQM, the
+probability of improvement) are in ``reports.stats``.
 """
 from __future__ import annotations
 
@@ -11,30 +11,16 @@ from scipy import signal, stats
 
 from bench.paper import TABLE4 as PAPER_TABLE4
 from bench.paper import improvement
+from reports.stats import (
+    bootstrap_ci,
+    by_case,
+    iqm,
+    probability_of_improvement,
+    probability_of_improvement_ci,
+    stratified_seed_bootstrap,
+)
 
 METRICS = ("energy", "travel_time")
-BOOTSTRAP_RESAMPLES = 2000
-CI_LEVEL = 0.95
-
-
-def iqm(x: np.ndarray) -> float:
-    """Interquartile mean: mean of the middle 50%."""
-    return float(stats.trim_mean(np.asarray(x, dtype=float), 0.25))
-
-
-def bootstrap_ci(x: np.ndarray, statistic=np.mean, seed: int = 0) -> tuple[float, float]:
-    x = np.asarray(x, dtype=float)
-    if len(x) < 2 or np.all(x == x[0]):
-        return float(x[0]), float(x[0])
-    res = stats.bootstrap((x,), statistic, n_resamples=BOOTSTRAP_RESAMPLES, confidence_level=CI_LEVEL,
-                          method="BCa", rng=np.random.default_rng(seed))
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
-
-
-def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
-    """P(X < Y) + 0.5 P(X = Y) over all pairs: the chance a run of X beats a run of Y."""
-    x, y = np.asarray(x, dtype=float)[:, None], np.asarray(y, dtype=float)[None, :]
-    return float(np.mean((x < y) + 0.5 * (x == y)))
 
 
 def table4(results: pd.DataFrame) -> pd.DataFrame:
@@ -76,7 +62,10 @@ def paper_costs(t4: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
 
 def statistics(results: pd.DataFrame) -> pd.DataFrame:
     """Per (method, signals, metric): mean with bootstrap CI, IQM with bootstrap CI, and the
-    probability of improvement over the baseline."""
+    probability of improvement over the baseline paired by case, with its CI over cases and seeds.
+
+    ``results``: one row per episode, columns ``method``, ``signals``, ``train_seed``, ``case``
+    and the ``METRICS``."""
     rows = []
     for (method, signals), g in results.groupby(["method", "signals"]):
         base = results[(results.method == "baseline") & (results.signals == signals)]
@@ -84,26 +73,17 @@ def statistics(results: pd.DataFrame) -> pd.DataFrame:
             x = g[m].to_numpy()
             lo, hi = bootstrap_ci(x)
             ilo, ihi = bootstrap_ci(x, statistic=lambda a, axis=-1: stats.trim_mean(a, 0.25, axis=axis))
+            p = plo = phi = np.nan
+            if len(base) and method != "baseline":
+                xm, ym = by_case(g, m), by_case(base, m)
+                common = xm.columns.intersection(ym.columns)
+                if len(common):
+                    xc, yc = xm[common].to_numpy(), ym[common].to_numpy()
+                    p, (plo, phi) = probability_of_improvement(xc, yc), probability_of_improvement_ci(xc, yc)
             rows.append({"method": method, "signals": signals, "metric": m, "n": len(x), "mean": x.mean(),
                          "ci_low": lo, "ci_high": hi, "iqm": iqm(x), "iqm_ci_low": ilo, "iqm_ci_high": ihi,
-                         "p_improve_vs_baseline": probability_of_improvement(x, base[m].to_numpy())
-                         if len(base) and method != "baseline" else np.nan})
+                         "p_improve_vs_baseline": p, "p_improve_ci_low": plo, "p_improve_ci_high": phi})
     return pd.DataFrame(rows)
-
-
-def stratified_seed_bootstrap(scores: np.ndarray, reps: int = BOOTSTRAP_RESAMPLES, seed: int = 0,
-                              statistic=np.mean) -> tuple[float, float]:
-    """Percentile CI of ``statistic`` over a [training seeds, cases] score matrix, resampling the
-    seeds with replacement independently for each case (rliable's stratified bootstrap, the cases
-    as its tasks). With fewer than two seeds there is no spread to sample: (nan, nan)."""
-    scores = np.asarray(scores, dtype=float)
-    n_seeds, n_cases = scores.shape
-    if n_seeds < 2:
-        return float("nan"), float("nan")
-    idx = np.random.default_rng(seed).integers(0, n_seeds, size=(reps, n_seeds, n_cases))
-    boot = statistic(scores[idx, np.arange(n_cases)].reshape(reps, -1), axis=1)
-    alpha = (1 - CI_LEVEL) / 2
-    return float(np.quantile(boot, alpha)), float(np.quantile(boot, 1 - alpha))
 
 
 def across_seeds(results: pd.DataFrame) -> pd.DataFrame:

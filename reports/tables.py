@@ -13,6 +13,12 @@ def _f(v, fmt: str = "{:.2f}") -> str:
     return "" if v is None or (isinstance(v, float) and math.isnan(v)) else fmt.format(v)
 
 
+def _ci(lo, hi, fmt: str = "{:.2f}") -> str:
+    """``[lo, hi]``, or empty where either end is missing."""
+    a, b = _f(lo, fmt), _f(hi, fmt)
+    return f"[{a}, {b}]" if a and b else ""
+
+
 def _pct(v) -> str:
     return _f(None if v is None or (isinstance(v, float) and math.isnan(v)) else 100 * v, "{:+.2f}%")
 
@@ -43,12 +49,14 @@ def table4_latex(t4: pd.DataFrame) -> str:
 
 
 def stats_markdown(st: pd.DataFrame) -> str:
-    cols = ["method", "signals", "metric", "n", "mean", "95% CI", "IQM", "IQM 95% CI", "P(improve vs baseline)"]
+    cols = ["method", "signals", "metric", "n", "mean", "95% CI", "IQM", "IQM 95% CI", "P(improve vs baseline)",
+            "P(improve) 95% CI"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for _, r in st.iterrows():
         lines.append("| " + " | ".join([
             r.method, r.signals, r.metric, str(r.n), _f(r["mean"]), f"[{_f(r.ci_low)}, {_f(r.ci_high)}]",
-            _f(r.iqm), f"[{_f(r.iqm_ci_low)}, {_f(r.iqm_ci_high)}]", _f(r.p_improve_vs_baseline, "{:.3f}")]) + " |")
+            _f(r.iqm), f"[{_f(r.iqm_ci_low)}, {_f(r.iqm_ci_high)}]", _f(r.p_improve_vs_baseline, "{:.3f}"),
+            _ci(r.get("p_improve_ci_low"), r.get("p_improve_ci_high"), "{:.3f}")]) + " |")
     return "\n".join(lines) + "\n"
 
 

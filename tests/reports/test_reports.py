@@ -5,16 +5,16 @@ import pandas as pd
 import pytest
 
 from bench.harness.run import parse, run
-from reports import metrics
+from reports import metrics, stats
 from reports.build import build
 
 
 def test_metric_functions():
-    assert metrics.iqm(np.array([0, 1, 2, 3, 4, 5, 6, 100.0])) == pytest.approx(3.5)
-    assert metrics.probability_of_improvement(np.array([1.0, 2.0]), np.array([3.0, 4.0])) == 1.0
-    assert metrics.probability_of_improvement(np.array([1.0]), np.array([1.0])) == 0.5
+    assert stats.iqm(np.array([0, 1, 2, 3, 4, 5, 6, 100.0])) == pytest.approx(3.5)
+    assert stats.probability_of_improvement(np.array([1.0, 2.0]), np.array([3.0, 4.0])) == 1.0
+    assert stats.probability_of_improvement(np.array([1.0]), np.array([1.0])) == 0.5
     x = np.random.default_rng(0).normal(10, 1, 200)
-    lo, hi = metrics.bootstrap_ci(x)
+    lo, hi = stats.bootstrap_ci(x)
     assert lo < x.mean() < hi and hi - lo < 0.6
     assert metrics.improvement(184.93, 253.79) == pytest.approx(0.2713, abs=1e-4)  # Table 4's 27.13%
 
@@ -76,11 +76,11 @@ def test_stratified_seed_bootstrap_and_across_seeds():
     offsets = np.array([0.0, 10.0, 20.0, 30.0])
     noise = rng.normal(0, 1, (4, 30))
     scores = 200 + offsets[:, None] + noise
-    lo, hi = metrics.stratified_seed_bootstrap(scores)
+    lo, hi = stats.stratified_seed_bootstrap(scores)
     assert lo < scores.mean() < hi and hi - lo < 30
-    lo2, hi2 = metrics.stratified_seed_bootstrap(200 + 2 * offsets[:, None] + noise)
+    lo2, hi2 = stats.stratified_seed_bootstrap(200 + 2 * offsets[:, None] + noise)
     assert hi2 - lo2 > 1.5 * (hi - lo)
-    assert np.isnan(metrics.stratified_seed_bootstrap(scores[:1])).all()  # one seed: no spread to sample
+    assert np.isnan(stats.stratified_seed_bootstrap(scores[:1])).all()  # one seed: no spread to sample
     rows = [{"method": "prl", "signals": "coordinated", "train_seed": s, "case": c, "energy": scores[s, c],
              "travel_time": 100.0 + s} for s in range(4) for c in range(30)]
     rows.append({"method": "prl", "signals": "coordinated", "train_seed": 0, "case": 99, "energy": 1e6,
@@ -132,3 +132,35 @@ def test_a_method_whose_trips_do_not_finish_is_warned_about(smoke_report, tmp_pa
     index, warnings = build(run_dir, tmp_path / "report")
     assert any(w.startswith("baseline, coordinated: 1 of 3 episodes did not reach") for w in warnings)
     assert "did not reach the corridor's end" in index.read_text()
+
+
+def test_probability_of_improvement_is_paired_by_case():
+    """A method that beats the baseline on every case by 1 Wh, where the cases spread over 100 Wh:
+    paired by case it is 1.0; pooled over all pairs of episodes it would be about 0.5."""
+    rng = np.random.default_rng(0)
+    difficulty = rng.uniform(150, 250, 100)
+    base = difficulty[None, :]
+    method = np.stack([difficulty - 1.0 - 0.1 * s for s in range(3)])  # three training seeds
+    assert stats.probability_of_improvement(method, base) == 1.0
+    pooled = np.mean(method.reshape(-1)[:, None] < base.reshape(-1)[None, :])
+    assert 0.45 < pooled < 0.55  # what the pooled form measured
+    assert stats.probability_of_improvement_ci(method, base) == (1.0, 1.0)
+    worse = np.vstack([method[:2], difficulty[None, :] + 1.0])  # one seed loses on every case
+    lo, hi = stats.probability_of_improvement_ci(worse, base)
+    assert stats.probability_of_improvement(worse, base) == pytest.approx(2 / 3)
+    assert lo < 2 / 3 < hi <= 1.0
+    with pytest.raises(ValueError, match="pair them by case"):
+        stats.probability_of_improvement(method[:, :10], base)
+
+
+def test_the_statistics_table_pairs_by_case_from_results_rows():
+    rng = np.random.default_rng(1)
+    difficulty = rng.uniform(150, 250, 20)
+    rows = [{"method": "baseline", "signals": "coordinated", "train_seed": -1, "case": c, "energy": e,
+             "travel_time": 200.0} for c, e in enumerate(difficulty)]
+    rows += [{"method": "prl", "signals": "coordinated", "train_seed": s, "case": c, "energy": e - 0.5,
+              "travel_time": 210.0} for s in range(2) for c, e in enumerate(difficulty)]
+    st = metrics.statistics(pd.DataFrame(rows)).set_index(["method", "metric"])
+    assert st.loc[("prl", "energy"), "p_improve_vs_baseline"] == 1.0
+    assert st.loc[("prl", "travel_time"), "p_improve_vs_baseline"] == 0.0
+    assert np.isnan(st.loc[("baseline", "energy"), "p_improve_vs_baseline"])
