@@ -160,16 +160,18 @@ def statistics_section(page: Page) -> str:
                 r = g.loc[metric]
                 cells += [td(f"{num(r['mean'])} <span class='ci'>{ci(r.ci_low, r.ci_high)}</span>", "num first", raw=True),
                           td(f"{num(r.iqm)} <span class='ci'>{ci(r.iqm_ci_low, r.iqm_ci_high)}</span>", "num", raw=True),
-                          td(num(r.p_improve_vs_baseline, 2), "num")]
+                          td(f"{num(r.p_improve_vs_baseline, 2)} <span class='ci'>"
+                             f"{ci(r.get('p_improve_ci_low'), r.get('p_improve_ci_high'), 2)}</span>", "num", raw=True)]
             rows.append("<tr>" + "".join(cells) + "</tr>")
         head = ("<thead><tr><th rowspan='2'>Method</th><th rowspan='2'>Episodes</th>"
                 + "".join(f"<th colspan='3' class='group first'>{t} [{u}]</th>" for t, u in METRIC_UNITS.values())
                 + "</tr><tr>" + "<th class='first'>Mean [95% CI]</th><th>IQM [95% CI]</th><th>P(improve)</th>" * 2
                 + "</tr></thead>")
         out.append(f"<div class='scroll'><table class='stats' id='stats-{esc(signals)}'><caption><b>{esc(signals)} "
-                   "signals</b>, per episode. IQM = interquartile (25%-trimmed) mean. P(improve) = chance that an "
-                   "episode of the method uses less energy (or takes less time) than one of the baseline; 0.5 = no "
-                   f"difference, {DASH} for the baseline itself.</caption>{head}<tbody>{''.join(rows)}</tbody>"
+                   "signals</b>, per episode. IQM = interquartile (25%-trimmed) mean. P(improve) [95% CI] = chance that "
+                   "the method uses less energy (or takes less time) than the baseline <i>on the same case</i>: per "
+                   "case over the method's training seeds, averaged over the cases (rliable's paired form; CI by "
+                   f"resampling cases and seeds); 0.5 = no difference, {DASH} for the baseline itself.</caption>{head}<tbody>{''.join(rows)}</tbody>"
                    "</table></div>")
     out.append(seeds_table(page))
     out.append("</section>")
