@@ -24,6 +24,31 @@ RESET_OPTIONS = ("sumo_seed", "insert_time")
 class EcoDriveEnv(gym.Env):
     """An electric connected vehicle crossing five signalized intersections (SUMO, libsumo).
 
+    ## Arguments
+    - ``signals``: ``"coordinated"`` (green waves along the arterial) or ``"uncoordinated"``.
+    - ``action``: the action type, ``"parameterized"`` (P-DQN), ``"discrete27"`` (DQN),
+      ``"longitudinal"`` (acceleration only, LC2013 changes lanes) or ``"sumo"`` (SUMO drives).
+    - ``reward``: the reward form, ``"r"`` (composite, eq. 11), ``"r2"`` or ``"r1"``.
+    - ``config``: a ``ScenarioConfig`` or a dict of its fields (nested dicts for ``reward`` and
+      ``ev``); every field is range-checked, and a bad one is a ``ConfigError`` naming it and its
+      range (``docs/environment.md`` lists them).
+    - ``**overrides``: scenario fields given directly, e.g. ``max_episode_time=300.0``; they
+      win over ``config``.
+
+    ## Example
+    >>> import gymnasium as gym, numpy as np
+    >>> import envs  # registers EcoDrive-v0
+    >>> env = gym.make("EcoDrive-v0", signals="uncoordinated", reward="r")
+    >>> obs, info = env.reset(options={"sumo_seed": 7, "insert_time": 210.0})  # one fixed case
+    >>> obs["grid"].shape, obs["logic"].shape
+    ((60, 5), (9,))
+    >>> obs, reward, terminated, truncated, info = env.step((1, np.array([0.0, 1.0, 0.0], np.float32)))
+    >>> info["time"] > info["case"]["insert_time"], terminated, truncated
+    (True, False, False)
+    >>> sorted(info["reward_components"])[:3]
+    ['distance', 'energy', 'jerk']
+    >>> env.close()
+
     ## Observation space
     ``Dict(grid=Box(0, 1, (60, 5)), logic=Box((9,)))``. ``grid`` is the occupancy grid from
     10 m behind to 50 m ahead of the ego's front bumper in 1 m cells (row 0 farthest behind),

@@ -213,3 +213,13 @@ def test_lane_change_penalty_falls_on_the_step_that_decides_it(charge):
     pen = -env.cfg.reward.lane_change_penalty
     assert penalties == ([pen] + [0.0] * 5 if charge == "request" else [0.0, pen] + [0.0] * 4)
     env.close()
+
+
+def test_the_env_docstrings_example_runs():
+    """The example in ``EcoDriveEnv``'s docstring (its front door) is run as a doctest."""
+    import doctest
+
+    import envs.env
+
+    res = doctest.testmod(envs.env)
+    assert res.attempted >= 8 and res.failed == 0
