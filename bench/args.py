@@ -3,13 +3,24 @@ naming the value and the accepted range, exit code 2, and nothing touched."""
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
 import re
+import stat
 import sys
 from collections.abc import Callable
-from typing import NoReturn
+from pathlib import Path
+from typing import Any, NoReturn
 
 NAME = re.compile(r"[A-Za-z0-9._-]+")
+MAX_JSON_BYTES = 1 << 20  # [bytes] largest JSON input file read (a --scenario file, a case list): 1 MiB
+MAX_JSON_DEPTH = 32  # [-] deepest nesting of arrays and objects accepted in a JSON input (a scenario needs 3)
+
+
+class InputError(ValueError):
+    """Bad input found after parsing (a file's content); one line naming the value and the accepted
+    range. A command reports it as ``prog: error: <message>`` with exit code 2 (``fail``)."""
 
 
 class Parser(argparse.ArgumentParser):
@@ -74,3 +85,66 @@ def fail(prog: str, message: str) -> int:
     """Print one error line for a bad input found after parsing; the exit code to return."""
     print(f"{prog}: error: {message}", file=sys.stderr)
     return 2
+
+
+def read_json(path: Path, what: str, limit: int = MAX_JSON_BYTES) -> Any:
+    """The JSON value in the file ``path``, read with bounds: a path that is not a regular file
+    (a device, a FIFO, a folder) or is larger than ``limit`` bytes is refused before it is read,
+    and unreadable, non-UTF-8, malformed or deeper than ``MAX_JSON_DEPTH`` JSON is an ``InputError``
+    of one line that starts with ``what`` and the path."""
+    where = f"{what} {path}"
+    accepted = f"accepted: a regular JSON file of at most {limit} bytes ({limit / 2**20:g} MiB)"
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise InputError(f"{where}: not a readable JSON file ({e.strerror or type(e).__name__})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{where}: not a regular file; {accepted}")
+    if st.st_size > limit:
+        raise InputError(f"{where}: {st.st_size} bytes is too large; {accepted}")
+    try:
+        with open(path, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):  # replaced since the check above
+                raise InputError(f"{where}: not a regular file; {accepted}")
+            raw = f.read(limit + 1)
+    except OSError as e:
+        raise InputError(f"{where}: not a readable JSON file ({e.strerror or type(e).__name__})") from None
+    if len(raw) > limit:  # it grew since the check above
+        raise InputError(f"{where}: more than {limit} bytes; {accepted}")
+    try:
+        value = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise InputError(f"{where}: not a readable JSON file (not UTF-8 at byte {e.start})") from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"{where}: not a readable JSON file (JSONDecodeError: {e.msg} at line {e.lineno} "
+                         f"column {e.colno})") from None
+    except RecursionError:
+        value = None
+        deep = True
+    except ValueError as e:  # e.g. an integer of more digits than Python converts
+        raise InputError(f"{where}: not a readable JSON file ({one_line(str(e))})") from None
+    else:
+        deep = depth(value) > MAX_JSON_DEPTH
+    if deep:
+        raise InputError(f"{where}: not a readable JSON file (arrays and objects nested more than "
+                         f"{MAX_JSON_DEPTH} deep; accepted: up to {MAX_JSON_DEPTH})")
+    return value
+
+
+def depth(value: Any) -> int:
+    """Nesting depth of arrays and objects in a JSON value (0 for a scalar), without recursion."""
+    deepest, todo = 0, [(value, 0)]
+    while todo:
+        v, d = todo.pop()
+        if isinstance(v, dict):
+            v = list(v.values())
+        if isinstance(v, (list, tuple)):
+            deepest = max(deepest, d + 1)
+            todo.extend((x, d + 1) for x in v)
+    return deepest
+
+
+def one_line(text: str, limit: int = 200) -> str:
+    """The first line of ``text``, cut to ``limit`` characters."""
+    first = next((line.strip() for line in text.splitlines() if line.strip()), "")
+    return first if len(first) <= limit else first[: limit - 3] + "..."

@@ -13,6 +13,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any, NamedTuple
 
+from .validation import ConfigError, accepted_range, validate  # noqa: F401  (both re-exported)
+from .validation import each as _each
+from .validation import rng as _rng
+from .validation import short as _short
+
 SIGNALS = ("coordinated", "uncoordinated")
 REWARDS = ("r1", "r2", "r")
 COST_TIMINGS = ("step", "end")
@@ -26,19 +31,8 @@ ADDED_FIELDS: dict[str, Any] = {"ego_sigma": 0.5, "reward.lane_change_charge": "
 # optional scenario fields whose None means "as the corridor-wide field(s)": the network cache key
 # leaves them out while None, so a config without them builds (and reuses) the same files as before
 OPTIONAL_FIELDS = ("spacings", "junction_cycles", "junction_greens", "junction_offsets", "obs_lanes")
-
-
-class ConfigError(ValueError):
-    """A config key or value that is not accepted; the message names the value and the range."""
-
-
-def _rng(lo: float | None, hi: float | None, *, lo_open: bool = False) -> dict[str, Any]:
-    return {"lo": lo, "hi": hi, "lo_open": lo_open}
-
-
-def _each(lo: float, hi: float) -> dict[str, Any]:
-    """Range of every entry of an optional tuple field (None: the field is not set)."""
-    return {**_rng(lo, hi), "each": True, "optional": True}
+# [s] shortest side green (cycle - green - 2 * yellow): SUMO refuses a phase whose duration rounds to 0 ms
+MIN_SIDE_GREEN = 1.0
 
 
 class SignalTiming(NamedTuple):
@@ -66,7 +60,7 @@ class EVParams:
     battery_capacity: float = field(default=40000.0, metadata=_rng(1000, 200000))  # [Wh]
 
     def __post_init__(self) -> None:
-        _validate(self)
+        validate(self)
 
 
 @dataclass(frozen=True)
@@ -90,7 +84,7 @@ class RewardConfig:
     lane_change_charge: str = field(default="request", metadata={"choices": LANE_CHANGE_CHARGES})
 
     def __post_init__(self) -> None:
-        _validate(self)
+        validate(self)
 
 
 @dataclass(frozen=True)
@@ -105,7 +99,8 @@ class ScenarioConfig:
     speed_limit: float = field(default=50.0 / 3.6, metadata=_rng(5.0, 40.0))  # V_max [m/s]
     cycle: float = field(default=90.0, metadata=_rng(30.0, 240.0))  # [s] signal cycle
     main_green: float = field(default=42.0, metadata=_rng(5.0, 200.0))  # [s] arterial green
-    yellow: float = field(default=3.0, metadata=_rng(0.0, 10.0))  # [s]
+    # [s] >= 1: netconvert makes no yellow phase for 0 (a 2-phase plan) and takes whole seconds only
+    yellow: float = field(default=3.0, metadata=_rng(1.0, 10.0))
     arterial_flow: float = field(default=1000.0, metadata=_rng(0.0, 5000.0))  # [veh/h] W->E Poisson
     mpr: float = field(default=0.0, metadata=_rng(0.0, 1.0))  # share of the W->E flow that are CVs (mixed traffic)
     opposing_flow: float = field(default=0.0, metadata=_rng(0.0, 5000.0))  # [veh/h] E->W Poisson
@@ -144,17 +139,16 @@ class ScenarioConfig:
             value = getattr(self, name)
             if isinstance(value, list):  # JSON has no tuples
                 object.__setattr__(self, name, tuple(value))
-        _validate(self)
+        validate(self)
         for name in ("spacings", "junction_cycles", "junction_greens", "junction_offsets"):
             value = getattr(self, name)
             if value is not None:  # 440 and 440.0 are one value: one digest, one cached network
                 object.__setattr__(self, name, tuple(float(v) for v in value))
         if self.insert_min > self.insert_max:
             raise ConfigError(f"insert_min={self.insert_min} must be <= insert_max={self.insert_max}")
-        if self.main_green + 2 * self.yellow >= self.cycle:
-            raise ConfigError(
-                f"main_green={self.main_green} + 2*yellow={2 * self.yellow} must be < cycle={self.cycle}"
-            )
+        if self.main_green + 2 * self.yellow > self.cycle - MIN_SIDE_GREEN:
+            raise ConfigError(f"main_green={self.main_green} + 2*yellow={2 * self.yellow} must be < "
+                              f"cycle={self.cycle}, leaving a side green of >= {MIN_SIDE_GREEN} s")
         self._check_junctions()
         if self.obs_lanes is not None and self.obs_lanes < self.lanes:
             raise ConfigError(f"obs_lanes={self.obs_lanes} is out of range; accepted: lanes={self.lanes}..6 "
@@ -171,10 +165,11 @@ class ScenarioConfig:
         cycles = self.junction_cycles or (self.cycle,) * n
         greens = self.junction_greens or (self.main_green,) * n
         for k, (c, g) in enumerate(zip(cycles, greens), start=1):
-            if g + 2 * self.yellow >= c:
+            if g + 2 * self.yellow > c - MIN_SIDE_GREEN:
                 gl = f"junction_greens[{k - 1}]" if self.junction_greens else "main_green"
                 cl = f"junction_cycles[{k - 1}]" if self.junction_cycles else "cycle"
-                raise ConfigError(f"{gl}={g} + 2*yellow={2 * self.yellow} must be < {cl}={c} (J{k})")
+                raise ConfigError(f"{gl}={g} + 2*yellow={2 * self.yellow} must be < {cl}={c} (J{k}), "
+                                  f"leaving a side green of >= {MIN_SIDE_GREEN} s")
         for k, (o, c) in enumerate(zip(self.junction_offsets or (), cycles), start=1):
             if not o < c:
                 raise ConfigError(f"junction_offsets[{k - 1}]={o} is out of range; accepted: [0, {c}) (J{k}'s cycle)")
@@ -329,7 +324,8 @@ def _from_dict(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
     if not isinstance(data, Mapping):
         raise ConfigError(f"{prefix or 'config'} must be a mapping, got {type(data).__name__}")
     known = {f.name: f for f in fields(cls)}
-    unknown = sorted(set(data) - set(known))
+    unknown = sorted(k if isinstance(k, str) and k.isprintable() and len(k) <= 40 else _short(k)
+                     for k in set(data) - set(known))  # a key is shown on one line
     if unknown:
         raise ConfigError(
             f"unknown config key(s) {', '.join(prefix + k for k in unknown)}; accepted: {', '.join(sorted(known))}"
@@ -341,50 +337,3 @@ def _from_dict(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
             value = _from_dict(sub, value, f"{prefix}{name}.")
         kwargs[name] = value
     return cls(**kwargs)
-
-
-def _validate(obj: Any) -> None:
-    for f in fields(obj):
-        value = getattr(obj, f.name)
-        meta = f.metadata
-        name = f.name
-        if "choices" in meta:
-            if value not in meta["choices"]:
-                raise ConfigError(f"{name}={value!r} is not accepted; choose one of {', '.join(meta['choices'])}")
-            continue
-        if "lo" not in meta:
-            if f.type in ("bool",) and not isinstance(value, bool):
-                raise ConfigError(f"{name}={value!r} must be true or false")
-            continue
-        if value is None and meta.get("optional"):
-            continue
-        if meta.get("each"):
-            if not isinstance(value, tuple):
-                raise ConfigError(f"{name}={value!r} must be a list of numbers (or null)")
-            for i, v in enumerate(value):
-                _check_number(f"{name}[{i}]", v, meta, want_int=False)
-            continue
-        _check_number(name, value, meta, want_int=f.type.startswith("int"))
-
-
-def _range_text(meta: Mapping[str, Any]) -> str:
-    lo, hi = meta["lo"], meta["hi"]
-    return (f"{'(' if meta['lo_open'] or lo is None else '['}{'-inf' if lo is None else lo}, "
-            f"{'inf)' if hi is None else f'{hi}]'}")
-
-
-def _check_number(name: str, value: Any, meta: Mapping[str, Any], want_int: bool) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (want_int and not isinstance(value, int)):
-        raise ConfigError(f"{name}={value!r} must be {'an integer' if want_int else 'a number'} "
-                          f"in {_range_text(meta)}")
-    lo, hi = meta["lo"], meta["hi"]
-    bad = (not math.isfinite(value)) or (lo is not None and (value <= lo if meta["lo_open"] else value < lo))
-    bad = bad or (hi is not None and value > hi)
-    if bad:
-        raise ConfigError(f"{name}={value!r} is out of range; accepted: {_range_text(meta)}")
-
-
-def accepted_range(cls: type, name: str) -> tuple[float | None, float | None, bool]:
-    """(lo, hi, lo_open) of a numeric config field, for command-line parsers to check against."""
-    meta = {f.name: f.metadata for f in fields(cls)}[name]
-    return meta["lo"], meta["hi"], meta["lo_open"]

@@ -13,17 +13,25 @@ import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from bench.args import Parser
+from bench.args import InputError, Parser, read_json
 
 MASTER_SEED = 20240501  # documented master seed of the protocol
 CASES_PER_SETTING = 100  # section 5.3
 SEED_GROUPS = 10  # independent groups for the violin figure
-INSERT_RANGE = (150.0, 300.0)  # [s] U(150, 300)
+INSERT_RANGE = (150.0, 300.0)  # [s] U(150, 300); a stored case's insert_time must lie in it
+SEED_BOUND = 2**31 - 1  # [-] SUMO seeds are drawn from [0, SEED_BOUND)
+CASE_KEYS = ("index", "sumo_seed", "insert_time", "group")  # every key of a stored case, no other
 VERSION = 1
 CASES_FILE = Path(__file__).with_name("cases.json")
+
+
+class CaseError(InputError):
+    """A case list (its file or one of its cases) that is not accepted; one line naming the file,
+    the case and the value with the accepted range. ``ecodrive`` commands exit 2 on it."""
 
 
 @dataclass(frozen=True)
@@ -39,7 +47,7 @@ class Case:
 
 def generate(master_seed: int = MASTER_SEED, n: int = CASES_PER_SETTING, groups: int = SEED_GROUPS) -> dict:
     rng = np.random.default_rng(master_seed)
-    seeds = rng.choice(2**31 - 1, size=n, replace=False)
+    seeds = rng.choice(SEED_BOUND, size=n, replace=False)
     times = np.round(rng.uniform(*INSERT_RANGE, size=n), 1)
     cases = [{"index": i, "sumo_seed": int(seeds[i]), "insert_time": float(times[i]), "group": i % groups}
              for i in range(n)]
@@ -48,10 +56,67 @@ def generate(master_seed: int = MASTER_SEED, n: int = CASES_PER_SETTING, groups:
 
 
 def load(path: Path = CASES_FILE) -> list[Case]:
-    data = json.loads(path.read_text())
-    if data.get("version") != VERSION:
-        raise ValueError(f"{path}: cases version {data.get('version')!r} is not the supported {VERSION}")
-    return [Case(**c) for c in data["cases"]]
+    """The fixed cases of a case-list file, each checked (``check_cases``): a file that is not a
+    regular JSON file of at most ``MAX_JSON_BYTES``, of another version, or with a bad case is a
+    ``CaseError`` of one line naming the file, the case and the value."""
+    try:
+        data = read_json(path, "case list")
+    except InputError as e:
+        raise CaseError(str(e)) from None
+    if not isinstance(data, dict) or data.get("version") != VERSION:
+        got = data.get("version") if isinstance(data, dict) else None
+        raise CaseError(f"{path}: cases version {_shown(got)} is not the supported {VERSION}")
+    return check_cases(data.get("cases"), path, groups=SEED_GROUPS)
+
+
+def check_cases(raw: Any, where: str | Path, groups: int) -> list[Case]:
+    """``raw`` (a JSON list of case objects) as ``Case``s, every value checked: exactly the keys
+    ``CASE_KEYS``; index a non-negative integer, unique; sumo_seed an integer in [0, 2**31-1);
+    insert_time a number in ``INSERT_RANGE``; group an integer in [0, groups). Otherwise a
+    ``CaseError`` of one line naming ``where``, the case and the bad value with the accepted range."""
+    if not isinstance(raw, list) or not raw:
+        raise CaseError(f"{where}: 'cases' is {_shown(raw)}; accepted: a non-empty list of case objects")
+    out, seen = [], {}
+    for pos, c in enumerate(raw):
+        at = f"{where}: case #{pos}"
+        if not isinstance(c, dict):
+            raise CaseError(f"{at} is {_shown(c)}; accepted: an object with keys {', '.join(CASE_KEYS)}")
+        if isinstance(c.get("index"), int) and not isinstance(c.get("index"), bool):
+            at = f"{where}: case #{pos} (index {_shown(c['index'])})"
+        unknown = sorted(str(k) for k in c if k not in CASE_KEYS)
+        missing = [k for k in CASE_KEYS if k not in c]
+        if unknown or missing:
+            raise CaseError(f"{at}: {'unknown key(s) ' + ', '.join(map(repr, unknown)) if unknown else ''}"
+                            f"{'; ' if unknown and missing else ''}"
+                            f"{'missing key(s) ' + ', '.join(map(repr, missing)) if missing else ''}; "
+                            f"accepted: exactly {', '.join(CASE_KEYS)}")
+        _integer(at, "index", c["index"], 0, None)
+        _integer(at, "sumo_seed", c["sumo_seed"], 0, SEED_BOUND, "2**31-1")
+        _integer(at, "group", c["group"], 0, groups)
+        t = c["insert_time"]
+        lo, hi = INSERT_RANGE
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not lo <= t <= hi:  # NaN fails too
+            raise CaseError(f"{at}: insert_time={_shown(t)}; accepted: a number of seconds in [{lo}, {hi}]")
+        if c["index"] in seen:
+            raise CaseError(f"{at}: index={c['index']} is also case #{seen[c['index']]}'s; accepted: unique "
+                            f"non-negative integers (each case writes case-<index>.mcap)")
+        seen[c["index"]] = pos
+        out.append(Case(int(c["index"]), int(c["sumo_seed"]), float(t), int(c["group"])))
+    return out
+
+
+def _integer(at: str, key: str, value: Any, lo: int, hi: int | None, hi_text: str = "") -> None:
+    """An integer in [lo, hi) (hi None: no upper bound), else a ``CaseError``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value >= hi):
+        span = f"[{lo}, {hi_text or ('inf' if hi is None else hi)})"
+        raise CaseError(f"{at}: {key}={_shown(value)}; accepted: an integer in {span}")
+
+
+def _shown(value: Any) -> str:
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 190:
+        return f"<an integer of about {int(value.bit_length() * 0.30103) + 1} digits>"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def main(argv: list[str] | None = None) -> int:

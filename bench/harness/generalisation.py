@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.harness.cases import INSERT_RANGE, Case
+from bench.args import InputError, read_json
+from bench.harness.cases import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
 from envs.config import SIGNALS, ConfigError, ScenarioConfig
 
 MASTER_SEED = 20240621  # documented master seed of the family
@@ -48,8 +49,8 @@ LANES = (3, 4, 5)  # [-] each twice
 FAMILY_FILE = Path(__file__).with_name("generalisation.json")
 
 
-class FamilyError(ValueError):
-    """A family file or variant name that is not accepted; one line."""
+class FamilyError(InputError):
+    """A family file or variant name that is not accepted; one line (a ValueError)."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,7 @@ def generate(master_seed: int = MASTER_SEED, n: int = N_VARIANTS, cases: int = C
     variants = []
     for k in range(n):
         v = _variant(rng, k, int(lanes[k]), float(flows[k]), bool(kinds[k]))
-        seeds = rng.choice(2**31 - 1, size=cases, replace=False)
+        seeds = rng.choice(SEED_BOUND, size=cases, replace=False)
         times = np.round(rng.uniform(*INSERT_RANGE, size=cases), 1)
         v["cases"] = [{"index": i, "sumo_seed": int(seeds[i]), "insert_time": float(times[i]), "group": i}
                       for i in range(cases)]
@@ -99,23 +100,32 @@ def text(data: dict | None = None) -> str:
 
 
 def load(path: Path | None = None) -> list[Variant]:
-    """The family, verified: the file must be the generator's output of this ``VERSION`` (a
-    tampered or stale file is a ``FamilyError``) and every variant a valid scenario."""
+    """The family, verified: a regular JSON file of at most ``MAX_JSON_BYTES``, every variant's
+    cases valid (``bench.harness.cases.check_cases``: the value and its range named), the file the
+    generator's output of this ``VERSION`` (a tampered or stale file is a ``FamilyError``) and every
+    variant a valid scenario."""
     path = FAMILY_FILE if path is None else path
     try:
-        raw = path.read_text()
-        data = json.loads(raw)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise FamilyError(f"{path}: not a readable family file ({type(e).__name__})") from None
+        data = read_json(path, "family file")
+    except InputError as e:
+        raise FamilyError(f"{e} (restore it with `ecodrive cases --generalisation --write`)") from None
     if not isinstance(data, dict) or data.get("version") != VERSION:
         got = data.get("version") if isinstance(data, dict) else None
         raise FamilyError(f"{path}: family version {got!r} is not the supported {VERSION}")
-    if raw != text():
+    variants = data.get("variants")
+    if not isinstance(variants, list) or not all(isinstance(v, dict) for v in variants):
+        raise FamilyError(f"{path}: 'variants' must be a list of objects")
+    for k, v in enumerate(variants):
+        try:  # a bad case is named before the comparison with the generator below
+            check_cases(v.get("cases"), f"{path}: variant {v.get('name', f'#{k}')!s:.40}", groups=CASES_PER_VARIANT)
+        except CaseError as e:
+            raise FamilyError(str(e)) from None
+    if path.read_text() != text():
         raise FamilyError(f"{path}: differs from the generator (version {VERSION}, master seed {MASTER_SEED}); "
                           f"restore it with `ecodrive cases --generalisation --write`")
     out = []
     for v in data["variants"]:
-        variant = Variant(v["name"], v["scenario"], tuple(Case(**c) for c in v["cases"]))
+        variant = Variant(v["name"], v["scenario"], tuple(check_cases(v["cases"], path, CASES_PER_VARIANT)))
         for s in SIGNALS:
             try:
                 variant.config(s)

@@ -19,13 +19,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bench.args import MAX_JSON_BYTES, MAX_JSON_DEPTH, InputError, depth, one_line, read_json
 from bench.harness.episode import deep_merge
 from envs.config import ConfigError, ScenarioConfig
 
 
 def add_options(ap) -> None:
     ap.add_argument("--scenario", type=Path, default=None, metavar="FILE.json",
-                    help="evaluate on this scenario: a JSON object of ScenarioConfig overrides (docs/environment.md)")
+                    help="evaluate on this scenario: a JSON object of ScenarioConfig overrides, in a regular file "
+                         f"of at most {MAX_JSON_BYTES / 2**20:g} MiB (docs/environment.md)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", dest="set_scenario",
                     help="override one scenario field, after --scenario (repeatable; e.g. lanes=3, "
                          "spacings=[300,600,440,500], ev.mass=1500)")
@@ -39,46 +41,68 @@ def setting(signals: str, overrides: dict[str, Any] | None) -> ScenarioConfig:
     return ScenarioConfig.from_dict(deep_merge({"signals": signals}, overrides or {}))
 
 
-def parse_overrides(path: Path | None, items: list[str], signals: list[str]) -> dict[str, Any]:
+def parse_overrides(path: Path | None, items: list[str], signals: list[str], build: bool = True) -> dict[str, Any]:
     """The overrides of ``--scenario`` and ``--set``, each validated on the corridor of every
-    setting in ``signals``; a ValueError is one line naming the option, the value and the range."""
+    setting in ``signals``; an ``InputError`` (a ValueError) is one line naming the option, the value
+    and the range. The file is read with bounds (``bench.args.read_json``: a regular file of at
+    most ``MAX_JSON_BYTES``). With ``build``, a scenario other than the paper's is then built
+    (``envs.scenario.build``, cached), so one netconvert cannot make is refused here, in one line."""
     out: dict[str, Any] = {}
     if path is not None:
-        try:
-            out = json.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise ValueError(f"--scenario {path}: not a readable JSON file ({type(e).__name__}: "
-                             f"{str(e).splitlines()[0] if str(e) else ''})") from None
+        out = read_json(path, "--scenario")
         if not isinstance(out, dict):
-            raise ValueError(f"--scenario {path}: a JSON {type(out).__name__}; expected an object of scenario fields")
+            raise InputError(f"--scenario {path}: a JSON {type(out).__name__}; expected an object of scenario fields")
         _check(f"--scenario {path}", out, signals)
     for item in items:
         key, sep, raw = item.partition("=")
+        shown = one_line(item, 80)
         if not sep or not key or any(not part for part in key.split(".")):
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE, e.g. lanes=3 or ev.mass=1500")
+            raise InputError(f"--set {shown!r}: expected FIELD=VALUE, e.g. lanes=3 or ev.mass=1500")
         try:
             value = json.loads(raw)
         except json.JSONDecodeError:
             value = raw
+        except (RecursionError, ValueError) as e:  # nested too deeply; an integer of too many digits
+            raise InputError(f"--set {shown}: VALUE is not readable ({type(e).__name__}); accepted: a JSON "
+                             f"number, list or object nested at most {MAX_JSON_DEPTH} deep, or text") from None
+        if depth(value) > MAX_JSON_DEPTH:
+            raise InputError(f"--set {shown}: VALUE nested more than {MAX_JSON_DEPTH} deep; accepted: up to "
+                             f"{MAX_JSON_DEPTH}")
         nested: dict[str, Any] = {}
         at = nested
         *subs, name = key.split(".")
+        if len(subs) >= MAX_JSON_DEPTH:
+            raise InputError(f"--set {shown}: FIELD has {len(subs) + 1} parts; accepted: up to {MAX_JSON_DEPTH}")
         for s in subs:
             at = at.setdefault(s, {})
         at[name] = value
         out = deep_merge(out, nested)
-        _check(f"--set {item}", out, signals)
+        _check(f"--set {shown}", out, signals)
+    if build and out:
+        for s in signals:
+            check_buildable(setting(s, out), "--scenario/--set")
     return out
+
+
+def check_buildable(cfg: ScenarioConfig, where: str) -> None:
+    """Build ``cfg``'s network (once: the build is cached); an ``InputError`` of one line naming the
+    scenario and netconvert's message when it cannot be built."""
+    from envs.scenario import ScenarioBuildError, build
+
+    try:
+        build(cfg)
+    except ScenarioBuildError as e:
+        raise InputError(f"{where}: {e}") from None
 
 
 def _check(where: str, overrides: dict[str, Any], signals: list[str]) -> None:
     if "signals" in overrides:
-        raise ValueError(f"{where}: the signal setting is chosen with --signals, not as a scenario field")
+        raise InputError(f"{where}: the signal setting is chosen with --signals, not as a scenario field")
     for s in signals:
         try:
             setting(s, overrides)
         except ConfigError as e:
-            raise ValueError(f"{where}: {e}") from None
+            raise InputError(f"{where}: {e}") from None
 
 
 def legacy_hash(signals: str) -> str:

@@ -31,6 +31,15 @@ def test_green_wave_offsets():
     ({"reward": {"form": "r3"}}, ["form='r3'", "r1, r2, r"]),
     ({"insert_min": 300, "insert_max": 150}, ["insert_min=300"]),
     ({"step_length": 0}, ["step_length=0", "(0.05"]),
+    # netconvert makes a 2-phase plan for a 0 s yellow (a RuntimeError at the build before)
+    ({"yellow": 0}, ["yellow=0", "[1.0, 10.0]"]),
+    ({"yellow": 0.5}, ["yellow=0.5", "[1.0, 10.0]"]),
+    # a side green that rounds to 0 ms: SUMO refuses the phase when the simulation starts
+    ({"main_green": 87.9999, "yellow": 1.0}, ["main_green=87.9999", "side green of >= 1.0 s"]),
+    ({"junction_greens": [42, 42, 42, 42, 83.5]}, ["junction_greens[4]=83.5", "must be < cycle=90.0 (J5)"]),
+    # an integer beyond a float's range was an OverflowError, not a ConfigError
+    ({"spacing": 10**400}, ["spacing=<an integer of about 401 digits>", "[100.0, 2000.0]"]),
+    ({"ev": {"mass": -(10**30)}}, ["mass=-1000000000000000000000000000000", "[500, 3500]"]),
 ])
 def test_bad_config_is_a_clear_error(bad, words):
     with pytest.raises(ConfigError) as e:

@@ -1,0 +1,180 @@
+"""Bad input files are refused in one line naming the file, the entry, the value and the accepted
+range, before anything is read without bounds or written: a case list (``bench.harness.cases.load``,
+the generalisation family's cases), a ``--scenario`` file and a ``--set`` value."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import pytest
+
+from bench.args import MAX_JSON_BYTES, InputError
+from bench.harness import cases as cases_mod
+from bench.harness import generalisation
+from bench.harness.cases import CaseError, check_cases, load
+from bench.harness.generalisation import FamilyError
+from bench.harness.run import parse
+from bench.harness.scenarios import parse_overrides
+
+SIGNALS = ["coordinated", "uncoordinated"]
+
+
+def _write_cases(tmp_path, edit) -> os.PathLike:
+    data = cases_mod.generate()
+    edit(data["cases"])
+    path = tmp_path / "cases.json"
+    path.write_text(json.dumps(data, indent=1))
+    return path
+
+
+def _set(key, value):
+    def edit(cases):
+        cases[5][key] = value
+    return edit
+
+
+def _drop(key):
+    def edit(cases):
+        del cases[5][key]
+    return edit
+
+
+def _duplicate(cases):
+    cases[7]["index"] = 3
+
+
+@pytest.mark.parametrize("edit, words", [
+    (_duplicate, ["case #7 (index 3)", "index=3 is also case #3's", "unique non-negative integers"]),
+    (_set("insert_time", -5.0), ["case #5 (index 5)", "insert_time=-5.0", "[150.0, 300.0]"]),
+    (_set("insert_time", 400), ["insert_time=400", "[150.0, 300.0]"]),
+    (_set("insert_time", "210"), ["insert_time='210'", "[150.0, 300.0]"]),
+    (_set("sumo_seed", "7"), ["case #5", "sumo_seed='7'", "an integer in [0, 2**31-1)"]),
+    (_set("sumo_seed", 2**70), ["sumo_seed=1180591620717411303424", "[0, 2**31-1)"]),
+    (_set("sumo_seed", 2**31 - 1), ["sumo_seed=2147483647", "[0, 2**31-1)"]),
+    (_set("sumo_seed", True), ["sumo_seed=True", "[0, 2**31-1)"]),
+    (_set("index", -1), ["case #5 (index -1)", "index=-1", "[0, inf)"]),
+    (_set("group", 10), ["group=10", "[0, 10)"]),
+    (_set("seed", 1), ["unknown key(s) 'seed'", "exactly index, sumo_seed, insert_time, group"]),
+    (_drop("insert_time"), ["missing key(s) 'insert_time'", "exactly index, sumo_seed, insert_time, group"]),
+])
+def test_a_bad_case_is_one_line_naming_the_file_the_case_and_the_range(edit, words, tmp_path):
+    path = _write_cases(tmp_path, edit)
+    with pytest.raises(CaseError) as e:
+        load(path)
+    msg = str(e.value)
+    assert "\n" not in msg and str(path) in msg
+    for w in words:
+        assert w in msg
+    assert isinstance(e.value, InputError) and isinstance(e.value, ValueError)  # the commands' exit 2
+
+
+def test_the_stored_cases_load_and_check_cleanly(tmp_path):
+    got = load()
+    assert [c.index for c in got] == list(range(100)) and got == check_cases(cases_mod.generate()["cases"], "x", 10)
+
+
+@pytest.mark.parametrize("kind", ["device", "folder", "large", "deep", "binary", "list", "version"])
+def test_a_case_list_that_is_not_one_is_refused_before_it_is_read(kind, tmp_path):
+    path = {"device": "/dev/zero", "folder": str(tmp_path)}.get(kind, tmp_path / "cases.json")
+    if kind == "large":
+        path.write_text(" " * (MAX_JSON_BYTES + 1))
+    elif kind == "deep":
+        path.write_text("[" * 100_000)
+    elif kind == "binary":
+        path.write_bytes(b"\xff\xfe{}")
+    elif kind == "list":
+        path.write_text("[]")
+    elif kind == "version":
+        path.write_text('{"version": 2, "cases": []}')
+    with pytest.raises(CaseError) as e:
+        load(path)
+    assert "\n" not in str(e.value) and str(path) in str(e.value)
+
+
+def test_a_bad_case_in_the_family_file_is_named(tmp_path):
+    data = json.loads(generalisation.text())
+    data["variants"][1]["cases"][3]["sumo_seed"] = "7"
+    bad = tmp_path / "generalisation.json"
+    bad.write_text(json.dumps(data, indent=1) + "\n")
+    with pytest.raises(FamilyError) as e:
+        generalisation.load(bad)
+    name = data["variants"][1]["name"]
+    assert f"variant {name}: case #3 (index 3): sumo_seed='7'" in str(e.value) and "[0, 2**31-1)" in str(e.value)
+    data["variants"][0]["cases"][2]["index"] = 1
+    bad.write_text(json.dumps(data, indent=1) + "\n")
+    with pytest.raises(FamilyError, match=r"case #2 \(index 1\): index=1 is also case #1's"):
+        generalisation.load(bad)
+
+
+def _scenario_file(kind, tmp_path):
+    if kind == "device":
+        return "/dev/zero"
+    if kind == "folder":
+        return str(tmp_path)
+    path = tmp_path / "s.json"
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "large":
+        path.write_text('{"lanes": 3' + " " * MAX_JSON_BYTES + "}")
+    elif kind == "deep":
+        path.write_text("[" * 100_000)
+    elif kind == "deep-valid":  # parses, but deeper than any scenario
+        path.write_text('{"ev": ' + "[" * 200 + "]" * 200 + "}")
+    elif kind == "digits":
+        path.write_text('{"lanes": ' + "9" * 5000 + "}")
+    return str(path)
+
+
+@pytest.mark.parametrize("kind, words", [
+    ("device", ["/dev/zero: not a regular file", "at most 1048576 bytes (1 MiB)"]),
+    ("folder", ["not a regular file"]),
+    ("fifo", ["not a regular file"]),
+    ("large", ["bytes is too large", "at most 1048576 bytes"]),
+    ("deep", ["not a readable JSON file", "nested more than 32 deep"]),
+    ("deep-valid", ["nested more than 32 deep"]),
+    ("digits", ["not a readable JSON file"]),
+])
+def test_a_scenario_file_is_refused_in_one_line_before_it_is_read(kind, words, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["ecodrive run"])
+    with pytest.raises(SystemExit) as e:
+        parse(["--logs", str(tmp_path / "logs"), "--scenario", _scenario_file(kind, tmp_path)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1 and "--scenario" in err[0]
+    for w in words:
+        assert w in err[0]
+    assert not (tmp_path / "logs").exists()
+
+
+@pytest.mark.parametrize("item, words", [
+    ("yellow=0", ["--set yellow=0", "yellow=0 is out of range; accepted: [1.0, 10.0]"]),
+    ("main_green=87", ["main_green=87", "side green of >= 1.0 s"]),
+    ("spacings=" + "[" * 100_000, ["--set spacings=[[[", "VALUE is not readable"]),
+    ("spacings=" + "[" * 100 + "]" * 100, ["nested more than 32 deep"]),
+    ("lanes=" + "9" * 5000, ["VALUE is not readable"]),
+    ("a" + ".a" * 50_000 + "=1", ["FIELD has 50001 parts"]),
+])
+def test_a_bad_set_value_is_one_line_exit_2(item, words, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["ecodrive run"])
+    with pytest.raises(SystemExit) as e:
+        parse(["--logs", str(tmp_path / "logs"), "--set", item])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1 and len(err[0]) < 600
+    for w in words:
+        assert w in err[0]
+    assert not (tmp_path / "logs").exists()
+
+
+def test_a_scenario_netconvert_cannot_build_is_refused_at_parse_time(tmp_path, monkeypatch):
+    import envs.scenario as scenario
+
+    fake = tmp_path / "netconvert"
+    fake.write_text("#!/bin/sh\necho 'Error: cannot do that' >&2\nexit 1\n")
+    fake.chmod(0o755)
+    monkeypatch.setattr(scenario, "_netconvert", lambda: str(fake))
+    monkeypatch.setenv("ECODRIVE_CACHE", str(tmp_path / "cache"))
+    with pytest.raises(InputError) as e:
+        parse_overrides(None, ["lanes=3"], ["coordinated"])
+    msg = str(e.value)
+    assert "\n" not in msg and msg.startswith("--scenario/--set: scenario ") and "Error: cannot do that" in msg
+    assert parse_overrides(None, ["lanes=3"], ["coordinated"], build=False) == {"lanes": 3}
