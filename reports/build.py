@@ -123,7 +123,7 @@ def _mixed_claims(run_dir: Path) -> pd.DataFrame | None:
 def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], list[str]]:
     """Table 4, statistics, violins and trajectories of a ``bench.harness.run`` folder: the markdown
     lines and warnings; what the HTML page shows goes into ``page``."""
-    results, manifest = load_run(run_dir)
+    results, manifest, dropped = load_run(run_dir)
     if "train_seed" not in results.columns:  # a table from before training seeds: one policy each
         results = results.assign(train_seed=[0 if m in LEARNED else -1 for m in results.method])
     methods = [m for m in METHOD_ORDER if m in set(results.method)] + sorted(set(results.method) - set(METHOD_ORDER))
@@ -141,6 +141,9 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
     md = [f"# Report: {run_dir.name}", "",
           f"Profile `{manifest.get('profile', '?')}`, git `{manifest.get('git_sha', '?')}`, "
           f"{len(results)} episodes, methods: {', '.join(methods)}.", ""]
+    if dropped:
+        md += ["**results.parquet was cleaned before any table or figure was made**: what was dropped (how many "
+               "rows, of which method and setting, and why) or converted is listed under Warnings.", ""]
     if manifest.get("skipped_methods"):
         md += [f"Not in this run (no shipped policy): {', '.join(manifest['skipped_methods'])}.", ""]
     phis = _phis(results, manifest)
@@ -162,7 +165,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
     page.experiments_md = _gaps(results, manifest, out)
     md += page.experiments_md
-    warnings = unfinished_warnings(results)
+    warnings = dropped + unfinished_warnings(results)
     parts, partial = _return_parts(results, run_dir, warnings)
     if partial:
         md += [f"**{partial} step log(s) are partial** (cut short after the results were written); they are left "
@@ -327,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"warning: {w}", file=sys.stderr)
     print(f"report: {index} and {index.with_suffix('.html')}")
     if args.readme is not None:
-        results, manifest = load_run(args.run_dir)
+        results, manifest, _ = load_run(args.run_dir)  # its notes were printed with the report's warnings
         try:
             headline.rewrite(args.readme, results, args.run_dir.name, manifest)
         except ValueError as e:

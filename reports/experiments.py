@@ -14,6 +14,7 @@ from bench.paper import HDV_TOL, HEATMAP_CHOICE, SPEED_LOSS_TOL
 from bench.paper import TRAINING_EPISODES as PAPER_TRAINING_EPISODES
 
 from . import figures, metrics, sweep_claims, tables
+from .load import RunError, load_run
 
 MPR_BREAKDOWN_DEMANDS = (200.0, 700.0)  # veh/h/lane, the paper's CV vs HDV breakdown
 
@@ -148,10 +149,13 @@ def _budget(sweep: pd.DataFrame) -> str:
 
 def _baseline_energy(run_dir: Path, sweep: pd.DataFrame) -> float | None:
     """SUMO's driver's mean energy [Wh] over the test cases the sweep's jobs ran (the first
-    ``cases``), from the run folder's ``results.parquet``; None where it lacks them."""
+    ``cases``), from the run folder's ``results.parquet`` as checked and cleaned by ``load_run``;
+    None where it lacks them."""
+    if not (run_dir / "results.parquet").is_file():
+        return None
     try:
-        r = pd.read_parquet(run_dir / "results.parquet", columns=["method", "signals", "case", "energy"])
-    except (OSError, ValueError, KeyError):
+        r = load_run(run_dir)[0]
+    except (RunError, OSError):
         return None
     signals, cases = sweep.signals.iloc[0], int(sweep.cases.max())
     b = r[(r.method == "baseline") & (r.signals == signals) & (r.case < cases)]

@@ -16,9 +16,21 @@ class RunError(RuntimeError):
 
 # what every report reads from a results table; other columns are drawn where present
 REQUIRED_COLUMNS = ("method", "signals", "case", "energy", "travel_time", "mcap")
+KEY = ("signals", "method", "train_seed", "case")  # one episode; train_seed where the table has it
+TEXT = {"method": "a method name", "signals": "a signal setting", "mcap": "the step log's path"}
+INTEGER = {"case": ("a test case index", 0), "train_seed": ("a training seed (-1 for a rule-based method)", -1)}
+# numeric columns the report reads: a missing or infinite value drops the row, except that a missing
+# bound only means the run has no bound for that case (``ecodrive run`` without --bounds)
+METRIC = {"energy": "energy in Wh", "travel_time": "travel time in s", "collisions": "a collision count",
+          "cost_bound": "the cost bound", "energy_bound": "the energy bound"}
+MAY_BE_MISSING = ("cost_bound", "energy_bound")
+FLAGS = ("terminated", "truncated")
+SHOWN_CASES = 5  # cases named per method and setting in a note on dropped rows
 
 
-def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict]:
+def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict, list[str]]:
+    """The run's results table, checked and cleaned (``check_results``), its manifest, and one note
+    per kind of row dropped. Everything that reports on a results table reads it through here."""
     res, man = run_dir / "results.parquet", run_dir / "manifest.json"
     if not res.is_file():
         raise RunError(f"{run_dir}: no results.parquet (is this a folder written by `ecodrive run`?)")
@@ -32,11 +44,123 @@ def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict]:
         results = pd.read_parquet(res)
     except Exception as e:  # pyarrow's errors for a truncated or foreign file have no common base
         raise RunError(f"{res}: not a readable results table ({type(e).__name__}: {str(e).splitlines()[0]})") from None
+    results, notes = check_results(results, res)
+    return results, manifest, notes
+
+
+def check_results(results: pd.DataFrame, where: Path | str) -> tuple[pd.DataFrame, list[str]]:
+    """A results table as every table and figure may read it, and notes on what was dropped.
+
+    Structural problems are a ``RunError`` naming ``where``, the column and what is expected: a
+    required column missing, a value of the wrong type that cannot be converted (text in a
+    numeric column, a missing method or case, an unknown signal setting), no rows. Values stored
+    as the wrong type but convertible (numbers as text, integral floats) are converted. Data
+    problems drop rows, and each kind dropped is one note (how many, of which method and setting,
+    why): a missing (NaN) or infinite value in a numeric metric column, and duplicate episodes
+    (the same signals, method, train_seed and case): an exact copy is dropped and one kept; copies
+    that disagree are all dropped, as nothing tells which one is right."""
     missing = [c for c in REQUIRED_COLUMNS if c not in results.columns]
     if missing:
-        raise RunError(f"{res}: no {', '.join(repr(c) for c in missing)} column; a results table written by "
+        raise RunError(f"{where}: no {', '.join(repr(c) for c in missing)} column; a results table written by "
                        f"`ecodrive run` has {', '.join(REQUIRED_COLUMNS)}")
-    return results, manifest
+    if results.empty:
+        raise RunError(f"{where}: the results table has no rows; expected one row per episode (`ecodrive run` "
+                       "writes them)")
+    from envs.config import SIGNALS
+
+    df, notes = results.reset_index(drop=True), []
+    for col, what in TEXT.items():
+        ok = df[col].map(lambda v: isinstance(v, str) and v != "" and v.isprintable()).to_numpy(bool)
+        _refuse_first(where, col, df[col], ok, f"{what} (non-empty printable text) in every row")
+    ok = df.signals.isin(SIGNALS).to_numpy(bool)
+    _refuse_first(where, "signals", df.signals, ok, " or ".join(SIGNALS))
+    for col, (what, least) in INTEGER.items():
+        if col in df.columns:
+            values = _numbers(df, col, where, f"{what}, an integer >= {least}", notes)
+            ok = (values.notna() & np.isfinite(values) & (values == values.round()) & (values >= least)
+                  & (values < 2**53)).to_numpy(bool)
+            _refuse_first(where, col, df[col], ok, f"{what}, an integer >= {least}")
+            df[col] = values.astype("int64")
+    for col in FLAGS:
+        if col in df.columns:
+            df[col] = _flags(df[col], col, where)
+    dropped = pd.Series(False, index=df.index)
+    for col, what in METRIC.items():
+        if col not in df.columns:
+            continue
+        df[col] = values = _numbers(df, col, where, f"{what} (a number)", notes)
+        for bad, why in ((values.isna() & ~dropped, "a missing (NaN)"), (np.isinf(values) & ~dropped, "an infinite")):
+            if why.startswith("a missing") and col in MAY_BE_MISSING:
+                continue
+            if bad.any():
+                notes.append(_dropped(df[bad], where, f"with {why} {col}"))
+                dropped |= bad
+    df = df[~dropped]
+    key = [c for c in KEY if c in df.columns]
+    copies = df.duplicated(keep="first")
+    if copies.any():
+        notes.append(_dropped(df[copies], where, "that are exact copies of another row (one of each kept)"))
+        df = df[~copies]
+    clash = df.duplicated(subset=key, keep=False)
+    if clash.any():
+        notes.append(_dropped(df[clash], where, f"that share their {', '.join(key)} with another row but differ in "
+                                                "their values (all copies dropped: nothing tells which is right)"))
+        df = df[~clash]
+    if df.empty:
+        raise RunError(f"{where}: no row is left once the bad ones are dropped ({'; '.join(notes)})")
+    return df.reset_index(drop=True), notes
+
+
+def _refuse_first(where: Path | str, col: str, values: pd.Series, ok: np.ndarray, expected: str) -> None:
+    """A ``RunError`` on the first row whose value is not ``ok``, naming it and what is expected."""
+    if not ok.all():
+        row = int(np.flatnonzero(~ok)[0])
+        raise RunError(f"{where}: column {col!r} holds {_shown(values.iloc[row])} in row {row} "
+                       f"({int((~ok).sum())} row(s) in all); expected {expected}")
+
+
+def _shown(v: object) -> str:
+    if v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA:
+        return "a missing value"
+    v = v.item() if isinstance(v, np.generic) else v
+    return repr(v) if isinstance(v, str) else f"{v!r} ({type(v).__name__})"
+
+
+def _numbers(df: pd.DataFrame, col: str, where: Path | str, expected: str, notes: list[str]) -> pd.Series:
+    """``df[col]`` as floats: numbers stored as text are read as numbers (and said in ``notes``);
+    text that is no number, or True/False, is a ``RunError``. Missing values stay NaN."""
+    s = df[col]
+    if pd.api.types.is_bool_dtype(s.dtype):
+        raise RunError(f"{where}: column {col!r} holds True/False; expected {expected}")
+    if pd.api.types.is_numeric_dtype(s.dtype):
+        return s.astype("float64")
+    ok = s.map(lambda v: not isinstance(v, bool)).to_numpy(bool)
+    _refuse_first(where, col, s, ok, expected)
+    values = pd.to_numeric(s, errors="coerce").astype("float64")
+    _refuse_first(where, col, s, (values.notna() | s.isna()).to_numpy(bool), expected)
+    notes.append(f"{where}: column {col!r} is stored as {s.dtype} and was read as numbers")
+    return values
+
+
+def _flags(s: pd.Series, col: str, where: Path | str) -> pd.Series:
+    """``s`` as booleans (True/False, 1/0 or their text); anything else is a ``RunError``."""
+    if pd.api.types.is_bool_dtype(s.dtype):
+        return s.astype(bool)
+    words = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
+    flags = s.map(lambda v: words.get(str(v).strip().lower()) if v is not None else None)
+    _refuse_first(where, col, s, flags.notna().to_numpy(bool), "True or False in every row")
+    return flags.astype(bool)
+
+
+def _dropped(rows: pd.DataFrame, where: Path | str, why: str) -> str:
+    """One note on ``rows`` dropped: how many, of which method and setting (with their cases), and why."""
+    parts = []
+    for (method, signals), g in rows.groupby(["method", "signals"], sort=True):
+        cases = sorted(set(g.case.tolist()))
+        shown = ", ".join(str(c) for c in cases[:SHOWN_CASES]) + (", ..." if len(cases) > SHOWN_CASES else "")
+        parts.append(f"{method}/{signals} {len(g)} (case{'s' if len(cases) > 1 else ''} {shown})")
+    return (f"{where}: {len(rows)} row(s) dropped {why}: {'; '.join(parts)}; they are left out of every table "
+            "and figure")
 
 
 def load_steps(path: Path) -> tuple[pd.DataFrame, str]:

@@ -2,8 +2,9 @@
 ``policy.pt``, ``manifest.json`` and per-episode ``metrics.parquet``; a method and setting ships
 every seed found there.
 
-Loading checks the file's sha256 against the manifest and the method and scenario config
-against what the caller expects; anything else is a ``CheckpointError`` naming the file.
+Loading checks the file's sha256 against the manifest, the method and scenario config against
+what the caller expects, and, in that layout, the manifest's method, signals and training seed
+against the folder's (``check_folder``); anything else is a ``CheckpointError`` naming the file.
 """
 from __future__ import annotations
 
@@ -88,6 +89,7 @@ def load_policy(folder: Path, method: str, scenario: dict[str, Any] | None = Non
                               f"{str(manifest.get('sha256'))[:12]}...: the file is corrupt or was replaced")
     if manifest.get("method") != method:
         raise CheckpointError(f"{path}: policy is for method {manifest.get('method')!r}, not {method!r}")
+    check_folder(folder, manifest)
     state = load_torch(path)
     if scenario is not None:
         check_scenario(folder, manifest, scenario, transfer)
@@ -131,6 +133,43 @@ def check_policy(folder: Path, method: str) -> None:
         policy_agent(folder, method, policy_spaces(folder, manifest), manifest, state, **small)
     finally:
         torch.set_num_threads(threads)
+
+
+def check_folder(folder: Path, manifest: dict[str, Any]) -> None:
+    """A policy in the shipped layout, ``<method>-<signals>/s<seed>/``, must be the one its folder
+    names: the manifest's ``method``, ``signals`` (or its scenario's) and training ``seed`` must be
+    the folder's, or its episodes would be labelled with another policy's method, setting or seed.
+    A folder outside that layout (a training run's export, a copy for a test) names nothing and
+    is not compared; a manifest without one of the fields is compared on the others."""
+    from envs.config import SIGNALS
+
+    where = folder / "manifest.json"
+    family, _, signals = folder.parent.name.rpartition("-")
+    if folder.name[:1] == "s" and folder.name[1:].isdigit() and "seed" in manifest:
+        seed = manifest["seed"]
+        if type(seed) is not int or seed != int(folder.name[1:]):
+            raise CheckpointError(f"{where}: training seed {seed!r}, but the folder {folder.name} is seed "
+                                  f"{int(folder.name[1:])}; a policy lives in <method>-<signals>/s<seed>/ of its "
+                                  f"own training{_home(folder, manifest)}")
+    if family and signals in SIGNALS:
+        trained = manifest.get("signals", manifest.get("scenario", {}).get("signals")
+                               if isinstance(manifest.get("scenario"), dict) else None)
+        if trained is not None and trained != signals:
+            raise CheckpointError(f"{where}: trained on signals {trained!r}, but the folder {folder.parent.name} is "
+                                  f"{signals!r}; a policy lives in <method>-<signals>/s<seed>/ of its own "
+                                  f"training{_home(folder, manifest)}")
+        if manifest.get("method") != family:
+            raise CheckpointError(f"{where}: a policy of method {manifest.get('method')!r}, but the folder "
+                                  f"{folder.parent.name} is method {family!r}; a policy lives in "
+                                  f"<method>-<signals>/s<seed>/ of its own training{_home(folder, manifest)}")
+
+
+def _home(folder: Path, manifest: dict[str, Any]) -> str:
+    """Where a misplaced policy belongs, from its manifest ('' if the manifest cannot say)."""
+    method, signals, seed = manifest.get("method"), manifest.get("signals"), manifest.get("seed")
+    if isinstance(method, str) and isinstance(signals, str) and type(seed) is int:
+        return f" (this one belongs in {folder.parent.parent / f'{method}-{signals}' / f's{seed}'})"
+    return ""
 
 
 def read_manifest(folder: Path) -> dict[str, Any]:

@@ -93,3 +93,129 @@ def test_readme_headline_is_rewritten_from_the_run(smoke, tmp_path, capsys):
     assert "no '<!-- headline:start -->'" in capsys.readouterr().err.splitlines()[-1]
     assert main([str(smoke), "--out", str(tmp_path / "rep3"), "--readme", str(tmp_path / "missing.md")]) == 2
     assert not (tmp_path / "rep3").exists()
+
+
+# ---------------------------------------------------------------- a crafted results table
+def craft(smoke, tmp_path, change) -> tuple:
+    """A copy of the smoke run whose results table is ``change(table)``, and the original table."""
+    run_dir = copy(smoke, tmp_path)
+    table = pd.read_parquet(run_dir / "results.parquet")
+    change(table.copy()).to_parquet(run_dir / "results.parquet")
+    return run_dir, table
+
+
+def energy_as_words(t):
+    t = t.assign(energy=t.energy.astype(str))
+    t.loc[2, "energy"] = "abc"
+    return t
+
+
+def case_as_fraction(t):
+    return t.assign(case=t.case.astype(float) + 0.5)
+
+
+def unknown_signals(t):
+    t.loc[0, "signals"] = "coord"
+    return t
+
+
+def missing_method(t):
+    t.loc[1, "method"] = None
+    return t
+
+
+def terminated_as_words(t):
+    return t.assign(terminated="yes")
+
+
+STRUCTURAL = [
+    (energy_as_words, "column 'energy' holds 'abc' in row 2", "a number"),
+    (lambda t: t.iloc[:0], "no rows", "one row per episode"),
+    (case_as_fraction, "column 'case' holds 0.5", "an integer >= 0"),
+    (unknown_signals, "column 'signals' holds 'coord'", "coordinated or uncoordinated"),
+    (missing_method, "column 'method' holds a missing value in row 1", "a method name"),
+    (terminated_as_words, "column 'terminated' holds 'yes'", "True or False"),
+    *[((lambda c: lambda t: t.drop(columns=[c]))(col), f"no {col!r} column", "has method, signals")
+      for col in ("method", "signals", "case", "energy", "travel_time", "mcap")],
+]
+
+
+@pytest.mark.parametrize("change, what, expected", STRUCTURAL,
+                         ids=["energy-text", "empty", "case-fraction", "signals", "method-none", "terminated-text",
+                              *[f"no-{c}" for c in ("method", "signals", "case", "energy", "travel_time", "mcap")]])
+def test_a_structurally_bad_results_table_is_one_line_naming_file_and_column(change, what, expected, smoke,
+                                                                             tmp_path, capsys):
+    run_dir, _ = craft(smoke, tmp_path, change)
+    out = tmp_path / "report"
+    assert main([str(run_dir), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert str(run_dir / "results.parquet") in err[0] and what in err[0] and expected in err[0]
+    assert "Traceback" not in err[0] and not out.exists()
+
+
+def test_a_refused_table_leaves_an_existing_report_as_it_was(smoke, tmp_path, capsys):
+    run_dir, _ = craft(smoke, tmp_path, lambda t: t.iloc[:0])
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "index.md").write_text("an earlier report")
+    assert main([str(run_dir), "--out", str(out)]) == 2
+    assert [p.name for p in out.iterdir()] == ["index.md"] and (out / "index.md").read_text() == "an earlier report"
+
+
+def nan_energy(t):
+    t.loc[1, "energy"] = float("nan")
+    return t
+
+
+def inf_time(t):
+    t.loc[1, "travel_time"] = float("inf")
+    return t
+
+
+def copied_rows(t):
+    return pd.concat([t, t.iloc[[0, 1]]], ignore_index=True)
+
+
+def clashing_copy(t):
+    other = t.iloc[[0]].assign(energy=1.0)
+    return pd.concat([t, other], ignore_index=True)
+
+
+@pytest.mark.parametrize("change, why, dropped, kept", [
+    (nan_energy, "1 row(s) dropped with a missing (NaN) energy", [1], [0, 2]),
+    (inf_time, "1 row(s) dropped with an infinite travel_time", [1], [0, 2]),
+    (copied_rows, "2 row(s) dropped that are exact copies of another row", [], [0, 1, 2]),
+    (clashing_copy, "2 row(s) dropped that share their signals, method, train_seed, case", [0], [1, 2]),
+], ids=["nan-energy", "inf-time", "duplicates", "conflicting-duplicates"])
+def test_bad_rows_are_dropped_and_said_in_the_report_and_on_stderr(change, why, dropped, kept, smoke, tmp_path,
+                                                                   capsys):
+    """Baseline's rows of the given cases are dropped; Table 4 is the mean of those kept, never
+    inf or NaN, every table counts each episode once, and the report says what was dropped."""
+    run_dir, table = craft(smoke, tmp_path, change)
+    out = tmp_path / "report"
+    assert main([str(run_dir), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {run_dir / 'results.parquet'}: {why}" in err and "baseline/coordinated" in err
+    for page in ("index.md", "index.html"):
+        text = (out / page).read_text()
+        assert why in text and "baseline/coordinated" in text, page
+    t4 = pd.read_csv(out / "table4.csv").set_index("method")
+    base = table[(table.method == "baseline") & table.case.isin(kept)]
+    assert t4.loc["baseline", "energy"] == pytest.approx(base.energy.mean())
+    assert t4.loc["baseline", "travel_time"] == pytest.approx(base.travel_time.mean())
+    assert "inf" not in (out / "table4.md").read_text() and "nan" not in (out / "table4.md").read_text()
+    st = pd.read_csv(out / "statistics.csv").set_index(["method", "metric"])
+    assert st.loc[("baseline", "energy"), "n"] == len(kept) and st.loc[("glosa", "energy"), "n"] == 3
+    parts = pd.read_csv(out / "return_parts.csv").set_index("method")
+    assert parts.loc["baseline", "episodes"] == len(kept)
+    assert not set(dropped) & set(kept)
+
+
+def test_numbers_stored_as_text_are_read_as_numbers(smoke, tmp_path, capsys):
+    run_dir, table = craft(smoke, tmp_path, lambda t: t.assign(energy=t.energy.astype(str)))
+    out = tmp_path / "report"
+    assert main([str(run_dir), "--out", str(out)]) == 0
+    assert "column 'energy' is stored as" in capsys.readouterr().err
+    t4 = pd.read_csv(out / "table4.csv").set_index("method")
+    assert t4.loc["baseline", "energy"] == pytest.approx(table[table.method == "baseline"].energy.mean())

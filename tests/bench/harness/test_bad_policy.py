@@ -16,7 +16,15 @@ import torch
 
 from bench.harness.cases import Case
 from bench.harness.executors import Task, task_agent
-from bench.harness.policies import CheckpointError, check_policy, load_torch, policy_dir, policy_spaces, read_manifest
+from bench.harness.policies import (
+    CheckpointError,
+    check_policy,
+    load_policy,
+    load_torch,
+    policy_dir,
+    policy_spaces,
+    read_manifest,
+)
 from bench.harness.run import main
 from bench.io import sha256
 from envs.config import ScenarioConfig
@@ -132,3 +140,54 @@ def test_the_worker_refuses_a_wrong_structure_as_a_checkpoint_error(tmp_path):
     with pytest.raises(CheckpointError) as e:
         task_agent(task, env)
     assert str(path) in str(e.value) and "\n" not in str(e.value)
+
+
+# ---------------------------------------------------------------- a policy under the wrong folder
+@pytest.mark.parametrize("source, words", [
+    (("prl", "coordinated", 1), "training seed 1, but the folder s0 is seed 0"),
+    (("prl", "uncoordinated", 0), "trained on signals 'uncoordinated', but the folder prl-coordinated is 'coordinated'"),
+], ids=["seed", "signals"])
+def test_ecodrive_run_refuses_a_policy_copied_under_another_folder(source, words, tmp_path, capsys):
+    """Shipped PRL seed 1 (or the uncoordinated seed 0) copied into prl-coordinated/s0: its rows
+    would be labelled seed 0 (coordinated). One line naming the folder and both values, exit 2,
+    before the run folder is made."""
+    models = tmp_path / "models"
+    folder = policy_dir(METHOD, SIGNALS, models, 0)
+    shutil.copytree(policy_dir(source[0], source[1], seed=source[2]), folder)
+    logs = tmp_path / "logs"
+    rc = main(["--profile", "smoke", "--methods", METHOD, "--signals", SIGNALS, "--train-seeds", "0",
+               "--models", str(models), "--logs", str(logs), "--workers", "1"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert str(folder / "manifest.json") in err and words in err
+    assert str(policy_dir(*source[:2], models, source[2])) in err  # where it belongs
+    assert not logs.exists()
+
+
+def test_a_policy_under_another_methods_folder_is_refused(tmp_path):
+    folder = policy_dir("prl", SIGNALS, tmp_path / "models")
+    shutil.copytree(policy_dir("dqn", SIGNALS), folder)
+    with pytest.raises(CheckpointError, match="a policy of method 'dqn', but the folder prl-coordinated is "
+                                              "method 'prl'") as e:
+        load_policy(folder, "dqn")
+    assert "\n" not in str(e.value)
+
+
+def test_a_policy_outside_the_shipped_layout_is_not_compared(tmp_path):
+    """A training run's export or a copy elsewhere names no method, setting or seed: it loads."""
+    for name in ("anywhere", "s7"):
+        folder = tmp_path / name
+        shutil.copytree(policy_dir(METHOD, SIGNALS, seed=1), folder)
+        if name == "s7":  # a seed folder without a <method>-<signals> parent: the seed is still compared
+            with pytest.raises(CheckpointError, match="training seed 1, but the folder s7 is seed 7"):
+                load_policy(folder, METHOD)
+        else:
+            state, manifest = load_policy(folder, METHOD)
+            assert state and manifest["seed"] == 1
+
+
+def test_a_shipped_policy_loads_for_transfer_to_another_scenario():
+    folder = policy_dir(METHOD, SIGNALS)
+    trained = read_manifest(folder)["scenario"]
+    state, _ = load_policy(folder, METHOD, {**trained, "lanes": 2}, transfer=True)
+    assert state

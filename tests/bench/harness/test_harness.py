@@ -162,6 +162,8 @@ def test_rows_of_a_replaced_policy_are_not_kept_beside_the_new_ones(tmp_path):
     assert len(run(parse(common), progress=False)) == 3
     shutil.rmtree(policy_dir("prl", "coordinated", models))
     shutil.copytree(policy_dir("prl", "coordinated", seed=1), policy_dir("prl", "coordinated", models))
+    man_path = policy_dir("prl", "coordinated", models) / "manifest.json"  # seed 0 trained again: a new policy
+    man_path.write_text(json.dumps({**json.loads(man_path.read_text()), "seed": 0}))
     again = run({**parse(common), "cases": load_cases()[:1]}, progress=False)
     man = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
     assert len(again) == 1 and man["episodes_kept_from_earlier_commands"] == 0
