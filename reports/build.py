@@ -23,7 +23,7 @@ from bench.args import Parser, fail
 from bench.logs.mcaplog import LogError, resolve_log
 from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
-from . import experiments, figures, generalisation, headline, metrics, tables
+from . import experiments, figures, generalisation, headline, metrics, stats, tables
 from .html import render
 from .html_markdown import experiment_caption
 from .html_parts import Figure, Page, esc, label
@@ -156,11 +156,12 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
         md += [f"- {r.method}, {r.signals}: {r.cost:.1f} against {r.paper_cost:.1f} (phi = {r.phi:g} Wh/s; "
                f"{100 * r.cost_vs_paper:+.1f}%)" for r in costs.itertuples()] + [""]
     md += ["## Statistics", "",
-           f"Bootstrap (BCa, {metrics.BOOTSTRAP_RESAMPLES} resamples) {int(metrics.CI_LEVEL * 100)}% CIs; IQM = "
-           "25% trimmed mean; P(improve) = chance an episode of the method uses less than one of the baseline.",
+           f"Bootstrap (BCa, {stats.BOOTSTRAP_RESAMPLES} resamples) {int(stats.CI_LEVEL * 100)}% CIs; IQM = "
+           "25% trimmed mean; P(improve) = chance the method uses less than the baseline on the same case (per case "
+           "over its training seeds, averaged over the cases; CI by resampling cases and seeds).",
            "", tables.stats_markdown(st), "## Across training seeds", "",
            "Each learning method's shipped training seeds, evaluated on the same cases: the mean over seeds and "
-           f"cases with a {int(metrics.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
+           f"cases with a {int(stats.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
            "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed has no CI.",
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
     page.experiments_md = _gaps(results, manifest, out)
@@ -184,8 +185,8 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
     page.manifest, page.results, page.table4, page.statistics, page.seeds = manifest, results, t4, st, seeds
     page.methods = methods
     page.claims, page.parts, page.partial_logs = tables.paper_claims(results), parts, partial
-    page.bootstrap = (f"Per-episode bootstrap (BCa, {metrics.BOOTSTRAP_RESAMPLES} resamples) "
-                      f"{int(metrics.CI_LEVEL * 100)}% confidence intervals of the mean and of the IQM.")
+    page.bootstrap = (f"Per-episode bootstrap (BCa, {stats.BOOTSTRAP_RESAMPLES} resamples) "
+                      f"{int(stats.CI_LEVEL * 100)}% confidence intervals of the mean and of the IQM.")
     for signals in sorted(set(results.signals)):
         p = figures.violins(groups, methods, signals, out / "figures")
         page.violins.append(Figure(p[0], _violin_caption(groups, results, methods, signals), f"violin, {signals}"))

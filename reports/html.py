@@ -160,7 +160,8 @@ def statistics_section(page: Page) -> str:
                 r = g.loc[metric]
                 cells += [td(f"{num(r['mean'])} <span class='ci'>{ci(r.ci_low, r.ci_high)}</span>", "num first", raw=True),
                           td(f"{num(r.iqm)} <span class='ci'>{ci(r.iqm_ci_low, r.iqm_ci_high)}</span>", "num", raw=True),
-                          td(f"{num(r.p_improve_vs_baseline, 2)} <span class='ci'>"
+                          td(DASH if missing(r.p_improve_vs_baseline) else
+                             f"{num(r.p_improve_vs_baseline, 2)} <span class='ci'>"
                              f"{ci(r.get('p_improve_ci_low'), r.get('p_improve_ci_high'), 2)}</span>", "num", raw=True)]
             rows.append("<tr>" + "".join(cells) + "</tr>")
         head = ("<thead><tr><th rowspan='2'>Method</th><th rowspan='2'>Episodes</th>"
