@@ -23,8 +23,9 @@ positions on ``x = x0 + i dx``, ``dx = dv dt``: the Euler update maps grid state
 states exactly, so a plan is exactly feasible in SUMO's kinematics and its energy is exact; the
 grid only restricts accelerations to multiples of ``da = dv / dt``. Value iteration runs
 backwards over the time steps, vectorised: for all states at once, the value after each next
-speed is one strided view of the next value array, one array operation per acceleration
-choice. (1) A global pass on ``n = Grid.n_v`` evaluates every state in the forward-reachable
+speed is one strided view of the next value array. The inner loop, one backward step over a
+window of states, is compiled with numba (``bench.oracle.kernel``; the numpy form stays as its
+reference, ``kernel="numpy"``, with the same plans bit for bit). (1) A global pass on ``n = Grid.n_v`` evaluates every state in the forward-reachable
 and backward-feasible band: it picks the green windows. (2) Local passes on the ``Grid.fine``
 times finer lattice evaluate only a tube (``tube_x``, ``tube_v``) around the current plan,
 re-centred until the cost stops falling. The coarse plan lies on the fine lattice, so a local
@@ -60,12 +61,12 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from numpy.lib.stride_tricks import as_strided
 
 from envs.config import ScenarioConfig
 from envs.scenario import build
 
 from .energy import energy_wh
+from .kernel import backward_step, backward_step_numpy
 
 POSITION_EPS = 0.1  # [m] SUMO's POSITION_EPS: departPos "base" = vehicle length + this
 MS = 1000  # [ms/s] SUMO's time unit
@@ -76,6 +77,7 @@ STALL = 1e-4  # [-] local passes stop when the cost falls by less than this frac
 GRID_EPS = 1e-9  # [-] slack for float rounding in grid index arithmetic
 MAX_HORIZON = 86400.0  # [s] the "cost" horizon stops growing here
 
+KERNELS = {"numba": backward_step, "numpy": backward_step_numpy}  # the inner loop, compiled or the reference
 Window = tuple[int, int, int, int]  # rows lo..hi, speeds jlo..jhi evaluated at one step
 
 
@@ -179,22 +181,25 @@ class Plan:
 
 
 def bound(cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
-          time_limit: float | None = None, grid: Grid | None = None) -> Plan:
+          time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba") -> Plan:
     """The optimal plan for ``cfg``'s corridor and signals, departing at ``depart_time`` [s]
-    (the env's ``t_depart``). ``objective="energy"`` needs ``time_limit`` [s]."""
-    return solve(Corridor.from_config(cfg), cfg, depart_time, objective, time_limit, grid)
+    (the env's ``t_depart``). ``objective="energy"`` needs ``time_limit`` [s]. ``kernel``: the
+    inner loop, ``"numba"`` or the numpy reference ``"numpy"`` (``KERNELS``; the same plan)."""
+    return solve(Corridor.from_config(cfg), cfg, depart_time, objective, time_limit, grid, kernel)
 
 
 def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
-          time_limit: float | None = None, grid: Grid | None = None) -> Plan:
+          time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba") -> Plan:
     """``bound`` on a given ``Corridor`` (tests drop or move its signals)."""
     if objective not in OBJECTIVES:
         raise ValueError(f"objective={objective!r} is not accepted; choose one of {', '.join(OBJECTIVES)}")
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel={kernel!r} is not accepted; choose one of {', '.join(KERNELS)}")
     if objective == "energy" and time_limit is None:
         raise ValueError("objective='energy' needs a time_limit [s]")
     grid = grid or Grid()
     started = time.perf_counter()
-    run = _Run(cor, cfg, depart_time, cfg.reward.phi if objective == "cost" else 0.0)
+    run = _Run(cor, cfg, depart_time, cfg.reward.phi if objective == "cost" else 0.0, kernel)
     lat = _Lattice(cor, cfg, grid.n_v)
     if objective == "energy":
         horizon = int(math.floor(float(time_limit) / cfg.step_length + GRID_EPS))
@@ -239,14 +244,14 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
 class _Run:
     """One solve: the signals seen from ``depart_time`` and the time weight ``phi`` [Wh/s]."""
 
-    def __init__(self, cor: Corridor, cfg: ScenarioConfig, depart_time: float, phi: float) -> None:
-        self.cor, self.cfg, self.depart_time, self.phi = cor, cfg, depart_time, phi
+    def __init__(self, cor: Corridor, cfg: ScenarioConfig, depart_time: float, phi: float, kernel: str) -> None:
+        self.cor, self.cfg, self.depart_time, self.phi, self.kernel = cor, cfg, depart_time, phi, kernel
         self.states = 0  # evaluated, all passes
 
     def backward(self, lat: _Lattice, windows: list[Window]) -> _Solution:
         dt = self.cfg.step_length
         green = self.cor.green(self.depart_time + np.arange(len(windows)) * dt, dt) if self.cor.stop_lines else None
-        out = _backward(lat, green, windows, self.phi * dt)
+        out = _backward(lat, green, windows, self.phi * dt, self.kernel)
         self.states += out.states
         return out
 
@@ -300,13 +305,11 @@ class _Lattice:
         ok = (j_next >= 0) & (j_next <= n_v)
         step = energy_wh(j[:, None] * self.dv, np.clip(j_next, 0, n_v) * self.dv, dt, cfg.ev)
         self.energy = np.where(ok, step, np.inf)  # [Wh] (speed, acceleration choice)
-        # (row, next speed) pairs whose step crosses stop line m: x_i < s <= x_i + j' dx
-        self.crossing: list[tuple[np.ndarray, np.ndarray]] = []
-        for s in cor.stop_lines:
-            q = (s - cor.x0) / self.dx
-            top = math.ceil(q - GRID_EPS) - 1
-            rows = [np.arange(math.ceil(q - jn - GRID_EPS), top + 1) for jn in range(n_v + 1)]
-            self.crossing.append((np.concatenate(rows), np.repeat(j, [len(r) for r in rows])))
+        # the step from row i to next speed j' crosses stop line m (x_i < s <= x_i + j' dx) iff
+        # cross_low[m, j'] <= i <= cross_top[m]
+        q = (np.asarray(cor.stop_lines, dtype=float) - cor.x0) / self.dx
+        self.cross_top = (np.ceil(q - GRID_EPS) - 1).astype(np.int64)
+        self.cross_low = np.ceil(q[:, None] - j[None, :] - GRID_EPS).astype(np.int64).reshape(len(q), n_v + 1)
 
     def windows(self, horizon: int, tube: tuple[np.ndarray, np.ndarray, int, int] | None = None) -> list[Window]:
         """States worth evaluating at each step: rows forward-reachable from the start (full
@@ -332,7 +335,7 @@ class _Lattice:
         for entry in sol.policy:
             assert entry is not None, "the optimal plan left the evaluated states"
             lo, jlo, arg = entry
-            j += int(arg[i - lo, j - jlo]) + self.d_min
+            j += int(arg[j - jlo, i - lo]) + self.d_min
             i += j
             rows.append(i)
             speeds.append(j)
@@ -341,53 +344,40 @@ class _Lattice:
         return np.array(rows), np.array(speeds)
 
 
-def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float) -> _Solution:
-    """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start."""
-    nv, n_d, d_min, i_end = lat.nv, lat.n_d, lat.d_min, lat.i_end
+def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float,
+              kernel: str = "numba") -> _Solution:
+    """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start,
+    one ``bench.oracle.kernel`` step per time step."""
+    step = KERNELS[kernel]
+    nv, n_d, i_end = lat.nv, lat.n_d, lat.i_end
     n_rows = i_end + nv + 1  # rows >= i_end: arrived, value 0
-    nxt = np.full((n_rows, nv + 1), np.inf, dtype=np.float32)
-    nxt[i_end:] = 0.0
+    nxt = np.full((nv + 1, n_rows), np.inf, dtype=np.float32)  # [speed, row]: the kernel's layout
+    nxt[:, i_end:] = 0.0
     cur = nxt.copy()
     reg_nxt: Window | None = None  # region of each buffer written by the last step stored there
     reg_cur: Window | None = None
-    step_cost = (lat.energy + time_cost).astype(np.float32)
+    step_cost = np.ascontiguousarray((lat.energy + time_cost).astype(np.float32))
     arg_type = np.int8 if n_d < 127 else np.int16
     policy: list[tuple[int, int, np.ndarray] | None] = [None] * len(windows)
+    no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))
     states = 0
     for k in range(len(windows) - 1, -1, -1):
         if reg_cur is not None:
-            cur[reg_cur[0]:reg_cur[1] + 1, reg_cur[2]:reg_cur[3] + 1] = np.inf
+            cur[reg_cur[2]:reg_cur[3] + 1, reg_cur[0]:reg_cur[1] + 1] = np.inf
             reg_cur = None
         lo, hi, jlo, jhi = windows[k]
         if lo <= hi and jlo <= jhi:
-            n, m = hi - lo + 1, jhi - jlo + 1
-            states += n * m
-            base = nxt[lo:]
-            # after[r, j'] = value of landing at row lo + r + j' with speed j' (x' = x + v' dt)
-            after = as_strided(base, shape=(n, nv + 1), strides=(base.strides[0], base.strides[0] + base.strides[1]))
-            first = jlo + d_min  # next speed of padded column 0
-            a, b = max(0, first), min(nv, jhi + lat.d_max)
-            padded = np.full((n, m - 1 + n_d), np.inf, dtype=np.float32)
-            padded[:, a - first:b - first + 1] = after[:, a:b + 1]
-            if green is not None:
-                for s in np.nonzero(~green[k])[0]:  # red / yellow: no crossing in this step
-                    rows, js = lat.crossing[s]
-                    keep = (rows >= lo) & (rows <= hi) & (js >= a) & (js <= b)
-                    padded[rows[keep] - lo, js[keep] - first] = np.inf
-            best = np.full((n, m), np.inf, dtype=np.float32)
-            arg = np.zeros((n, m), dtype=arg_type)
-            cand = np.empty_like(best)
-            better = np.empty(best.shape, dtype=bool)
-            for c in range(n_d):  # next speed j + d_min + c
-                np.add(padded[:, c:c + m], step_cost[jlo:jhi + 1, c], out=cand)
-                np.less(cand, best, out=better)
-                np.copyto(best, cand, where=better)
-                np.copyto(arg, c, where=better)
-            cur[lo:hi + 1, jlo:jhi + 1] = best
+            states += (hi - lo + 1) * (jhi - jlo + 1)
+            red = no_red
+            if green is not None and not green[k].all():  # red / yellow: no crossing in this step
+                r = np.nonzero(~green[k])[0]
+                red = (lat.cross_low[r], lat.cross_top[r])
+            arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=arg_type)  # [speed, row]
+            step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red)
             reg_cur = (lo, hi, jlo, jhi)
             policy[k] = (lo, jlo, arg)
         nxt, cur, reg_nxt, reg_cur = cur, nxt, reg_cur, reg_nxt
-    value = float(nxt[0, nv]) if i_end > 0 else 0.0
+    value = float(nxt[nv, 0]) if i_end > 0 else 0.0
     return _Solution(value=value, policy=policy, states=states)
 
 

@@ -1,0 +1,98 @@
+"""The DP's inner loop, one backward step over a window of states, compiled with numba.
+
+Why numba: the step is a triple loop (rows x speeds x acceleration choices) whose numpy form
+(``bench.oracle.dp._backward_numpy``) builds a padded copy of the next values and one full
+temporary per choice; compiled, each state reads its few successors in place and skips the
+choices that leave the speed range. numba is made for such array loops, is a well-kept
+dependency with wheels for every platform torch has, and keeps the kernel in Python (no build
+step). The arithmetic is the numpy form's, in the same order and the same float32 precision,
+with the same tie rule (the first choice that is strictly better wins), so both give the same
+values and the same plans bit for bit (tests/bench/oracle/test_kernel.py).
+
+The first call compiles (about a second; cached under ``__pycache__`` where that is writable).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _relax(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: int, lo: int, jn: int,
+           cost: np.float32, c: int) -> None:
+    """States of rows ``a..b`` (one speed): a landing at speed ``jn`` improves on the best so far
+    (``arg_j`` is indexed from row ``lo``; contiguous loads and stores, so the loop vectorises)."""
+    for i in range(a, b + 1):
+        cand = nxt_jn[i + jn] + cost
+        if cand < cur_j[i]:
+            cur_j[i] = cand
+            arg_j[i - lo] = c
+
+
+@njit(cache=True, nogil=True)
+def backward_step(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
+                  d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray) -> None:
+    """Fill ``cur[jlo:jhi+1, lo:hi+1]`` with the best value over the acceleration choices and
+    ``arg`` ([jhi-jlo+1, hi-lo+1]) with the choice, from ``nxt``.
+
+    ``nxt``/``cur``: [speeds, rows] float32 values of the next/this step (rows past the end hold 0):
+    speed-major, so that the landings of one next speed ``jn`` from consecutive rows,
+    ``nxt[jn, i + jn]``, are consecutive in memory and the row loop vectorises. A choice ``c``
+    moves speed ``j`` to ``jn = j + d_min + c`` and row ``i`` to ``i + jn`` at ``step_cost[j, c]``.
+    ``red_low[s, jn] <= i <= red_top[s]``: the step crosses stop line ``s`` (ascending), whose
+    signal is red in this step, so those landings are forbidden. Choices are tried in ascending
+    order for every state and only a strictly better one replaces the best: numpy's tie rule."""
+    nv = nxt.shape[0] - 1
+    n_d = step_cost.shape[1]
+    n_red = red_top.shape[0]
+    for j in range(jlo, jhi + 1):
+        cur[j, lo:hi + 1] = np.inf
+        arg[j - jlo, :] = 0
+        arg_j = arg[j - jlo, :]
+        for c in range(n_d):
+            jn = j + d_min + c
+            if jn < 0:
+                continue
+            if jn > nv:
+                break
+            cost = step_cost[j, c]
+            start = lo
+            for s in range(n_red):  # the rows between the red stop lines' blocked intervals
+                b0, b1 = max(red_low[s, jn], lo), min(red_top[s], hi)
+                if b0 > b1:
+                    continue
+                _relax(nxt[jn], cur[j], arg_j, start, b0 - 1, lo, jn, cost, c)
+                start = b1 + 1
+            _relax(nxt[jn], cur[j], arg_j, start, hi, lo, jn, cost, c)
+
+
+def backward_step_numpy(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
+                        d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray) -> None:
+    """``backward_step`` in numpy, one array operation per choice: the reference the compiled
+    kernel is tested against (and the DP's form before it; ``Grid(kernel="numpy")``)."""
+    nxt, cur, arg = nxt.T, cur.T, arg.T  # [rows, speeds] views
+    nv, n_d = nxt.shape[1] - 1, step_cost.shape[1]
+    n, m = hi - lo + 1, jhi - jlo + 1
+    base = nxt[lo:]
+    # after[r, j'] = value of landing at row lo + r + j' with speed j' (x' = x + v' dt)
+    after = np.lib.stride_tricks.as_strided(base, shape=(n, nv + 1),
+                                            strides=(base.strides[0], base.strides[0] + base.strides[1]))
+    first = jlo + d_min  # next speed of padded column 0
+    a, b = max(0, first), min(nv, jhi + d_min + n_d - 1)
+    padded = np.full((n, m - 1 + n_d), np.inf, dtype=np.float32)
+    padded[:, a - first:b - first + 1] = after[:, a:b + 1]
+    for s in range(len(red_top)):  # red / yellow: no crossing in this step
+        for jn in range(a, b + 1):
+            r0, r1 = max(lo, red_low[s, jn]), min(hi, red_top[s])
+            if r0 <= r1:
+                padded[r0 - lo:r1 - lo + 1, jn - first] = np.inf
+    best = np.full((n, m), np.inf, dtype=np.float32)
+    arg[:] = 0
+    cand = np.empty_like(best)
+    better = np.empty(best.shape, dtype=bool)
+    for c in range(n_d):  # next speed j + d_min + c
+        np.add(padded[:, c:c + m], step_cost[jlo:jhi + 1, c], out=cand)
+        np.less(cand, best, out=better)
+        np.copyto(best, cand, where=better)
+        np.copyto(arg, c, where=better)
+    cur[lo:hi + 1, jlo:jhi + 1] = best
