@@ -4,10 +4,11 @@ Agents see gymnasium spaces and numpy arrays only, never SUMO.
 """
 from __future__ import annotations
 
-from dataclasses import fields
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+
+from envs.validation import ConfigError, validate
 
 
 @runtime_checkable
@@ -44,35 +45,17 @@ class _NoLearning:
             raise ValueError(f"state is for agent {state.get('name')!r}, not {self.name!r}")  # type: ignore[attr-defined]
 
 
-# Accepted ranges of the learning agents' config fields, by field name (lo, hi, lo_open): the
-# configs share these names. A value outside is a ValueError naming it and the range.
-FIELD_RANGES: dict[str, tuple[float | None, float | None, bool]] = {
-    "gamma": (0.0, 1.0, False), "tau": (0.0, 1.0, True), "tau_q": (0.0, 1.0, True),
-    "tau_param": (0.0, 1.0, True), "tau_critic": (0.0, 1.0, True), "tau_actor": (0.0, 1.0, True),
-    "lr": (0.0, 1.0, True), "lr_q": (0.0, 1.0, True), "lr_param": (0.0, 1.0, True),
-    "lr_critic": (0.0, 1.0, True), "lr_actor": (0.0, 1.0, True),
-    "batch_size": (1, None, False), "replay_size": (1, None, False),
-    "eps_init": (0.0, 1.0, False), "eps_end": (0.0, 1.0, False), "eps_decay_episodes": (1, None, False),
-    "ou_theta": (0.0, 1.0, False), "ou_sigma": (0.0, None, False), "learning_starts": (0, None, False),
-    "reward_scale": (0.0, None, True), "n_step": (1, 100, False), "grad_clip": (0.0, None, True), "seed": (0, None, False),
-}
-
-
 def check_config(cfg: Any) -> None:
-    """Range-check a learning agent's config dataclass (called from its ``__post_init__``)."""
+    """Validate a learning agent's config dataclass (called from its ``__post_init__``): every
+    field against its declaration (``envs.validation.param``), then the relations between fields.
+    A bad value is a ``ConfigError`` (a ValueError) naming the config, the field and the range."""
     name = type(cfg).__name__
-    for f in fields(cfg):
-        v = getattr(cfg, f.name)
-        if f.name not in FIELD_RANGES or isinstance(v, bool):
-            continue
-        lo, hi, lo_open = FIELD_RANGES[f.name]
-        ok = isinstance(v, (int, float)) and v == v and (lo is None or (v > lo if lo_open else v >= lo)) \
-            and (hi is None or v <= hi)
-        if not ok:
-            rng = f"{lo} {'<' if lo_open else '<='} {f.name}" + (f" <= {hi}" if hi is not None else "")
-            raise ValueError(f"{name}.{f.name} = {v!r} is out of range; accepted: {rng}")
-    if getattr(cfg, "eps_end", 0.0) > getattr(cfg, "eps_init", 1.0):
-        raise ValueError(f"{name}.eps_end = {cfg.eps_end} exceeds eps_init = {cfg.eps_init}; accepted: eps_end <= eps_init")
+    try:
+        validate(cfg)
+    except ConfigError as e:
+        raise ConfigError(f"{name}.{e}") from None
+    if cfg.eps_end > cfg.eps_init if hasattr(cfg, "eps_end") else False:
+        raise ConfigError(f"{name}.eps_end={cfg.eps_end} exceeds eps_init={cfg.eps_init}; accepted: eps_end <= eps_init")
     if cfg.replay_size < cfg.batch_size:
-        raise ValueError(f"{name}.replay_size = {cfg.replay_size} is smaller than batch_size = {cfg.batch_size}; "
-                         f"accepted: replay_size >= batch_size")
+        raise ConfigError(f"{name}.replay_size={cfg.replay_size} is smaller than batch_size={cfg.batch_size}; "
+                          f"accepted: replay_size >= batch_size")

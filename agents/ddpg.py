@@ -20,6 +20,8 @@ import torch
 import torch.nn.functional as F
 from gymnasium import spaces
 
+from envs.validation import param
+
 from .base import check_config
 from .device import OnDevice, host
 from .nets import (
@@ -45,25 +47,37 @@ from .replay import Replay
 
 @dataclass
 class DDPGConfig:
-    gamma: float = 0.99  # discount factor (Table 2)
-    tau_critic: float = 0.01  # soft-update rate of the target critic, tau_1 (Table 2)
-    tau_actor: float = 0.001  # soft-update rate of the target actor, tau_2 (Table 2)
-    lr_critic: float = 1e-4  # Adam step size of the critic, alpha (Table 2)
-    lr_actor: float = 1e-5  # Adam step size of the actor, beta (Table 2)
-    batch_size: int = 128  # minibatch size (Table 2)
-    replay_size: int = 500_000  # replay capacity (Table 2)
-    ou_theta: float = 0.15  # OU mean reversion per step (not in the paper)
-    ou_sigma: float = 0.2  # OU noise scale in units of the half action range (not in the paper)
-    learning_starts: int = 1000  # transitions stored before the first update (not in the paper)
-    reward_scale: float = 0.01  # rewards are multiplied by this for learning
-    grad_clip: float = 10.0  # max gradient norm per network (not in the paper)
-    bound: str = "invert"  # "invert": inverting gradients at [-1, 1]; "tanh": squash (saturates, see above)
-    seed: int = 0  # seeds network initialisation and the agent's numpy Generator
+    gamma: float = param(0.99, 0.0, 1.0, unit="-",
+                          doc="discount factor (Table 2)")
+    tau_critic: float = param(0.01, 0.0, 1.0, unit="1/update", lo_open=True,
+                               doc="soft-update rate of the target critic, tau_1 (Table 2)")
+    tau_actor: float = param(0.001, 0.0, 1.0, unit="1/update", lo_open=True,
+                              doc="soft-update rate of the target actor, tau_2 (Table 2)")
+    lr_critic: float = param(1e-4, 0.0, 1.0, unit="-", lo_open=True,
+                              doc="Adam step size of the critic, alpha (Table 2)")
+    lr_actor: float = param(1e-5, 0.0, 1.0, unit="-", lo_open=True,
+                             doc="Adam step size of the actor, beta (Table 2)")
+    batch_size: int = param(128, 1, None, unit="transitions",
+                             doc="minibatch size (Table 2)")
+    replay_size: int = param(500_000, 1, None, unit="transitions",
+                              doc="replay capacity (Table 2)")
+    ou_theta: float = param(0.15, 0.0, 1.0, unit="1/step",
+                             doc="OU mean reversion per step (not in the paper)")
+    ou_sigma: float = param(0.2, 0.0, None, unit="-",
+                             doc="OU noise scale in units of the half action range (not in the paper)")
+    learning_starts: int = param(1000, 0, None, unit="transitions",
+                                  doc="transitions stored before the first update (not in the paper)")
+    reward_scale: float = param(0.01, 0.0, None, unit="-", lo_open=True,
+                                 doc="rewards are multiplied by this for learning")
+    grad_clip: float = param(10.0, 0.0, None, unit="-", lo_open=True,
+                              doc="max gradient norm per network (not in the paper)")
+    bound: str = param("invert", choices=("invert", "tanh"),
+                        doc="'invert': inverting gradients at [-1, 1]; 'tanh': squash (saturates, see above)")
+    seed: int = param(0, 0, None, unit="-",
+                       doc="seeds network initialisation and the agent's numpy Generator")
 
     def __post_init__(self) -> None:
         check_config(self)
-        if self.bound not in ("invert", "tanh"):
-            raise ValueError(f"DDPGConfig.bound={self.bound!r}; accepted: 'invert', 'tanh'")
 
 
 class DDPGAgent(OnDevice):

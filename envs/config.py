@@ -13,9 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any, NamedTuple
 
-from .validation import ConfigError, accepted_range, validate  # noqa: F401  (both re-exported)
-from .validation import each as _each
-from .validation import rng as _rng
+from .validation import ConfigError, accepted_range, param, validate  # noqa: F401  (both re-exported)
 from .validation import short as _short
 
 SIGNALS = ("coordinated", "uncoordinated")
@@ -47,17 +45,17 @@ class SignalTiming(NamedTuple):
 class EVParams:
     """SUMO `Energy` model parameters of the ego EV (compact EV; calibrated, see docs)."""
 
-    mass: float = field(default=1450.0, metadata=_rng(500, 3500))  # [kg] curb + driver
-    front_surface_area: float = field(default=2.2, metadata=_rng(1.0, 4.0))  # [m^2]
-    air_drag_coefficient: float = field(default=0.28, metadata=_rng(0.15, 0.6))  # [-]
-    roll_drag_coefficient: float = field(default=0.01, metadata=_rng(0.004, 0.03))  # [-]
-    rotating_mass: float = field(default=40.0, metadata=_rng(0, 200))  # [kg]
-    radial_drag_coefficient: float = field(default=0.1, metadata=_rng(0, 1))  # [-]
-    constant_power_intake: float = field(default=300.0, metadata=_rng(0, 3000))  # [W] auxiliaries
-    propulsion_efficiency: float = field(default=0.9, metadata=_rng(0.5, 1.0))  # [-]
-    recuperation_efficiency: float = field(default=0.7, metadata=_rng(0.0, 1.0))  # [-]
-    maximum_power: float = field(default=80000.0, metadata=_rng(10000, 300000))  # [W]
-    battery_capacity: float = field(default=40000.0, metadata=_rng(1000, 200000))  # [Wh]
+    mass: float = param(1450.0, 500, 3500, unit="kg", doc="vehicle mass, curb + driver")
+    front_surface_area: float = param(2.2, 1.0, 4.0, unit="m^2", doc="frontal area (air drag)")
+    air_drag_coefficient: float = param(0.28, 0.15, 0.6, unit="-", doc="air drag coefficient c_d")
+    roll_drag_coefficient: float = param(0.01, 0.004, 0.03, unit="-", doc="rolling resistance coefficient c_r")
+    rotating_mass: float = param(40.0, 0, 200, unit="kg", doc="equivalent mass of the rotating parts")
+    radial_drag_coefficient: float = param(0.1, 0, 1, unit="-", doc="radial drag coefficient (heading changes)")
+    constant_power_intake: float = param(300.0, 0, 3000, unit="W", doc="auxiliaries' constant power draw")
+    propulsion_efficiency: float = param(0.9, 0.5, 1.0, unit="-", doc="battery-to-wheel efficiency when driving")
+    recuperation_efficiency: float = param(0.7, 0.0, 1.0, unit="-", doc="wheel-to-battery efficiency when braking")
+    maximum_power: float = param(80000.0, 10000, 300000, unit="W", doc="maximum power (not applied by SUMO's model)")
+    battery_capacity: float = param(40000.0, 1000, 200000, unit="Wh", doc="battery capacity")
 
     def __post_init__(self) -> None:
         validate(self)
@@ -67,21 +65,22 @@ class EVParams:
 class RewardConfig:
     """Reward form and parameters (section 3, eq. 9-11; final choice of section 5.2)."""
 
-    form: str = field(default="r", metadata={"choices": REWARDS})  # r1 | r2 | r (composite)
-    phi: float = field(default=1.0, metadata=_rng(0.0, 100.0))  # [Wh/s] weight of travel time
-    speed_penalty: float = field(default=40.0, metadata=_rng(0.0, 1000.0))  # |r_p^s| per step
-    jerk_penalty: float = field(default=30.0, metadata=_rng(0.0, 1000.0))  # |r_p^j| per step
-    lane_change_penalty: float = field(default=50.0, metadata=_rng(0.0, 1000.0))  # |r_p^c| per change
-    speed_threshold: float = field(default=1.5, metadata=_rng(0.0, 20.0))  # v_zeta [m/s]
-    jerk_threshold: float = field(default=4.0, metadata=_rng(0.0, 100.0))  # j_zeta [m/s^3]
-    # when form r pays -(E_f + phi T_f): "end" = once at t_f (the paper's eq. 11); "step" = as
-    # -(e_t + phi dt) every step, the same undiscounted sum (deviation, see docs/notebook.md)
-    cost_timing: str = field(default="step", metadata={"choices": COST_TIMINGS})
-    # when r_p^c is charged: "request" = in the step whose accepted request starts the change (the
-    # agent's own decision; a change SUMO makes on its own is charged when the lane index changes);
-    # "lane" = when the lane index changes, mid-manoeuvre, one step after the request (kept by
-    # runs whose checkpoint records it)
-    lane_change_charge: str = field(default="request", metadata={"choices": LANE_CHANGE_CHARGES})
+    form: str = param("r", choices=REWARDS,
+        doc="reward form: r1 (terminal only), r2 (distance - phi energy) or r (composite, eq. 11)")
+    phi: float = param(1.0, 0.0, 100.0, unit="Wh/s", doc="weight of travel time in the cost E + phi T")
+    speed_penalty: float = param(40.0, 0.0, 1000.0, unit="reward/step", doc="|r_p^s|: speed penalty per step below v_zeta")
+    jerk_penalty: float = param(30.0, 0.0, 1000.0, unit="reward/step", doc="|r_p^j|: jerk penalty per step above j_zeta")
+    lane_change_penalty: float = param(50.0, 0.0, 1000.0, unit="reward/change", doc="|r_p^c|: penalty per lane change")
+    speed_threshold: float = param(1.5, 0.0, 20.0, unit="m/s", doc="v_zeta: speed below which r_p^s is charged")
+    jerk_threshold: float = param(4.0, 0.0, 100.0, unit="m/s^3", doc="j_zeta: jerk above which r_p^j is charged")
+    cost_timing: str = param("step", choices=COST_TIMINGS,
+        doc="when form r pays -(E_f + phi T_f): 'end' = once at t_f (the paper's eq. 11); 'step' = as -(e_t + phi"
+            " dt) every step, the same undiscounted sum (deviation, see docs/notebook.md)")
+    lane_change_charge: str = param("request", choices=LANE_CHANGE_CHARGES,
+        doc="when r_p^c is charged: 'request' = in the step whose accepted request starts the change (the agent's"
+            " own decision; a change SUMO makes on its own is charged when the lane index changes); 'lane' = when"
+            " the lane index changes, mid-manoeuvre, one step after the request (kept by runs whose checkpoint "
+            "records it)")
 
     def __post_init__(self) -> None:
         validate(self)
@@ -91,46 +90,50 @@ class RewardConfig:
 class ScenarioConfig:
     """The corridor: geometry, signals, demand, ego, perception, limits."""
 
-    signals: str = field(default="coordinated", metadata={"choices": SIGNALS})
-    n_intersections: int = field(default=5, metadata=_rng(1, 10))  # [-]
-    spacing: float = field(default=440.0, metadata=_rng(100.0, 2000.0))  # [m] between junctions (see spacings)
-    lanes: int = field(default=5, metadata=_rng(1, 6))  # [-] through lanes per direction
-    side_length: float = field(default=200.0, metadata=_rng(50.0, 1000.0))  # [m] side streets
-    speed_limit: float = field(default=50.0 / 3.6, metadata=_rng(5.0, 40.0))  # V_max [m/s]
-    cycle: float = field(default=90.0, metadata=_rng(30.0, 240.0))  # [s] signal cycle
-    main_green: float = field(default=42.0, metadata=_rng(5.0, 200.0))  # [s] arterial green
-    # [s] >= 1: netconvert makes no yellow phase for 0 (a 2-phase plan) and takes whole seconds only
-    yellow: float = field(default=3.0, metadata=_rng(1.0, 10.0))
-    arterial_flow: float = field(default=1000.0, metadata=_rng(0.0, 5000.0))  # [veh/h] W->E Poisson
-    mpr: float = field(default=0.0, metadata=_rng(0.0, 1.0))  # share of the W->E flow that are CVs (mixed traffic)
-    opposing_flow: float = field(default=0.0, metadata=_rng(0.0, 5000.0))  # [veh/h] E->W Poisson
-    side_flow: float = field(default=60.0, metadata=_rng(0.0, 1000.0))  # [veh/h] per side approach
-    step_length: float = field(default=1.0, metadata=_rng(0.05, 2.0, lo_open=True))  # [s]
-    lane_change_duration: float = field(default=3.0, metadata=_rng(0.0, 10.0))  # T_c [s]
-    insert_min: float = field(default=150.0, metadata=_rng(0.0, 3600.0))  # [s] ego insertion U(lo,.)
-    insert_max: float = field(default=300.0, metadata=_rng(0.0, 3600.0))  # [s] ego insertion U(.,hi)
-    v2i_range: float = field(default=300.0, metadata=_rng(0.0, 2000.0))  # [m]
-    grid_ahead: float = field(default=50.0, metadata=_rng(1.0, 200.0))  # L_head [m]
-    grid_behind: float = field(default=10.0, metadata=_rng(0.0, 100.0))  # L_tail [m]
-    cell_length: float = field(default=1.0, metadata=_rng(0.1, 10.0, lo_open=True))  # L_c [m]
-    vehicle_length: float = field(default=5.0, metadata=_rng(2.0, 20.0))  # [m]
-    a_min: float = field(default=-4.0, metadata=_rng(-10.0, -0.1))  # [m/s^2] max deceleration
-    a_max: float = field(default=3.0, metadata=_rng(0.1, 10.0))  # [m/s^2] max acceleration
-    max_episode_time: float = field(default=900.0, metadata=_rng(10.0, 7200.0))  # [s] truncation
-    glosa: bool = False  # equip the ego with SUMO's GLOSA device (range = v2i_range)
-    ego_sigma: float = field(default=0.5, metadata=_rng(0.0, 1.0))  # Krauss driver imperfection of the ego's vType (SUMO default)
-    # [m] junction centre to the next one, J1->J2 .. J(n-1)->Jn: n_intersections - 1 values, each in
-    # spacing's range; None: all `spacing`. The entry (W->J1) and exit (Jn->E) links stay `spacing`.
-    spacings: tuple[float, ...] | None = field(default=None, metadata=_each(100.0, 2000.0))
-    # per-junction signal plans, n_intersections values each; None: the corridor-wide cycle,
-    # main_green and the named setting's offsets. A junction's green + 2 * yellow must be < its cycle.
-    junction_cycles: tuple[float, ...] | None = field(default=None, metadata=_each(30.0, 240.0))  # [s]
-    junction_greens: tuple[float, ...] | None = field(default=None, metadata=_each(5.0, 200.0))  # [s] arterial
-    # [s] in [0, that junction's cycle); replace the offsets of `signals`, which then only names the plan
-    junction_offsets: tuple[float, ...] | None = field(default=None, metadata=_each(0.0, 240.0))
-    # lanes of the observation (grid columns, lane one-hot), lanes..6; None: `lanes`. Lanes the road
-    # lacks read as occupied, so a policy trained on more lanes drives a narrower road.
-    obs_lanes: int | None = field(default=None, metadata={**_rng(1, 6), "optional": True})
+    signals: str = param("coordinated", choices=SIGNALS,
+        doc="signal setting: coordinated (green waves) or uncoordinated")
+    n_intersections: int = param(5, 1, 10, unit="-", doc="signalized intersections on the arterial")
+    spacing: float = param(440.0, 100.0, 2000.0, unit="m", doc="junction spacing (see spacings)")
+    lanes: int = param(5, 1, 6, unit="-", doc="through lanes per direction")
+    side_length: float = param(200.0, 50.0, 1000.0, unit="m", doc="length of the side streets")
+    speed_limit: float = param(50.0 / 3.6, 5.0, 40.0, unit="m/s", doc="V_max, the speed limit")
+    cycle: float = param(90.0, 30.0, 240.0, unit="s", doc="signal cycle")
+    main_green: float = param(42.0, 5.0, 200.0, unit="s", doc="arterial green per cycle")
+    yellow: float = param(3.0, 1.0, 10.0, unit="s",
+        doc="yellow per phase change; >= 1 (netconvert makes no yellow phase for 0 and takes whole seconds only)")
+    arterial_flow: float = param(1000.0, 0.0, 5000.0, unit="veh/h", doc="W->E background flow (Poisson)")
+    mpr: float = param(0.0, 0.0, 1.0, unit="-", doc="share of the W->E flow that are CVs (mixed traffic)")
+    opposing_flow: float = param(0.0, 0.0, 5000.0, unit="veh/h", doc="E->W background flow (Poisson)")
+    side_flow: float = param(60.0, 0.0, 1000.0, unit="veh/h", doc="background flow per side approach (Poisson)")
+    step_length: float = param(1.0, 0.05, 2.0, lo_open=True, unit="s", doc="simulation step")
+    lane_change_duration: float = param(3.0, 0.0, 10.0, unit="s", doc="T_c, duration of a lane change")
+    insert_min: float = param(150.0, 0.0, 3600.0, unit="s", doc="earliest ego insertion, U(insert_min, insert_max)")
+    insert_max: float = param(300.0, 0.0, 3600.0, unit="s", doc="latest ego insertion, U(insert_min, insert_max)")
+    v2i_range: float = param(300.0, 0.0, 2000.0, unit="m",
+        doc="range in which the signal state and time to green are observed")
+    grid_ahead: float = param(50.0, 1.0, 200.0, unit="m", doc="L_head, occupancy grid ahead of the front bumper")
+    grid_behind: float = param(10.0, 0.0, 100.0, unit="m", doc="L_tail, occupancy grid behind the front bumper")
+    cell_length: float = param(1.0, 0.1, 10.0, lo_open=True, unit="m", doc="L_c, occupancy grid cell length")
+    vehicle_length: float = param(5.0, 2.0, 20.0, unit="m", doc="vehicle length")
+    a_min: float = param(-4.0, -10.0, -0.1, unit="m/s^2", doc="a_min, maximum deceleration (negative)")
+    a_max: float = param(3.0, 0.1, 10.0, unit="m/s^2", doc="a_max, maximum acceleration")
+    max_episode_time: float = param(900.0, 10.0, 7200.0, unit="s", doc="episode truncation")
+    glosa: bool = param(False, doc="equip the ego with SUMO's GLOSA device (range = v2i_range)")
+    ego_sigma: float = param(0.5, 0.0, 1.0, unit="-",
+        doc="Krauss driver imperfection of the ego's vType (SUMO default)")
+    spacings: tuple[float, ...] | None = param(None, 100.0, 2000.0, each=True, unit="m",
+        doc="junction centre to the next one, J1->J2 .. J(n-1)->Jn: n_intersections - 1 values, each in spacing's"
+            " range; None: all `spacing`. The entry (W->J1) and exit (Jn->E) links stay `spacing`.")
+    junction_cycles: tuple[float, ...] | None = param(None, 30.0, 240.0, each=True, unit="s",
+        doc="per-junction signal plans, n_intersections values each; None: the corridor-wide cycle, main_green "
+            "and the named setting's offsets. A junction's green + 2 * yellow must be < its cycle.")
+    junction_greens: tuple[float, ...] | None = param(None, 5.0, 200.0, each=True, unit="s",
+        doc="per-junction arterial greens, n_intersections values; None: main_green")
+    junction_offsets: tuple[float, ...] | None = param(None, 0.0, 240.0, each=True, unit="s",
+        doc="in [0, that junction's cycle); replace the offsets of `signals`, which then only names the plan")
+    obs_lanes: int | None = param(None, 1, 6, optional=True, unit="-",
+        doc="lanes of the observation (grid columns, lane one-hot), lanes..6; None: `lanes`. Lanes the road lacks"
+            " read as occupied, so a policy trained on more lanes drives a narrower road.")
     ev: EVParams = field(default_factory=EVParams)
     reward: RewardConfig = field(default_factory=RewardConfig)
 

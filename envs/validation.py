@@ -1,11 +1,16 @@
-"""Field validation of the config dataclasses (``envs.config``): every numeric field declares its
-accepted range in its metadata, and a value outside it, of the wrong type, or not finite is a
-``ConfigError`` of one line naming the value and the range."""
+"""Config fields declared once, validated once: the scenario's (``envs.config``) and the learning
+agents' (``agents.pdqn``, ``agents.dqn``, ``agents.ddpg``) configs alike.
+
+A field is declared with ``param(default, lo, hi, unit=..., doc=...)`` (or ``choices=``): its
+meaning, unit and accepted range live in the field's metadata, where ``validate`` checks them
+(a value outside, of the wrong type, or not finite is a ``ConfigError`` of one line naming the
+value and the range) and ``describe`` turns them into ``--help`` text, as CleanRL's attribute
+docstrings become its ``--help``. Pure Python: no SUMO, no torch."""
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import fields
+from dataclasses import MISSING, field, fields
 from typing import Any
 
 
@@ -21,6 +26,45 @@ def rng(lo: float | None, hi: float | None, *, lo_open: bool = False) -> dict[st
 def each(lo: float, hi: float) -> dict[str, Any]:
     """Range of every entry of an optional tuple field (None: the field is not set)."""
     return {**rng(lo, hi), "each": True, "optional": True}
+
+
+def param(default: Any, lo: float | None = None, hi: float | None = None, *, doc: str, unit: str = "",
+          lo_open: bool = False, choices: tuple[str, ...] | None = None, each: bool = False,
+          optional: bool = False) -> Any:
+    """A config field: ``default``, its meaning ``doc``, its ``unit`` ("-" or "" for none) and its
+    accepted values: a number in [lo, hi] ((lo, hi] with ``lo_open``), one of ``choices``, a
+    tuple of such numbers (``each``, None allowed), or a number or None (``optional``)."""
+    meta: dict[str, Any] = {"doc": doc, "unit": unit}
+    if choices is not None:
+        meta["choices"] = tuple(choices)
+    elif each:
+        meta.update(globals()["each"](lo, hi))  # the module's each(): the name is shadowed here
+    elif lo is not None or hi is not None:
+        meta.update(rng(lo, hi, lo_open=lo_open), **({"optional": True} if optional else {}))
+    return field(default=default, metadata=meta)
+
+
+def accepted_text(meta: Mapping[str, Any], type_name: str = "") -> str:
+    """The accepted values of a field, as its error messages and ``--help`` say them."""
+    if "choices" in meta:
+        return "one of " + ", ".join(map(str, meta["choices"]))
+    if "lo" in meta:
+        return ("an integer in " if type_name.startswith("int") else "") + range_text(meta)
+    return "true or false" if type_name == "bool" else "any"
+
+
+def describe(cls: type, skip: tuple[str, ...] = ()) -> list[str]:
+    """One line per field of a config dataclass: name, default, unit, meaning, accepted values."""
+    out = []
+    for f in fields(cls):
+        if f.name in skip:
+            continue
+        meta = f.metadata
+        unit = meta.get("unit", "")
+        default = f.default if f.default is not MISSING else "(required)"
+        out.append(f"{f.name} = {default}{f' [{unit}]' if unit and unit != '-' else ''}: {meta.get('doc', '')}"
+                   f" (accepted: {accepted_text(meta, str(f.type))})")
+    return out
 
 
 def validate(obj: Any) -> None:

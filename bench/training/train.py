@@ -65,36 +65,58 @@ CHECKPOINT_KEYS: dict[str, type | tuple[type, ...]] = {
 IDENTITY_KEYS: dict[str, type] = {"method": str, "signals": str, "seed": int}
 
 
+NOT_SET = ("seed", "multipass")  # agent config fields --set may not change (--seed; the method itself)
+
+
+def config_class(method: str) -> type:
+    """The agent config dataclass of a learning method."""
+    from agents.ddpg import DDPGConfig
+    from agents.dqn import DQNConfig
+    from agents.pdqn import PDQNConfig
+
+    return {"prl": PDQNConfig, "mpdqn": PDQNConfig, "dqn": DQNConfig, "ddpg": DDPGConfig}[method]
+
+
+def fields_help() -> str:
+    """``--help`` text: every field ``--set`` accepts, per config, from its declaration."""
+    from envs.validation import describe
+
+    out = ["agent config fields for --set FIELD=VALUE (name = default [unit]: meaning (accepted values)):"]
+    for methods, m in (("prl, mpdqn", "prl"), ("dqn", "dqn"), ("ddpg", "ddpg")):
+        out += [f"  {methods} ({config_class(m).__name__}):"] + [f"    {line}" for line in describe(config_class(m), NOT_SET)]
+    return "\n".join(out)
+
+
 def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
     """``FIELD=VALUE`` strings -> typed overrides of ``method``'s agent config dataclass; a
     ValueError names the bad item and the accepted fields or values."""
     import dataclasses
 
-    from agents.ddpg import DDPGConfig
-    from agents.dqn import DQNConfig
-    from agents.pdqn import PDQNConfig
+    from envs.validation import ConfigError, describe
 
-    cls = {"prl": PDQNConfig, "mpdqn": PDQNConfig, "dqn": DQNConfig, "ddpg": DDPGConfig}[method]
-    defaults = {f.name: f.default for f in dataclasses.fields(cls) if f.name not in ("seed", "multipass")}
+    cls = config_class(method)
+    defaults = {f.name: f.default for f in dataclasses.fields(cls) if f.name not in NOT_SET}
     out: dict[str, Any] = {}
     for item in items:
         name, sep, raw = item.partition("=")
         if not sep or name not in defaults:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(defaults)}")
+            raise ConfigError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(defaults)} "
+                             f"(`ecodrive train --help` gives each field's meaning and range)")
         kind = type(defaults[name])
         if kind is bool:
             if raw.lower() not in ("true", "false"):
-                raise ValueError(f"--set {item!r}: {name} takes true or false")
+                raise ConfigError(f"--set {item!r}: {name} takes true or false")
             out[name] = raw.lower() == "true"
         else:
             try:
                 out[name] = kind(raw)
             except ValueError:
-                raise ValueError(f"--set {item!r}: {name} takes a {kind.__name__}") from None
+                line = next(d for d in describe(cls) if d.startswith(f"{name} = "))
+                raise ConfigError(f"--set {item!r}: {name} takes a {kind.__name__}; {line}") from None
     try:
         cls(**out)  # range checks (agents.base.check_config)
     except ValueError as e:
-        raise ValueError(f"--set {' '.join(items)}: {e}") from None
+        raise ConfigError(f"--set {' '.join(items)}: {e}") from None
     return out
 
 
@@ -330,7 +352,7 @@ def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = Parser(description=__doc__)
+    ap = Parser(description=__doc__, epilog=fields_help())
     ap.add_argument("--method", required=True, help=f"one of {', '.join(LEARNING)}")
     ap.add_argument("--signals", required=True, help=f"one of {', '.join(SIGNALS)}")
     ap.add_argument("--episodes", type=int_in(1, 100_000), default=None,

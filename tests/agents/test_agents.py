@@ -16,6 +16,7 @@ from bench.harness.policies import CheckpointError, load_policy, policy_dir
 from bench.logs.mcaplog import read_log
 from bench.training.train import snapshot, train, validate
 from envs.config import ScenarioConfig
+from envs.validation import ConfigError
 
 FAST_AGENT = {"learning_starts": 64, "batch_size": 16}
 FAST_SCENARIO = {"max_episode_time": 60.0}
@@ -96,18 +97,43 @@ def test_agent_overrides_are_typed_and_checked():
 
     assert agent_overrides("prl", ["twin_q=true", "lr_q=0.001", "batch_size=64"]) == {
         "twin_q": True, "lr_q": 0.001, "batch_size": 64}
-    for bad, msg in (("twin=true", "one of gamma"), ("twin_q=1", "true or false"), ("lr_q=fast", "takes a float"),
+    for bad, msg in (("twin=true", "one of gamma"), ("twin_q=1", "true or false"),
+                     ("lr_q=fast", r"takes a float; lr_q = 0.0001: Adam step size of the Q network, alpha \(Table 2\) "
+                                   r"\(accepted: \(0.0, 1.0\]\)"),
                      ("multipass=true", "one of"), ("twin_q", "FIELD=VALUE"),
-                     ("gamma=5", r"gamma = 5.0 is out of range; accepted: 0.0 <= gamma <= 1.0"),
-                     ("lr_q=0", r"0.0 < lr_q <= 1.0"), ("batch_size=0", "1 <= batch_size"),
+                     ("gamma=5", r"PDQNConfig.gamma=5.0 is out of range; accepted: \[0.0, 1.0\]"),
+                     ("lr_q=0", r"lr_q=0.0 is out of range; accepted: \(0.0, 1.0\]"),
+                     ("batch_size=0", r"batch_size=0 is out of range; accepted: \[1, inf\)"),
                      ("eps_init=0.001", "exceeds eps_init"), ("replay_size=100", "smaller than batch_size"),
-                     ("grad_clip=nan", "grad_clip = nan")):
-        with pytest.raises(ValueError, match=msg):
+                     ("grad_clip=nan", "grad_clip=nan is out of range")):
+        with pytest.raises(ConfigError, match=msg):
             agent_overrides("prl", [bad])
-    with pytest.raises(ValueError, match="DDPGConfig.tau_actor = 2.0"):
+    with pytest.raises(ConfigError, match="DDPGConfig.tau_actor=2.0"):
         agent_overrides("ddpg", ["tau_actor=2"])
-    with pytest.raises(ValueError, match="DQNConfig.eps_decay_episodes = 0"):
+    with pytest.raises(ConfigError, match="DDPGConfig.bound='clip' is not accepted; choose one of invert, tanh"):
+        agent_overrides("ddpg", ["bound=clip"])
+    with pytest.raises(ConfigError, match="DQNConfig.eps_decay_episodes=0"):
         agent_overrides("dqn", ["eps_decay_episodes=0"])
+
+
+def test_train_help_lists_every_agent_field_with_its_meaning_and_range(capsys):
+    import dataclasses
+
+    from agents.ddpg import DDPGConfig
+    from agents.dqn import DQNConfig
+    from agents.pdqn import PDQNConfig
+    from bench.training.train import main
+
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    for cls in (PDQNConfig, DQNConfig, DDPGConfig):
+        for f in dataclasses.fields(cls):
+            assert f.metadata["doc"] and "unit" in f.metadata  # declared once, with its meaning and unit
+            if f.name not in ("seed", "multipass"):
+                assert f"    {f.name} = {f.default}" in out
+    assert "gamma = 0.99: discount factor (Table 2) (accepted: [0.0, 1.0])" in out
+    assert "batch_size = 128 [transitions]: minibatch size B (Table 2) (accepted: an integer in [1, inf))" in out
 
 
 def test_multipass_removes_parameter_leakage():
