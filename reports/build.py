@@ -23,7 +23,7 @@ from bench.args import Parser, fail
 from bench.logs.mcaplog import LogError, resolve_log
 from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
-from . import experiments, figures, generalisation, headline, metrics, stats, tables
+from . import claims, experiments, figures, generalisation, headline, metrics, stats, tables
 from .html import render
 from .html_markdown import experiment_caption
 from .html_parts import Figure, Page, esc, label
@@ -117,7 +117,7 @@ def _mixed_claims(run_dir: Path) -> pd.DataFrame | None:
     if not path.is_file():
         return None
     effect = metrics.mpr_effect(metrics.mixed_cells(metrics.common_runs(pd.read_parquet(path))))
-    return metrics.mixed_claims(effect, SPEED_LOSS_TOL, HDV_TOL, FLEET_SAVING)
+    return claims.mixed_claims(effect, SPEED_LOSS_TOL, HDV_TOL, FLEET_SAVING)
 
 
 def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], list[str]]:
@@ -184,7 +184,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
     md += ["## Distributions over seed groups (fig:rwd_bar)", ""]
     page.manifest, page.results, page.table4, page.statistics, page.seeds = manifest, results, t4, st, seeds
     page.methods = methods
-    page.claims, page.parts, page.partial_logs = tables.paper_claims(results), parts, partial
+    page.claims, page.parts, page.partial_logs = claims.paper_claims(results), parts, partial
     page.bootstrap = (f"Per-episode bootstrap (BCa, {stats.BOOTSTRAP_RESAMPLES} resamples) "
                       f"{int(stats.CI_LEVEL * 100)}% confidence intervals of the mean and of the IQM.")
     for signals in sorted(set(results.signals)):

@@ -13,7 +13,7 @@ from bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
 from bench.paper import HDV_TOL, HEATMAP_CHOICE, SPEED_LOSS_TOL
 from bench.paper import TRAINING_EPISODES as PAPER_TRAINING_EPISODES
 
-from . import figures, metrics, sweep_claims, tables
+from . import claims, figures, metrics, tables
 from .load import RunError, load_run
 
 MPR_BREAKDOWN_DEMANDS = (200.0, 700.0)  # veh/h/lane, the paper's CV vs HDV breakdown
@@ -47,8 +47,8 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         cols = ["energy", "travel_time", "lane_changes", "collisions", "selected_episode"]
         cols += ["finished"] if "finished" in sweep else []  # share of test trips that reached the end
         md += [_table(sweep.groupby("config")[cols].mean()), ""]
-        md += ["The paper's claims on these jobs (`reports/sweep_claims.py`):", "",
-               _table(sweep_claims.reward_claims(sweep, _baseline_energy(run_dir, sweep)).set_index("claim")), ""]
+        md += ["The paper's claims on these jobs (`reports/claims.py`):", "",
+               _table(claims.reward_claims(sweep, _baseline_energy(run_dir, sweep)).set_index("claim")), ""]
     heat = run_dir / "heatmap" / "sweep.parquet"
     sweep = pd.read_parquet(heat) if heat.is_file() else pd.DataFrame()
     if heat.is_file() and sweep.empty:
@@ -63,8 +63,8 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
                f"cell. Lowest energy at |r_p^s| = {best.reward_speed_penalty:g}, |r_p^j| = {best.reward_jerk_penalty:g} "
                f"(the paper chose {HEATMAP_CHOICE[0]:g} and {HEATMAP_CHOICE[1]:g}).", "", f"![heatmap](figures/{p[0].name})", "",
                "Energy [Wh]:", "", _table(grids["energy"]), "", "Travel time [s]:", "", _table(grids["travel_time"]), "",
-               "The paper's claims on these cells (`reports/sweep_claims.py`):", "",
-               _table(sweep_claims.heatmap_claims(sweep).set_index("claim")), ""]
+               "The paper's claims on these cells (`reports/claims.py`):", "",
+               _table(claims.heatmap_claims(sweep).set_index("claim")), ""]
     lateral = run_dir / "lateral" / "lateral.parquet"
     if lateral.is_file():
         summary = pd.read_parquet(lateral)
@@ -122,7 +122,7 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
                _table(effect.set_index(["signals", "mpr"])), ""]
         md += ["The paper's claims on these cells (the regression check's tolerances, "
                "`docs/regression.md`):", "",
-               _table(metrics.mixed_claims(effect, SPEED_LOSS_TOL, HDV_TOL, PAPER_FLEET_SAVING).set_index(["signals", "claim"])), ""]
+               _table(claims.mixed_claims(effect, SPEED_LOSS_TOL, HDV_TOL, PAPER_FLEET_SAVING).set_index(["signals", "claim"])), ""]
         if not spread.empty:
             md += ["The same changes within each finished repetition (every repetition drives the same "
                    "traffic draw at every MPR): mean, min and max over the repetitions:", "",

@@ -1,6 +1,6 @@
 """The report as one self-contained HTML page: inline CSS, no JavaScript, nothing fetched.
 
-Sections: the paper's claims on this run (PASS / FAIL / NOT IN THIS RUN), Table 4 laid out as the
+Sections: the paper's claims on this run (PASS / FAIL / NOT CHECKED), Table 4 laid out as the
 paper prints it with the published values beside ours, the statistics with their confidence
 intervals, every figure in a ``<figure>`` with a caption, the further experiments, and the run's
 provenance from ``manifest.json``. Only formatting lives here; the numbers come from
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+from .claims import STATUSES
 from .html_markdown import experiments_html
 from .html_parts import (
     DASH,
@@ -62,7 +63,7 @@ def claims_section(page: Page) -> str:
     if page.claims is not None and len(page.claims):
         c = page.claims
         counts = c.status.value_counts()
-        summary = " \u00a0".join(f"{badge(s)}\u00a0{int(counts.get(s, 0))}" for s in ("PASS", "FAIL", "NOT IN THIS RUN"))
+        summary = " \u00a0".join(f"{badge(s)}\u00a0{int(counts.get(s, 0))}" for s in STATUSES)
         res = page.results
         cases = int(res.groupby(["method", "signals"]).case.nunique().max()) if res is not None and "case" in res else 0
         seeds = (int(res[res.train_seed >= 0].groupby(["method", "signals"]).train_seed.nunique().max())
@@ -74,7 +75,7 @@ def claims_section(page: Page) -> str:
                    f"checked on this run's own episodes ({per}; the paper used 100 cases) with the published "
                    "numbers and tolerances of "
                    "<code>bench/paper.py</code>. A claim about a method or setting this run did not evaluate is "
-                   "NOT IN THIS RUN, never a pass. <code>ecodrive regress</code> checks the same claims on 20 "
+                   "NOT CHECKED, never a pass. <code>ecodrive regress</code> checks the same claims on 20 "
                    "cases against a recorded reference.</p>")
         rows = []
         for r in c.itertuples(index=False):
@@ -90,7 +91,7 @@ def claims_section(page: Page) -> str:
                    "<th>Detail</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table></div>")
     elif page.results is None:
         out.append("<p>This run folder has no single-vehicle results (<code>results.parquet</code>): Table 4's "
-                   "claims are NOT IN THIS RUN.</p>")
+                   "claims are NOT CHECKED.</p>")
     if page.mixed_claims is not None and len(page.mixed_claims):
         rows = "".join(f"<tr class='{STATUS_CLASS.get(r.status, 'absent')}'>{td(r.signals)}{td(r.claim)}"
                        f"{td(r.detail, 'detail')}{td(badge(r.status), raw=True)}</tr>"

@@ -10,7 +10,7 @@ import pandas as pd
 
 DASH = "\u2013"
 MINUS = "\u2212"
-STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT IN THIS RUN": "absent", "NOT CHECKED": "absent",
+STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT CHECKED": "absent",
                 "KNOWN FAIL": "fail", "OUTSIDE BAND": "fail"}
 METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
                  "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",

@@ -257,44 +257,6 @@ def mpr_effect(cells: pd.DataFrame) -> pd.DataFrame:
     return g
 
 
-def mixed_claims(effect: pd.DataFrame, speed_loss_tol: float, hdv_tol: float, paper_saving: float) -> pd.DataFrame:
-    """The paper's mixed-traffic claims (section 5.5) on an ``mpr_effect`` table, per setting:
-    fleet energy per km lower at MPR 1 than at 0; space-mean speed at MPR 1 at most
-    ``speed_loss_tol`` below MPR 0; the HDVs' energy per km and space-mean speed at no MPR strictly
-    between 0 and 1 worse than at MPR 0 by more than ``hdv_tol`` (relative). ``paper_saving`` (the
-    paper's fleet saving at MPR 1) is shown beside ours."""
-    out = []
-    for signals, g in effect.groupby("signals"):
-        g = g.set_index("mpr")
-        def add(claim: str, ok: bool | None, detail: str, signals: str = signals) -> None:
-            out.append({"signals": signals, "claim": claim,
-                        "status": "NOT CHECKED" if ok is None else ("PASS" if ok else "FAIL"), "detail": detail})
-        if not {0.0, 1.0} <= set(g.index):
-            add("fleet energy and speed at MPR 1 against 0", None, "MPR 0 or 1 not in the grid")
-        else:
-            e, v = g.loc[1.0, "all_energy_per_km_change"], g.loc[1.0, "all_space_mean_speed_change"]
-            add("fleet energy per km falls from MPR 0 to 1", bool(e < 0),
-                f"{100 * e:+.1f}% (paper: about {-100 * paper_saving:.1f}% per vehicle)")
-            add(f"space-mean speed loss at MPR 1 < {100 * speed_loss_tol:.0f}%", bool(-v < speed_loss_tol),
-                f"speed {100 * v:+.1f}%")
-        above = g.loc[g.index > 0, "all_energy_per_km_change"].dropna()
-        if not above.empty:
-            add("fleet energy per km below MPR 0 at every MPR > 0", bool((above < 0).all()),
-                f"highest {100 * above.max():+.1f}% (MPR {above.idxmax():g})")
-        mid = g[(g.index > 0) & (g.index < 1)]
-        for col, sign, what in (("hdv_energy_per_km_change", 1, "energy per km"),
-                                ("hdv_space_mean_speed_change", -1, "space-mean speed")):
-            worse = sign * mid[col].dropna() if col in mid else pd.Series(dtype=float)
-            claim = f"HDV {what} not worse by > {100 * hdv_tol:.0f}% at any MPR in (0, 1)"
-            if worse.empty:
-                add(claim, None, "no MPR level with both CVs and HDVs")
-            else:
-                w, at = worse.max(), worse.idxmax()
-                add(claim, bool(w <= hdv_tol), f"at most {100 * w:.1f}% worse (MPR {at:g})" if w > 0
-                    else f"never worse (least gain {-100 * w:.1f}%, MPR {at:g})")
-    return pd.DataFrame(out)
-
-
 def mpr_effect_spread(rows: pd.DataFrame, cols: tuple[str, ...] = ("all_energy_per_km", "all_space_mean_speed",
                                                                    "all_energy", "all_speed")) -> pd.DataFrame:
     """Per signal setting and MPR: the change against MPR = 0 computed within each repetition (the

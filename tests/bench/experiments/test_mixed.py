@@ -208,7 +208,7 @@ def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
 
 
 def test_mixed_claims_on_a_grid():
-    from reports.metrics import mixed_claims
+    from reports.claims import mixed_claims
 
     effect = pd.DataFrame({"signals": ["coordinated"] * 3 + ["uncoordinated"] * 2, "mpr": [0.0, 0.5, 1.0, 0.0, 0.5],
                            "all_energy_per_km_change": [0.0, -0.1, -0.2, 0.0, 0.01],

@@ -1,0 +1,310 @@
+"""The paper's claims, checked: their one home in the report (pure functions on tables).
+
+Every claim is a row with a ``status`` from one vocabulary, ``STATUSES``: PASS, FAIL, or NOT
+CHECKED (what the claim needs is not in the run, or the grid does not hold it yet; the detail
+says which), never a pass by default. The published numbers and tolerances come from
+``bench.paper``; no tolerance is chosen here.
+
+- ``paper_claims``: single vehicle (section 5.3, Table 4), on a run's ``results.parquet``;
+- ``mixed_claims``: mixed traffic (section 5.5), on an ``metrics.mpr_effect`` table;
+- ``reward_claims``, ``heatmap_claims``: section 5.2, on the sweeps' ``sweep.parquet`` (one row
+  per finished job: its reward values and its mean energy [Wh] and travel time [s] over the test
+  cases); a claim is a sign, an order, or an effect against the spread over training seeds of the
+  same configuration, judged on complete blocks of the grid only.
+"""
+from __future__ import annotations
+
+import pandas as pd
+
+from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
+from bench.paper import TABLE4 as PAPER
+
+PASS, FAIL, NOT_CHECKED = "PASS", "FAIL", "NOT CHECKED"
+STATUSES = (PASS, FAIL, NOT_CHECKED)
+
+
+def status(ok: bool | None) -> str:
+    """PASS, FAIL, or NOT CHECKED for ``None`` (the claim could not be judged)."""
+    return NOT_CHECKED if ok is None else (PASS if ok else FAIL)
+
+
+# ---------------------------------------------------------------- single vehicle (section 5.3, Table 4)
+CLAIM_COLUMNS = ["signals", "claim", "paper", "ours", "status", "detail"]
+
+
+def paper_claims(results: pd.DataFrame) -> pd.DataFrame:
+    """The paper's single-vehicle claims (section 5.3, Table 4) checked on a run's own episodes,
+    with the published numbers and tolerances of ``bench.paper``: one row per claim with columns
+    signals ('both' for a claim across the settings), claim, paper (what the paper reports), ours
+    (this run's number), status (PASS, FAIL or NOT CHECKED) and detail (the comparison, or what
+    is missing). Names follow ``ecodrive regress`` where it checks the same thing."""
+    means = results.groupby(["method", "signals"])[["energy", "travel_time"]].mean()
+    rows: list[dict] = []
+
+    def m(method: str, signals: str, col: str) -> float:
+        return float(means.loc[(method, signals), col])
+
+    def add(signals: str, claim: str, needs: list[tuple[str, str]], paper: str, check) -> None:
+        """``check()`` -> (ok, ours, detail); run only when every (method, setting) needed is here."""
+        absent = [f"{a}/{s}" for a, s in needs if (a, s) not in means.index]
+        if absent:
+            rows.append({"signals": signals, "claim": claim, "paper": paper, "ours": "", "status": NOT_CHECKED,
+                         "detail": f"needs {', '.join(absent)}"})
+            return
+        ok, ours, detail = check()
+        rows.append({"signals": signals, "claim": claim, "paper": paper, "ours": ours,
+                     "status": status(ok), "detail": detail})
+
+    sig = ("coordinated", "uncoordinated")
+    others = ("baseline", "prl", "ddpg")  # DQN slower than each of these
+    units = {"energy": "Wh", "travel_time": "s"}
+    for s in sig:
+        for col, idx, what in (("energy", 0, "energy"), ("travel_time", 1, "travel time")):
+            paper = PAPER[("baseline", s)][idx]
+
+            def base(col=col, s=s, paper=paper):
+                dev = m("baseline", s, col) / paper - 1
+                return (abs(dev) <= BASELINE_TOL, f"{m('baseline', s, col):.2f} {units[col]}",
+                        f"{m('baseline', s, col):.2f} vs {paper:.2f} {units[col]} ({100 * dev:+.1f}%, tolerance "
+                        f"\u00b1{100 * BASELINE_TOL:.0f}%)")
+            add(s, f"baseline {what} within \u00b1{100 * BASELINE_TOL:.0f}% of Table 4", [("baseline", s)],
+                f"{paper:.2f} {units[col]}", base)
+        saving = lambda s=s: improvement(m("prl", s, "energy"), m("baseline", s, "energy"))  # noqa: E731
+        paper_saving = improvement(PAPER[("prl", s)][0], PAPER[("baseline", s)][0])
+        need = [("prl", s), ("baseline", s)]
+        add(s, "PRL saves energy against the baseline", need, f"yes, {_saves(paper_saving)}",
+            lambda saving=saving, s=s: (saving() > 0, _saves(saving()),
+                                        f"PRL {m('prl', s, 'energy'):.2f} Wh, baseline {m('baseline', s, 'energy'):.2f} Wh"))
+        add(s, f"PRL's energy saving within \u00b1{100 * IMPROVEMENT_BAND:.0f} points of the paper's", need,
+            f"{100 * paper_saving:+.2f}%",
+            lambda saving=saving, p=paper_saving: (abs(saving() - p) <= IMPROVEMENT_BAND, f"{100 * saving():+.2f}%",
+                                                   f"{100 * (saving() - p):+.2f} points from the paper's (band "
+                                                   f"\u00b1{100 * IMPROVEMENT_BAND:.0f})"))
+        penalty = lambda s=s: -improvement(m("prl", s, "travel_time"), m("baseline", s, "travel_time"))  # noqa: E731
+        paper_penalty = -improvement(PAPER[("prl", s)][1], PAPER[("baseline", s)][1])
+        add(s, f"PRL travel-time penalty < {100 * TIME_PENALTY_TOL:.0f}%", need,
+            _longer(paper_penalty),
+            lambda penalty=penalty, s=s: (penalty() < TIME_PENALTY_TOL, _longer(penalty()),
+                                          f"PRL {m('prl', s, 'travel_time'):.2f} s, baseline "
+                                          f"{m('baseline', s, 'travel_time'):.2f} s"))
+        add(s, "PRL uses less energy than DDPG+LC2013", [("prl", s), ("ddpg", s)], "yes (fig:rwd_bar)",
+            lambda s=s: (m("prl", s, "energy") < m("ddpg", s, "energy"),
+                         f"{m('prl', s, 'energy'):.2f} vs {m('ddpg', s, 'energy'):.2f} Wh",
+                         f"PRL {m('prl', s, 'energy'):.2f} Wh, DDPG+LC2013 {m('ddpg', s, 'energy'):.2f} Wh"))
+        add(s, "DQN has the worst travel time", [("dqn", s)] + [(o, s) for o in others], "yes (fig:rwd_bar)",
+            lambda s=s: (m("dqn", s, "travel_time") > max(m(o, s, "travel_time") for o in others),
+                         f"{m('dqn', s, 'travel_time'):.2f} s",
+                         _slowest([(o, m(o, s, "travel_time")) for o in others])))
+    both = [("prl", s) for s in sig] + [("baseline", s) for s in sig]
+    savings = {s: (lambda s=s: improvement(m("prl", s, "energy"), m("baseline", s, "energy"))) for s in sig}
+    paper_savings = {s: improvement(PAPER[("prl", s)][0], PAPER[("baseline", s)][0]) for s in sig}
+    add("both", "PRL saves more energy uncoordinated than coordinated", both,
+        f"yes, {100 * paper_savings['uncoordinated']:+.2f}% vs {100 * paper_savings['coordinated']:+.2f}%",
+        lambda: (savings["uncoordinated"]() > savings["coordinated"](),
+                 f"{100 * savings['uncoordinated']():+.2f}% vs {100 * savings['coordinated']():+.2f}%",
+                 "energy saving against the baseline, uncoordinated vs coordinated"))
+    ddpg_pen = {s: (lambda s=s: -improvement(m("ddpg", s, "travel_time"), m("baseline", s, "travel_time")))
+                for s in sig}
+    add("both", "DDPG+LC2013 slower than the baseline uncoordinated, and more so than coordinated",
+        [("ddpg", s) for s in sig] + [("baseline", s) for s in sig], "yes (section 5.3)",
+        lambda: (0 < ddpg_pen["uncoordinated"]() and ddpg_pen["uncoordinated"]() > ddpg_pen["coordinated"](),
+                 f"{_longer(ddpg_pen['uncoordinated']())} vs {_longer(ddpg_pen['coordinated']())}",
+                 "travel time against the baseline, uncoordinated vs coordinated"))
+    if "collisions" in results.columns:
+        n = int(results.collisions.sum())
+        rows.append({"signals": "both", "claim": "no collisions", "paper": "no collisions", "ours": str(n),
+                     "status": status(n == 0), "detail": f"{n} in {len(results)} episodes"})
+    return pd.DataFrame(rows, columns=CLAIM_COLUMNS)
+
+
+def _slowest(times: list[tuple[str, float]]) -> str:
+    method, t = max(times, key=lambda p: p[1])
+    return f"slowest of the others: {method} {t:.2f} s"
+
+
+def _saves(x: float) -> str:
+    """An energy improvement (a fraction, + = less than the baseline) in words."""
+    return f"saves {100 * x:.2f}%" if x >= 0 else f"uses {-100 * x:.2f}% more"
+
+
+def _longer(x: float) -> str:
+    """A travel-time penalty (a fraction, + = longer than the baseline) in words."""
+    return f"{100 * x:.2f}% longer" if x >= 0 else f"{-100 * x:.2f}% shorter"
+
+
+# ---------------------------------------------------------------- mixed traffic (section 5.5)
+def mixed_claims(effect: pd.DataFrame, speed_loss_tol: float, hdv_tol: float, paper_saving: float) -> pd.DataFrame:
+    """The paper's mixed-traffic claims (section 5.5) on an ``mpr_effect`` table, per setting:
+    fleet energy per km lower at MPR 1 than at 0; space-mean speed at MPR 1 at most
+    ``speed_loss_tol`` below MPR 0; the HDVs' energy per km and space-mean speed at no MPR strictly
+    between 0 and 1 worse than at MPR 0 by more than ``hdv_tol`` (relative). ``paper_saving`` (the
+    paper's fleet saving at MPR 1) is shown beside ours."""
+    out = []
+    for signals, g in effect.groupby("signals"):
+        g = g.set_index("mpr")
+        def add(claim: str, ok: bool | None, detail: str, signals: str = signals) -> None:
+            out.append({"signals": signals, "claim": claim, "status": status(ok), "detail": detail})
+        if not {0.0, 1.0} <= set(g.index):
+            add("fleet energy and speed at MPR 1 against 0", None, "MPR 0 or 1 not in the grid")
+        else:
+            e, v = g.loc[1.0, "all_energy_per_km_change"], g.loc[1.0, "all_space_mean_speed_change"]
+            add("fleet energy per km falls from MPR 0 to 1", bool(e < 0),
+                f"{100 * e:+.1f}% (paper: about {-100 * paper_saving:.1f}% per vehicle)")
+            add(f"space-mean speed loss at MPR 1 < {100 * speed_loss_tol:.0f}%", bool(-v < speed_loss_tol),
+                f"speed {100 * v:+.1f}%")
+        above = g.loc[g.index > 0, "all_energy_per_km_change"].dropna()
+        if not above.empty:
+            add("fleet energy per km below MPR 0 at every MPR > 0", bool((above < 0).all()),
+                f"highest {100 * above.max():+.1f}% (MPR {above.idxmax():g})")
+        mid = g[(g.index > 0) & (g.index < 1)]
+        for col, sign, what in (("hdv_energy_per_km_change", 1, "energy per km"),
+                                ("hdv_space_mean_speed_change", -1, "space-mean speed")):
+            worse = sign * mid[col].dropna() if col in mid else pd.Series(dtype=float)
+            claim = f"HDV {what} not worse by > {100 * hdv_tol:.0f}% at any MPR in (0, 1)"
+            if worse.empty:
+                add(claim, None, "no MPR level with both CVs and HDVs")
+            else:
+                w, at = worse.max(), worse.idxmax()
+                add(claim, bool(w <= hdv_tol), f"at most {100 * w:.1f}% worse (MPR {at:g})" if w > 0
+                    else f"never worse (least gain {-100 * w:.1f}%, MPR {at:g})")
+    return pd.DataFrame(out)
+
+
+# ---------------------------------------------------------------- reward study and heatmap (section 5.2)
+METRICS = (("energy", "Wh"), ("travel_time", "s"))
+
+
+def _row(claim: str, ok: bool | None, detail: str) -> dict[str, str]:
+    return {"claim": claim, "status": status(ok), "detail": detail}
+
+
+def _effect_and_noise(sweep: pd.DataFrame, factor: str, metric: str) -> tuple[float, float] | None:
+    """(range over ``factor``'s values of the metric's mean, mean over those values of the range over
+    training seeds), or None with fewer than two values or a value with fewer than two seeds."""
+    g = sweep.groupby(factor)[metric]
+    if g.ngroups < 2 or g.count().min() < 2:
+        return None
+    means = g.mean()
+    return float(means.max() - means.min()), float((g.max() - g.min()).mean())
+
+
+def unfinished_jobs(sweep: pd.DataFrame) -> pd.DataFrame:
+    """The jobs whose policy leaves test trips unfinished (``finished`` < 1: cut at the episode's
+    truncation). Their mean energy counts trips that never arrived, so it is no saving; the claims
+    compare energy over the other jobs and name these."""
+    if "finished" not in sweep:
+        return sweep.iloc[:0]
+    return sweep[sweep.finished < 1.0]
+
+
+def _unfinished_text(jobs: pd.DataFrame) -> str:
+    if jobs.empty:
+        return ""
+    return "; left trips unfinished (not compared): " + ", ".join(
+        f"{r.config} seed {r.seed} ({100 * r.finished:.0f}% finished)" for r in jobs.itertuples())
+
+
+def reward_claims(sweep: pd.DataFrame, baseline_energy: float | None = None) -> pd.DataFrame:
+    """Section 5.2, fig:rwd_compare: (1) with the terminal reward r1 the agent "cannot learn
+    effective information": r1's mean test energy is no lower than SUMO's driver's on the same
+    cases (``baseline_energy`` [Wh]), or no r1 job finishes its trips; (2) r2 and the paper's r
+    converge to much lower energy: r1's mean test energy is the highest of the forms; (3) phi hardly
+    matters: for the paper's form r, the spread of the per-phi means is no larger than the spread
+    over training seeds within a phi, for energy and travel time. Energy is compared over the jobs
+    whose policy finishes every test trip (``unfinished_jobs`` are named, not averaged)."""
+    out = []
+    lost = unfinished_jobs(sweep)
+    done = sweep.drop(lost.index)
+    by_form = done.groupby("reward_form").energy.mean() if "reward_form" in done else pd.Series(dtype=float)
+    r1_lost = lost[lost.reward_form == "r1"] if "reward_form" in lost else lost
+    claim = "r1 (terminal reward only) learns no saving: no less energy than SUMO's driver"
+    if "r1" not in by_form and len(r1_lost):
+        out.append(_row(claim, True, "no r1 job finishes its test trips" + _unfinished_text(r1_lost)))
+    elif "r1" not in by_form or baseline_energy is None:
+        out.append(_row(claim, None, "needs r1 and the baseline on the same test cases"))
+    else:
+        e = by_form["r1"]
+        out.append(_row(claim, bool(e >= baseline_energy), f"r1 {e:.1f} Wh against SUMO's driver's "
+                        f"{baseline_energy:.1f} Wh ({100 * (e / baseline_energy - 1):+.1f}%)" + _unfinished_text(r1_lost)))
+    claim = "r1 (terminal reward only) ends with more energy than r2 and r"
+    if "r1" not in by_form or len(by_form) < 2:
+        out.append(_row(claim, None, "needs r1 and another form, with jobs that finish their trips"))
+    else:
+        others = by_form.drop("r1")
+        out.append(_row(claim, bool(by_form["r1"] > others.max()),
+                        ", ".join(f"{f} {e:.1f} Wh" for f, e in by_form.items()) + _unfinished_text(lost)))
+    r = done[done.reward_form == "r"] if "reward_form" in done else done.iloc[:0]
+    found = {m: _effect_and_noise(r, "reward_phi", m) for m, _ in METRICS}
+    claim = "phi hardly matters (form r): its effect is within the spread over training seeds"
+    if any(v is None for v in found.values()):
+        out.append(_row(claim, None, "needs two phi values of form r with two seeds each"))
+    else:
+        out.append(_row(claim, all(e <= n for e, n in found.values()), "; ".join(
+            f"{m}: phi moves the mean by {e:.1f} {u}, seeds spread {n:.1f} {u}"
+            for (m, u), (e, n) in zip(METRICS, found.values()))))
+    return pd.DataFrame(out)
+
+
+def complete_block(cells: pd.DataFrame) -> pd.DataFrame:
+    """The cells of the largest complete block of the grid: a set of |r_p^s| values x a set of
+    |r_p^j| values whose every pair is finished; a block with two values of each first, then the
+    most cells, then the most |r_p^s| values, then the smallest values. On a partly finished grid
+    the two factors are not crossed, so a comparison over all finished cells would mix |r_p^s|'s
+    effect with |r_p^j|'s; over a complete block they are independent.
+
+    A largest block's |r_p^j| set is the intersection of some rows' |r_p^j| sets, so only those
+    intersections are tried (few on a grid filled row by row)."""
+    if cells.empty:
+        return cells
+    rows_of = cells.groupby("reward_speed_penalty").reward_jerk_penalty.agg(frozenset).to_dict()
+    candidates: set[frozenset] = set()
+    for js in rows_of.values():
+        candidates |= {js} | {js & c for c in candidates}
+    best: tuple | None = None
+    for cols in filter(None, candidates):
+        rows = sorted(s for s, js in rows_of.items() if cols <= js)
+        key = (len(rows) >= 2 and len(cols) >= 2, len(rows) * len(cols), len(rows),
+               tuple(-v for v in rows), tuple(-v for v in sorted(cols)))
+        if best is None or key > best[0]:
+            best = (key, rows, cols)
+    _, rows, cols = best
+    return cells[cells.reward_speed_penalty.isin(rows) & cells.reward_jerk_penalty.isin(cols)]
+
+
+def heatmap_claims(sweep: pd.DataFrame) -> pd.DataFrame:
+    """Section 5.2, fig:heatmap, on the cell means (over seeds) of the grid's largest complete block
+    (``complete_block``), which needs at least two values of each penalty: (1) a larger |r_p^s|
+    shortens the travel time (negative Spearman rank correlation over the cells) and (2) raises
+    the energy (positive); (3) |r_p^j| matters less than |r_p^s|: the range of the per-|r_p^j|
+    means is smaller than the range of the per-|r_p^s| means, for energy and travel time. Jobs
+    that leave test trips unfinished (``unfinished_jobs``) are named, not averaged."""
+    out = []
+    lost = unfinished_jobs(sweep)  # a cell's jobs that crawl to the truncation are named, not averaged
+    done = sweep.drop(lost.index)
+    cells = (done.groupby(["reward_speed_penalty", "reward_jerk_penalty"])[["energy", "travel_time"]].mean()
+             .reset_index() if len(done) else pd.DataFrame())
+    block = complete_block(cells)
+    enough = not block.empty and block.reward_speed_penalty.nunique() >= 2 and block.reward_jerk_penalty.nunique() >= 2
+    wait = (f"needs a complete block of two |r_p^s| x two |r_p^j| values; the largest has "
+            f"{block.reward_speed_penalty.nunique() if len(block) else 0} x {block.reward_jerk_penalty.nunique() if len(block) else 0}")
+    where = (f"{len(block)} cells: |r_p^s| {', '.join(f'{v:g}' for v in sorted(set(block.reward_speed_penalty)))} x "
+             f"|r_p^j| {', '.join(f'{v:g}' for v in sorted(set(block.reward_jerk_penalty)))}" if enough else "")
+    where += _unfinished_text(lost) if "config" in lost else ""
+    for metric, sign, what in (("travel_time", -1, "shortens the travel time"), ("energy", 1, "raises the energy")):
+        claim = f"a larger |r_p^s| {what}"
+        if not enough:
+            out.append(_row(claim, None, wait))
+            continue
+        rho = block.reward_speed_penalty.corr(block[metric], method="spearman")
+        out.append(_row(claim, None if pd.isna(rho) else bool(sign * rho > 0),
+                        f"Spearman rank correlation {rho:+.2f} over {where}"))
+    claim = "|r_p^j| matters less than |r_p^s|"
+    if not enough:
+        out.append(_row(claim, None, wait))
+    else:
+        spans = {m: [float(block.groupby(f)[m].mean().agg(lambda x: x.max() - x.min()))
+                     for f in ("reward_speed_penalty", "reward_jerk_penalty")] for m, _ in METRICS}
+        out.append(_row(claim, all(j < s for s, j in spans.values()), "; ".join(
+            f"{m}: range {s:.1f} {u} over |r_p^s|, {j:.1f} {u} over |r_p^j|"
+            for (m, u), (s, j) in zip(METRICS, spans.values())) + f" ({where})"))
+    return pd.DataFrame(out)
