@@ -7,7 +7,7 @@ import errno
 import importlib
 import sys
 
-from bench.args import Parser
+from bench.args import InputError, Parser, fail
 
 # subcommand -> (module, one-line description)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -23,7 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sweep": ("bench.experiments.sweep", "the reward study or the penalty heatmap (section 5.2)"),
     "stalls": ("bench.experiments.stalls", "trace the CVs that stall in one mixed-traffic cell"),
     "calibrate": ("bench.experiments.calibrate", "SUMO's driver over the fixed cases against Table 4's baseline row"),
-    "cases": ("bench.harness.cases", "write or check the fixed test cases (bench/harness/cases.json)"),
+    "cases": ("bench.harness.case_files", "write or check the fixed test cases (bench/harness/cases.json)"),
     "perf": ("bench.perf", "ratios from a pytest-benchmark JSON (env step vs raw SUMO, update vs FLOP floor)"),
 }
 
@@ -53,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     sys.argv[0] = f"ecodrive {ns.command}"  # argparse's prog in the command's help and errors
     try:
         return int(module.main(ns.args) or 0)
+    except InputError as e:  # a file's content refused where the command did not catch it: one line
+        return fail(f"ecodrive {ns.command}", str(e))
     except OSError as e:
         if e.errno not in STORAGE_ERRORS:
             raise

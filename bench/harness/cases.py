@@ -1,23 +1,18 @@
 """Fixed test cases: (SUMO seed, ego insertion time) pairs shared by every method.
 
-    ecodrive cases --write|--check [--generalisation]
-
 The list is generated from a documented master seed and stored in ``bench/harness/cases.json`` (a
 versioned file in the repo). ``ecodrive cases --write`` regenerates it; ``--check``
-verifies the stored file matches the generator. With ``--generalisation`` both act on the
-family of held-out corridors (``bench/harness/generalisation.json``, ``bench.harness.generalisation``).
+verifies the stored file matches the generator (``bench.harness.case_files``).
 """
 from __future__ import annotations
 
-import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench.args import InputError, Parser, read_json
+from bench.args import InputError, read_json
 
 MASTER_SEED = 20240501  # documented master seed of the protocol
 CASES_PER_SETTING = 100  # section 5.3
@@ -117,31 +112,3 @@ def _shown(value: Any) -> str:
         return f"<an integer of about {int(value.bit_length() * 0.30103) + 1} digits>"
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = Parser(description=__doc__)
-    g = ap.add_mutually_exclusive_group(required=True)
-    g.add_argument("--write", action="store_true", help="regenerate bench/harness/cases.json")
-    g.add_argument("--check", action="store_true", help="check bench/harness/cases.json against the generator")
-    ap.add_argument("--generalisation", action="store_true",
-                    help="write or check the generalisation family instead (bench/harness/generalisation.json, "
-                         "bench.harness.generalisation)")
-    args = ap.parse_args(argv)
-    if args.generalisation:
-        from bench.harness import generalisation
-
-        return generalisation.main(args.write)
-    data = generate()
-    text = json.dumps(data, indent=1) + "\n"
-    if args.write:
-        CASES_FILE.write_text(text)
-        print(f"wrote {len(data['cases'])} cases to {CASES_FILE}")
-        return 0
-    ok = CASES_FILE.exists() and CASES_FILE.read_text() == text
-    print("cases.json matches the generator" if ok else "cases.json differs from the generator")
-    return 0 if ok else 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

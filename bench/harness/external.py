@@ -24,14 +24,11 @@ from typing import Any
 
 from agents.base import Agent
 from bench.args import NAME
+from bench.harness.errors import AgentError
 
 GROUP = "ecodrive_bench.agents"
 INTERFACES = ("parameterized", "discrete27", "longitudinal")
 SPEC = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$")
-
-
-class AgentError(ValueError):
-    """A user agent that cannot be loaded or acts outside its space; one line."""
 
 
 _WARNED: set[str] = set()  # entry-point names already reported as left out

@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from bench.args import Parser, fail
-from bench.harness.external import AgentError
+from bench.harness.errors import AgentError
 from bench.harness.policies import CheckpointError
 from bench.harness.run import UsageError, parse, run
 from bench.io import atomic_csv

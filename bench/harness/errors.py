@@ -1,0 +1,8 @@
+"""The harness's errors, at the bottom of ``bench.harness``: every module may raise them and no
+import runs back up to a runner for them. Each message is one line; the ``ecodrive`` commands
+print it and exit 2."""
+from __future__ import annotations
+
+
+class AgentError(ValueError):
+    """A user agent that cannot be loaded or acts outside its space; one line."""
