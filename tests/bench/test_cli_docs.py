@@ -33,3 +33,13 @@ def test_docs_show_the_commands_help(command, capsys, monkeypatch):
     assert e.value.code == 0
     assert words(capsys.readouterr().out) == words(documented(command)), (
         f"docs/cli.md's block for `ecodrive {command}` differs from its --help: paste the current output")
+
+
+def test_the_readme_opens_with_its_two_commands_and_a_short_status():
+    """A newcomer reads the two commands first, then a status of at most 8 lines (the evidence is
+    in docs/results.md, which the status links)."""
+    text = (DOC.parents[1] / "README.md").read_text()
+    commands = re.findall(r"^python3 -m venv .*# set up, run (the main job|the tests.*)$", text, re.M)
+    assert len(commands) == 2
+    status = re.search(r"^\*\*Status\.\*\*.*?(?=\n\n)", text, re.S | re.M)
+    assert status and len(status.group(0).splitlines()) <= 8 and "docs/results.md" in status.group(0)
