@@ -71,7 +71,11 @@ def run_episode(
         if script is not None:
             script.start(env)
         while True:
-            action = agent.act(obs, info, explore=False)
+            try:
+                action = agent.act(obs, info, explore=False)
+            except Exception as e:  # the harness names the agent, case and step (bench.harness.failures)
+                e.ecodrive_step, e.ecodrive_agent = steps, True
+                raise
             if log is not None:
                 log.raw_action = _flatten(action)
             if script is not None:

@@ -1,22 +1,23 @@
 """Where episodes run: a local process pool (one SUMO per process) or a Ray cluster.
 
 Both run the same ``run_task`` and yield result rows as episodes finish; the rows do not depend
-on the executor (tests compare them).
+on the executor (tests compare them). On both, a task whose worker process dies is run again, at
+most ``RETRIES`` more times; a task that raises is not retried. A task that cannot be finished
+goes to ``on_failure`` (a ``bench.harness.pool.Failure``), or, without it, raises.
 """
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bench.harness.cases import Case
 from bench.harness.oracle import NAME as ORACLE
+from bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 
 EXECUTORS = ("local", "ray")
 
@@ -92,56 +93,56 @@ def task_agent(task: Task, env: Any) -> tuple[Any, str]:
     return policy_agent(folder, task.method, spaces, manifest, state), manifest["sha256"]
 
 
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
+def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = run_task,
+              on_failure: Callable[[Failure], None] | None = None,
+              skip: Callable[[Any], bool] | None = None) -> Iterator[dict[str, Any]]:
+    """Rows of ``fn(task)`` on a pool of ``workers`` processes, as they finish; a dead worker is
+    replaced and its task rerun up to ``RETRIES`` times (``bench.harness.pool``)."""
+    return run_pool(tasks, workers, fn, on_failure, skip)
 
 
-def _die_with_parent(parent: int) -> None:
-    """Worker initializer: on Linux, ask for SIGTERM when the process that started the pool dies
-    (a killed sweep must not leave orphans computing its cells); elsewhere nothing."""
-    import ctypes
-    import signal
-    import sys
-
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-    except (OSError, AttributeError):
-        return
-    if os.getppid() != parent:  # it died before prctl took effect
-        os.kill(os.getpid(), signal.SIGTERM)
-
-
-def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = run_task) -> Iterator[dict[str, Any]]:
-    ctx = mp.get_context("spawn")  # a fresh interpreter per worker: no libsumo state is inherited
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_die_with_parent,
-                             initargs=(os.getpid(),)) as pool:
-        futures = [pool.submit(fn, t) for t in tasks]
-        try:
-            for f in as_completed(futures):
-                yield f.result()
-        except BaseException:
-            for f in futures:
-                f.cancel()
-            raise
-
-
-def run_ray(tasks: Iterable[Any], address: str | None, workers: int,
-            fn: Callable[[Any], dict] = run_task) -> Iterator[dict[str, Any]]:
+def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callable[[Any], dict] = run_task,
+            on_failure: Callable[[Failure], None] | None = None,
+            skip: Callable[[Any], bool] | None = None) -> Iterator[dict[str, Any]]:
+    """As ``run_local``; after a failure, pending tasks for which ``skip(task)`` is true are
+    cancelled."""
     try:
         import ray
     except ImportError:
         raise SystemExit("error: --executor ray needs Ray: pip install '.[distributed]'") from None
     root = str(Path(__file__).resolve().parents[2])
     if not ray.is_initialized():
+        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)  # a user agent's module too
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
-                                  "runtime_env": {"env_vars": {"PYTHONPATH": root}}}
+                                  "runtime_env": {"env_vars": {"PYTHONPATH": path}}}
         if address:
             ray.init(address=address, **kwargs)
         else:
             ray.init(num_cpus=workers, **kwargs)
-    remote = ray.remote(num_cpus=1)(fn)
-    pending = [remote.remote(t) for t in tasks]
+    # a task whose worker died is retried by Ray; an exception raised by the task is not
+    remote = ray.remote(num_cpus=1, max_retries=RETRIES, retry_exceptions=False)(fn)
+    pending = {remote.remote(t): t for t in tasks}
     while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        yield ray.get(done[0])
+        done, _ = ray.wait(list(pending), num_returns=1)
+        task = pending.pop(done[0])
+        if task is None:  # cancelled by skip
+            continue
+        try:
+            yield ray.get(done[0])
+        except ray.exceptions.RayTaskError as e:  # the task raised: e.cause is its exception
+            if on_failure is None:
+                raise
+            cause = e.cause if isinstance(e.cause, BaseException) else RuntimeError(str(e))
+            on_failure(describe(cause, str(e), f"{type(cause).__name__}: {cause}", 1, task))  # str: the traceback
+        except ray.exceptions.RayError as e:  # its worker (or node) died every time
+            if on_failure is None:
+                raise
+            first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+            on_failure(describe(None, str(e), f"its worker died ({type(e).__name__}: {first}), "
+                                              f"{1 + RETRIES} times", 1 + RETRIES, task))
+        else:
+            continue
+        for ref, t in pending.items():
+            if t is not None and skip is not None and skip(t):
+                ray.cancel(ref, force=True)
+                pending[ref] = None

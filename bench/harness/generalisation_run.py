@@ -16,10 +16,12 @@ covers every variant folder present.
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
+from bench.harness import runlock
 from bench.harness.generalisation import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
 from bench.harness.provenance import git_sha
 from bench.harness.run import UsageError, check_writable, preflight, run
@@ -39,6 +41,12 @@ def run_family(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
     checked: set[str] = set()  # each policy is loaded once, for all variants
     checks = [preflight(o, checked) for o in variants]  # every variant is checked before anything is written
     check_writable(root)
+    with runlock.hold(root):  # one command per folder (bench.harness.runlock); each variant's run locks its own
+        return _run_variants(opts, root, variants, checks, progress)
+
+
+def _run_variants(opts: dict[str, Any], root: Path, variants: list[dict[str, Any]], checks: list[dict[str, Any]],
+                  progress: bool) -> pd.DataFrame:
     family = load()
     chosen = {v.name for v in opts["family"]}
     for v, o, c in zip(opts["family"], variants, checks):

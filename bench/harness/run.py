@@ -12,6 +12,10 @@ rest, so a killed run loses nothing that finished. Evaluation is greedy. ``--sce
 scenario other than its training one only with ``--transfer`` (``bench.harness.scenarios``).
 ``--profile generalisation`` runs over the held-out corridors of ``bench.harness.generalisation``
 instead, one sub-folder per variant (``bench.harness.generalisation_run``).
+A worker that dies is replaced and its episode rerun (at most twice more); an episode that still
+fails, or whose agent raises, is one line on stderr (its traceback in ``<run>/errors/``) and no
+row. Exit codes: 0 done; 2 bad input, or the run folder in use by another command; 3 finished
+with failed episodes (rerun the command to retry them); 130 interrupted.
 """
 from __future__ import annotations
 
@@ -26,7 +30,7 @@ from tqdm import tqdm
 
 from agents.registry import LEARNING, METHODS
 from bench.args import Parser, fail, int_in, name
-from bench.harness import external, scenarios
+from bench.harness import external, failures, runlock, scenarios
 from bench.harness.bounds import attach
 from bench.harness.cases import load
 from bench.harness.executors import EXECUTORS, Task, run_local, run_ray
@@ -228,8 +232,16 @@ def preflight(opts: dict[str, Any], checked: set[str] | None = None) -> dict[str
 
 def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | None = None) -> pd.DataFrame:
     """Run (or reuse) every episode of the command and write ``results.parquet`` and the manifest;
-    ``checks``: this command's ``preflight``, when the caller ran it already."""
+    ``checks``: this command's ``preflight``, when the caller ran it already. The run folder is
+    locked meanwhile (``bench.harness.runlock``); failed episodes are appended to
+    ``opts["failures"]`` (``bench.harness.failures``)."""
     checks = preflight(opts) if checks is None else checks
+    check_writable(opts["logs"] / opts["run_id"])
+    with runlock.hold(opts["logs"] / opts["run_id"]):
+        return _run(opts, progress, checks)
+
+
+def _run(opts: dict[str, Any], progress: bool, checks: dict[str, Any]) -> pd.DataFrame:
     runs, skipped, pdirs, where, evals = (checks[k] for k in ("runs", "skipped", "pdirs", "where", "evals"))
     factories = opts.get("factories", {})
     overrides, transfer = opts.get("scenario") or {}, bool(opts.get("transfer"))
@@ -259,15 +271,17 @@ def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | No
                 else:
                     tasks.append(Task(method, signals, case, str(path), pdir, seed, factories.get(method, ""),
                                       scenario=ev.scenario, transfer=transfer, meta=ev.meta(transfer)))
+    failed = failures.Failures(run_dir, tasks, opts.setdefault("failures", []))
     t0 = time.perf_counter()
-    it = (run_local(tasks, opts["workers"]) if opts["executor"] == "local"
-          else run_ray(tasks, opts["address"], opts["workers"]))
+    it = (run_local(tasks, opts["workers"], on_failure=failed, skip=failed.skip) if opts["executor"] == "local"
+          else run_ray(tasks, opts["address"], opts["workers"], on_failure=failed, skip=failed.skip))
     with tqdm(total=len(rows) + len(tasks), initial=len(rows), desc="episodes", unit="ep", disable=not progress) as bar:
         for row in it:
             rows.append(row)
             bar.update(1)
     wall = time.perf_counter() - t0
     df = pd.DataFrame(rows).rename(columns={"return_": "return", "case_index": "case", "sumo_seed": "seed"})
+    df = df if len(df) else pd.DataFrame(columns=[*KEEP, "episode_wall_s"])  # every episode failed
     for i, col in enumerate(SCENARIO_COLUMNS):
         df[col] = [(ev.eval_hash, ev.train_hash)[i] for ev in map(where.get, zip(df.method, df.signals, df.train_seed))]
     ran = df["episode_wall_s"].dropna()
@@ -293,7 +307,7 @@ def run(opts: dict[str, Any], progress: bool = True, checks: dict[str, Any] | No
         if len(ran) else None,
     }
     manifest["scenario"] = {s: c.to_dict() for s, c in evals.items()}  # eval_scenario_hash: their digests
-    manifest.update(scenario_overrides=overrides, transfer=transfer, train_scenarios=trained)
+    manifest.update(scenario_overrides=overrides, transfer=transfer, train_scenarios=trained, **failed.manifest())
     if opts.get("bounds"):  # the DP's per-case time, as measured in this run's workers
         manifest["bound_wall_s_median"] = round(float(pd.read_parquet(run_dir / "bounds.parquet").bound_wall_s.median()), 3)
     kept_keys = {policy_key(m, s, sd) for m, s, sd in zip(kept.method, kept.signals, kept.train_seed)}
@@ -358,7 +372,7 @@ def _relative(run_dir: Path, mcap: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     opts = parse(argv)
-    opts["argv"] = argv
+    opts["argv"], opts["failures"] = argv, []
     try:
         if opts["profile"] == "generalisation":
             from bench.harness.generalisation_run import run_family
@@ -366,17 +380,17 @@ def main(argv: list[str] | None = None) -> int:
             df = run_family(opts)
         else:
             df = run(opts)
-    except (UsageError, CheckpointError, AgentError) as e:
+    except (UsageError, CheckpointError, AgentError, runlock.InUse) as e:
         return fail(parser().prog, str(e))
     except KeyboardInterrupt:
         print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)
         return 130
     by = ["variant", "signals", "method"] if "variant" in df.columns else ["signals", "method"]
-    summary = df.groupby(by)[["energy", "travel_time", "collisions"]].mean().round(2)
-    print(summary.to_string())
+    if len(df):
+        print(df.groupby(by)[["energy", "travel_time", "collisions"]].mean().round(2).to_string())
     table = "generalisation.parquet" if "variant" in df.columns else "results.parquet"
     print(f"results: {opts['logs'] / opts['run_id'] / table}")
-    return 0
+    return failures.exit_code(opts["failures"])  # 0, or 2 / 3 after failed episodes
 
 
 if __name__ == "__main__":

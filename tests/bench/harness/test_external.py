@@ -84,8 +84,12 @@ def test_a_bad_factory_is_one_line_and_runs_nothing(spec, words, user_module, tm
 def test_an_action_outside_the_space_stops_the_run_with_one_line(user_module, tmp_path, capsys):
     rc = main(["--profile", "smoke", "--logs", str(tmp_path / "logs"), "--agent", "myagents:too_fast",
                "--methods", "baseline", "--signals", "coordinated", "--workers", "1"])
-    err = [ln for ln in capsys.readouterr().err.strip().splitlines() if not ln.startswith("episodes:")]  # progress bar
+    err = [ln for ln in capsys.readouterr().err.strip().splitlines()
+           if ln.strip() and not ln.startswith("episodes:")]  # progress bar
     assert rc == 2 and len(err) == 1 and "outside the action space" in err[0] and "9." in err[0]
+    assert "too_fast/coordinated case 000" in err[0] and "step 0" in err[0]
+    table = pd.read_parquet(tmp_path / "logs" / "smoke" / "results.parquet")  # the baseline's rows are kept
+    assert set(table.method) == {"baseline"} and len(table) == 3
 
 
 def test_a_name_taken_by_a_built_in_method_is_refused(user_module, capsys):

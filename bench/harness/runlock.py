@@ -1,0 +1,46 @@
+"""One ``ecodrive run`` per run folder at a time.
+
+The command holds an advisory ``fcntl.flock`` on ``<run>/.lock`` (holding its pid) from the
+moment it reads the folder's finished logs until its results table and manifest are written; a
+second command on the same folder is refused at once with one line naming that pid (exit code 2)
+instead of writing ``results.parquet`` beside it. The lock goes with the process, however it
+ends (a SIGKILL included); the file stays. Windows has no ``fcntl``: there, no lock is taken.
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+LOCK = ".lock"
+
+
+class InUse(Exception):
+    """The run folder is held by another command; one line."""
+
+
+@contextmanager
+def hold(run_dir: Path) -> Iterator[None]:
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        yield
+        return
+    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        fd = os.open(run_dir / LOCK, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as e:
+        raise InUse(f"run folder {run_dir}: cannot open its lock file {LOCK} ({e.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise InUse(f"run folder {run_dir} is in use by another ecodrive command (pid {holder}); wait for it "
+                        f"to finish, or use another --run-id") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)

@@ -1,0 +1,91 @@
+"""A dead worker does not take the run down: its task is run again (at most twice more) on a
+fresh process, a task that dies every time is reported as failed, the others' results come
+back, and a task's own exception is not retried. Local pool and Ray, with real processes killed."""
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from bench.harness.executors import run_local, run_ray
+from bench.harness.pool import RETRIES, Failure, WorkerDied
+
+
+def flaky(task: tuple[str, str]) -> dict:
+    """``task`` = (marker folder, name): counts its attempts in a marker file; ``die-once-*`` is
+    SIGKILLed on its first attempt, ``die-always-*`` on every one, ``raise-*`` raises."""
+    folder, name = task
+    marker = Path(folder) / name
+    with open(marker, "a") as f:
+        f.write(f"{os.getpid()}\n")
+    attempts = len(marker.read_text().split())
+    if name.startswith("die-always") or (name.startswith("die-once") and attempts == 1):
+        os.kill(os.getpid(), signal.SIGKILL)
+    if name.startswith("raise"):
+        raise ValueError(f"{name} is broken")
+    if name.startswith("sleep"):
+        time.sleep(3)
+        (Path(folder) / f"{name}.done").touch()
+    return {"name": name, "attempts": attempts, "pid": os.getpid()}
+
+
+NAMES = ["die-once-a", "ok-b", "die-always-c", "ok-d", "raise-e", "ok-f"]
+
+
+def _check(rows: list[dict], failed: list[Failure], folder: Path) -> None:
+    got = {r["name"]: r["attempts"] for r in rows}
+    assert got == {"die-once-a": 2, "ok-b": 1, "ok-d": 1, "ok-f": 1}  # no innocent task was rerun
+    by = {f.task[1]: f for f in failed}
+    assert set(by) == {"die-always-c", "raise-e"}
+    assert by["die-always-c"].attempts == 1 + RETRIES and by["die-always-c"].error is None
+    assert len((folder / "die-always-c").read_text().split()) == 1 + RETRIES
+    assert isinstance(by["raise-e"].error, ValueError) and "raise ValueError" in by["raise-e"].traceback
+    assert len((folder / "raise-e").read_text().split()) == 1  # an exception is not retried
+
+
+def test_local_pool_replaces_a_dead_worker_and_retries_its_task(tmp_path):
+    failed: list[Failure] = []
+    rows = list(run_local([(str(tmp_path), n) for n in NAMES], 2, flaky, on_failure=failed.append))
+    _check(rows, failed, tmp_path)
+    assert "SIGKILL" in next(f.reason for f in failed if f.error is None)
+
+
+def test_without_on_failure_the_pool_raises_as_before(tmp_path):
+    with pytest.raises(WorkerDied):
+        list(run_local([(str(tmp_path), "die-always-x")], 1, flaky))
+    with pytest.raises(ValueError, match="raise-y is broken"):  # the task in flight beside it finishes first
+        list(run_local([(str(tmp_path), "sleep-z"), (str(tmp_path), "raise-y")], 2, flaky))
+    assert (tmp_path / "sleep-z.done").exists()
+
+
+def test_skipped_tasks_are_not_run(tmp_path):
+    rows = list(run_local([(str(tmp_path), n) for n in ("ok-1", "ok-2", "ok-3")], 1, flaky,
+                          skip=lambda t: t[1] == "ok-2"))
+    assert sorted(r["name"] for r in rows) == ["ok-1", "ok-3"] and not (tmp_path / "ok-2").exists()
+
+
+@pytest.fixture(scope="module")
+def ray_cluster():
+    """Two Ray nodes of one CPU each on this machine."""
+    ray = pytest.importorskip("ray")
+    from ray.cluster_utils import Cluster
+
+    cluster = Cluster()
+    for _ in range(2):
+        cluster.add_node(num_cpus=1, include_dashboard=False)
+    here, root = Path(__file__).parent, Path(__file__).parents[3]
+    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False,
+             runtime_env={"env_vars": {"PYTHONPATH": f"{here}{os.pathsep}{root}"}})  # the workers import this module
+    yield cluster
+    ray.shutdown()
+    cluster.shutdown()
+
+
+def test_ray_retries_a_task_whose_worker_died(ray_cluster, tmp_path):
+    failed: list[Failure] = []
+    rows = list(run_ray([(str(tmp_path), n) for n in NAMES], None, 2, flaky, on_failure=failed.append))
+    _check(rows, failed, tmp_path)
+    assert "WorkerCrashedError" in next(f.reason for f in failed if f.error is None)
