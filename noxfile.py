@@ -22,29 +22,29 @@ def tests(session: nox.Session) -> None:
 @nox.session
 def benchmark(session: nox.Session) -> None:
     """The main job: every available method over the fixed cases, MCAP logs, results, report."""
-    from bench.harness.run import parse
+    from bench.harness.options import parse
 
     session.run("ecodrive", "run", "--bounds", *session.posargs)
     opts = parse(list(session.posargs))
-    if opts["methods"] is None:  # and the energy-optimal plan replayed in traffic (a DP solve per case)
+    if opts.methods is None:  # and the energy-optimal plan replayed in traffic (a DP solve per case)
         session.run("ecodrive", "run", "--bounds", *session.posargs, "--methods", "oracle")
-    if opts["profile"] == "full":  # section 5's further experiments, into the same run folder
-        common = ["--executor", opts["executor"], "--workers", str(opts["workers"]),
-                  "--run-id", opts["run_id"], "--logs", str(opts["logs"])]
-        common += ["--address", opts["address"]] if opts["address"] else []
+    if opts.profile == "full":  # section 5's further experiments, into the same run folder
+        common = ["--executor", opts.executor, "--workers", str(opts.workers),
+                  "--run-id", opts.run_id, "--logs", str(opts.logs)]
+        common += ["--address", opts.address] if opts.address else []
         session.run("ecodrive", "lateral", *common, "--methods", *LATERAL_ALL)
         session.run("ecodrive", "mixed", *common)
         session.run("ecodrive", "sweep", "reward", *common)  # days on 2 cores: see docs/experiments.md
         session.run("ecodrive", "sweep", "heatmap", *common)
         # zero-shot: every method on the held-out corridors (docs/generalisation.md), beside this run
-        gen = ["--executor", opts["executor"], "--workers", str(opts["workers"]), "--logs", str(opts["logs"]),
-               "--run-id", f"{opts['run_id']}-generalisation", "--signals", *opts["signals"]]
-        gen += ["--address", opts["address"]] if opts["address"] else []
+        gen = ["--executor", opts.executor, "--workers", str(opts.workers), "--logs", str(opts.logs),
+               "--run-id", f"{opts.run_id}-generalisation", "--signals", *opts.signals]
+        gen += ["--address", opts.address] if opts.address else []
         session.run("ecodrive", "run", "--profile", "generalisation", *gen)
-        session.run("ecodrive", "report", str(opts["logs"] / opts["run_id"]),
-                    "--generalisation", str(opts["logs"] / f"{opts['run_id']}-generalisation"))
+        session.run("ecodrive", "report", str(opts.logs / opts.run_id),
+                    "--generalisation", str(opts.logs / f"{opts.run_id}-generalisation"))
         return
-    session.run("ecodrive", "report", str(opts["logs"] / opts["run_id"]))
+    session.run("ecodrive", "report", str(opts.logs / opts.run_id))
 
 
 @nox.session

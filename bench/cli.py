@@ -11,7 +11,7 @@ from bench.args import InputError, Parser, fail
 
 # subcommand -> (module, one-line description)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "run": ("bench.harness.run", "evaluate methods over the fixed test cases: MCAP logs, results.parquet, manifest"),
+    "run": ("bench.harness.run_command", "evaluate methods over the fixed test cases: MCAP logs, results.parquet, manifest"),
     "report": ("reports.build", "rebuild the paper's tables and figures from a run folder"),
     "view": ("bench.logs.view", "open step logs in the Rerun viewer, or save an .rrd recording"),
     "regress": ("bench.regression.check", "check the paper's claims and the own reference on the CI cases"),

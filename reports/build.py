@@ -20,6 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from bench.args import Parser, fail
+from bench.io import atomic_csv, atomic_text, refuse_links
 from bench.logs.mcaplog import LogError, resolve_log
 from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
@@ -49,6 +50,7 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None) -> Path:
             and not generalisation.present(run_dir)):
         raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
                        f"`ecodrive run`?)")
+    refuse_links(out, "report folder")  # an Unwritable (OSError): one line, nothing written
     out.mkdir(parents=True, exist_ok=True)
     page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
@@ -64,12 +66,12 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None) -> Path:
     md, warnings = md + emd, warnings + ewarnings
     if warnings:
         md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
-    (out / "index.md").write_text("\n".join(md))
+    atomic_text("\n".join(md), out / "index.md")
     page.experiments_md = page.experiments_md + emd
     page.experiment_figures = [Figure(p, experiment_caption(t), t) for t, p in eimages]
     page.mixed_claims = _mixed_claims(run_dir)
     page.warnings = warnings
-    (out / "index.html").write_text(render(page))
+    atomic_text(render(page), out / "index.html")
     return out / "index.md", warnings
 
 
@@ -85,7 +87,7 @@ def _gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
     phis = _phis(results, manifest)
     gaps = pd.concat([metrics.optimality_gaps(results[results.signals == s], phi) for s, phi in phis.items()],
                      ignore_index=True)
-    gaps.to_csv(out / "optimality_gaps.csv", index=False)
+    atomic_csv(gaps, out / "optimality_gaps.csv")
     learned = gaps[gaps.method.isin(["prl", "mpdqn", "ddpg", "dqn"])]
     lines = ["## Distance to the energy-optimal bound", "",
              "The bound is the least cost E + phi T of the ego alone on the corridor through the known signal plans "
@@ -131,12 +133,12 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
     t4 = t4.set_index("method").loc[[m for m in methods if m in set(t4.method)]].reset_index()
     st = metrics.statistics(results)
     seeds = metrics.across_seeds(results)
-    (out / "table4.md").write_text(tables.table4_markdown(t4))
-    (out / "table4.tex").write_text(tables.table4_latex(t4))
-    (out / "statistics.md").write_text(tables.stats_markdown(st))
-    t4.to_csv(out / "table4.csv", index=False)
-    st.to_csv(out / "statistics.csv", index=False)
-    seeds.to_csv(out / "seeds.csv", index=False)
+    atomic_text(tables.table4_markdown(t4), out / "table4.md")
+    atomic_text(tables.table4_latex(t4), out / "table4.tex")
+    atomic_text(tables.stats_markdown(st), out / "statistics.md")
+    atomic_csv(t4, out / "table4.csv")
+    atomic_csv(st, out / "statistics.csv")
+    atomic_csv(seeds, out / "seeds.csv")
     groups = metrics.group_means(results)
     md = [f"# Report: {run_dir.name}", "",
           f"Profile `{manifest.get('profile', '?')}`, git `{manifest.get('git_sha', '?')}`, "
@@ -172,7 +174,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
         md += [f"**{partial} step log(s) are partial** (cut short after the results were written); they are left "
                "out of the return split and the trajectories, and listed under Warnings.", ""]
     if parts is not None:
-        parts.to_csv(out / "return_parts.csv", index=False)
+        atomic_csv(parts, out / "return_parts.csv")
         md += ["## Return by reward component", "",
                "Mean per episode of each reward component's sum, read from the step logs (form r: speed "
                "and jerk penalties, lane-change penalty, -energy [Wh] and -phi x time [s] paid per step); "

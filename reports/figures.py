@@ -10,6 +10,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from bench.io import atomic_file  # noqa: E402
+
 LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
 
 
@@ -30,8 +32,10 @@ def save(fig, out: Path, name: str) -> list[Path]:
     paths = [out / f"{name}.png", out / f"{name}.pdf"]
     if fig.get_layout_engine() is None:
         fig.tight_layout()  # stacked panels: a title must not sit on the x label above it
-    fig.savefig(paths[0], dpi=120, bbox_inches="tight")
-    fig.savefig(paths[1], bbox_inches="tight")
+    with atomic_file(paths[0]) as f:  # never through a link planted under the name
+        fig.savefig(f, format="png", dpi=120, bbox_inches="tight")
+    with atomic_file(paths[1]) as f:
+        fig.savefig(f, format="pdf", bbox_inches="tight")
     plt.close(fig)
     return paths
 

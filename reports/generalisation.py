@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.io import atomic_csv
+
 from . import figures, metrics, tables
 from .load import RunError
 
@@ -59,8 +61,8 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...],
     per_variant = per_variant.sort_values(["signals", "variant", "method"],
                                           key=lambda c: c.map(order) if c.name == "method" else c)
     summary = summary.sort_values(["signals", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
-    per_variant.to_csv(out / "generalisation.csv", index=False)
-    summary.to_csv(out / "generalisation_summary.csv", index=False)
+    atomic_csv(per_variant, out / "generalisation.csv")
+    atomic_csv(summary, out / "generalisation_summary.csv")
     fam = manifest.get("family", {})
     variants = manifest.get("variants", {})
     md = ["## Generalisation: held-out corridors (zero-shot)", "",

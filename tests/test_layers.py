@@ -48,3 +48,40 @@ def test_reports_read_only_logs_and_the_paper_from_bench():
     bad = [f"{p.name}: {imp}" for p in sorted((ROOT / "reports").glob("*.py")) for imp in imports(p)
            if imp.startswith("bench") and layer_of(imp) not in ("bench.logs", "bench.paper", "bench.io", "bench.args")]
     assert not bad, "\n".join(bad)
+
+
+def _module_graph(package: str) -> dict[str, set[str]]:
+    """Module -> the modules of ``package`` it imports, at the top or inside a function."""
+    mods = {".".join(p.relative_to(ROOT).with_suffix("").parts): p for p in sorted((ROOT / package).rglob("*.py"))}
+    mods = {m.removesuffix(".__init__"): p for m, p in mods.items()}
+    graph = {}
+    for mod, path in mods.items():
+        targets = set()
+        for imp in imports(path):
+            hit = max((m for m in mods if imp == m or imp.startswith(m + ".")), key=len, default=None)
+            if hit and hit != mod and hit != package:
+                targets.add(hit)
+        graph[mod] = targets
+    return graph
+
+
+def test_the_import_graph_of_bench_has_no_circle():
+    """No two modules of ``bench`` import each other, directly or round a longer loop, not even
+    from inside a function: errors sit at the bottom, dispatch at the top."""
+    graph = _module_graph("bench")
+    state: dict[str, int] = {}
+    circles: list[str] = []
+
+    def visit(m: str, path: list[str]) -> None:
+        state[m] = 1
+        for n in sorted(graph[m]):
+            if state.get(n) == 1:
+                circles.append(" -> ".join(path[path.index(n):] + [n]))
+            elif n not in state:
+                visit(n, path + [n])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+    assert not circles, "\n".join(circles)

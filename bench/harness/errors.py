@@ -6,3 +6,7 @@ from __future__ import annotations
 
 class AgentError(ValueError):
     """A user agent that cannot be loaded or acts outside its space; one line."""
+
+
+class UsageError(Exception):
+    """Bad input to ``ecodrive run`` found after parsing; printed as one line, nothing touched."""

@@ -17,27 +17,27 @@ covers every variant folder present.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
 from bench.harness import runlock
+from bench.harness.errors import UsageError
 from bench.harness.generalisation import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
+from bench.harness.options import RunOptions
 from bench.harness.provenance import git_sha
-from bench.harness.run import UsageError, check_writable, preflight, run
+from bench.harness.run import Preflight, check_writable, preflight, run
 from bench.io import atomic_json, atomic_parquet, sha256
 
 TABLE = "generalisation.parquet"
 
 
-def run_family(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
-    """Run ``opts["family"]`` (the selected variants), then write the family's table and manifest."""
-    root = opts["logs"] / opts["run_id"]
+def run_family(opts: RunOptions, progress: bool = True) -> pd.DataFrame:
+    """Run ``opts.family`` (the selected variants), then write the family's table and manifest."""
+    root = opts.run_dir
     if (root / "results.parquet").is_file():
         raise UsageError(f"{root} holds a single-scenario run (results.parquet); the generalisation profile "
                          f"writes one sub-folder per variant: use another --run-id")
-    variants = [{**opts, "logs": root, "run_id": v.name, "scenario": v.scenario, "transfer": True,
-                 "cases": list(v.cases)} for v in opts["family"]]
+    variants = [opts.variant(v) for v in opts.family]
     checked: set[str] = set()  # each policy is loaded once, for all variants
     checks = [preflight(o, checked) for o in variants]  # every variant is checked before anything is written
     check_writable(root)
@@ -45,11 +45,11 @@ def run_family(opts: dict[str, Any], progress: bool = True) -> pd.DataFrame:
         return _run_variants(opts, root, variants, checks, progress)
 
 
-def _run_variants(opts: dict[str, Any], root: Path, variants: list[dict[str, Any]], checks: list[dict[str, Any]],
+def _run_variants(opts: RunOptions, root: Path, variants: list[RunOptions], checks: list[Preflight],
                   progress: bool) -> pd.DataFrame:
     family = load()
-    chosen = {v.name for v in opts["family"]}
-    for v, o, c in zip(opts["family"], variants, checks):
+    chosen = {v.name for v in opts.family}
+    for v, o, c in zip(opts.family, variants, checks):
         print(f"variant {v.name}: {len(v.cases)} cases per setting", flush=True)
         run(o, progress=progress, checks=c)
     frames = []
@@ -64,7 +64,7 @@ def _run_variants(opts: dict[str, Any], root: Path, variants: list[dict[str, Any
     atomic_parquet(table, root / TABLE)
     present = [v for v in family if v.name in set(table.variant)]
     atomic_json({
-        "command": " ".join(["ecodrive", "run", *opts.get("argv", [])]), "profile": "generalisation",
+        "command": " ".join(["ecodrive", "run", *opts.argv]), "profile": "generalisation",
         "family": {"file": FAMILY_FILE.name, "version": VERSION, "master_seed": MASTER_SEED,
                    "sha256": sha256(FAMILY_FILE), "cases_per_variant": CASES_PER_VARIANT},
         "variants": {v.name: v.scenario for v in present}, "signals": sorted(set(table.signals)),

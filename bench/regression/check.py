@@ -22,9 +22,10 @@ import numpy as np
 import pandas as pd
 
 from bench.args import Parser, fail
-from bench.harness.errors import AgentError
+from bench.harness.errors import AgentError, UsageError
+from bench.harness.options import parse
 from bench.harness.policies import CheckpointError
-from bench.harness.run import UsageError, parse, run
+from bench.harness.run import run
 from bench.io import atomic_csv
 from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
 from bench.paper import TABLE4 as PAPER_TABLE4
@@ -165,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-mixed", action="store_true", help="skip the mixed-traffic cells (reported NOT CHECKED)")
     ap.add_argument("--logs", default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
     args = ap.parse_args(argv)
-    import bench.harness.run as br
+    import bench.harness.options as br
 
     logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
     br.PROFILES["regression"] = CI_CASES  # for this run only: `ecodrive run` offers no such profile

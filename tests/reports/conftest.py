@@ -6,7 +6,8 @@ import json
 import pandas as pd
 import pytest
 
-from bench.harness.run import parse, run
+from bench.harness.options import parse
+from bench.harness.run import run
 from reports.build import build
 
 

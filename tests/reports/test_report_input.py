@@ -7,7 +7,8 @@ import shutil
 import pandas as pd
 import pytest
 
-from bench.harness.run import parse, run
+from bench.harness.options import parse
+from bench.harness.run import run
 from reports.build import build, main
 
 
@@ -219,3 +220,39 @@ def test_numbers_stored_as_text_are_read_as_numbers(smoke, tmp_path, capsys):
     assert "column 'energy' is stored as" in capsys.readouterr().err
     t4 = pd.read_csv(out / "table4.csv").set_index("method")
     assert t4.loc["baseline", "energy"] == pytest.approx(table[table.method == "baseline"].energy.mean())
+
+
+def test_report_files_are_never_written_through_a_planted_link(smoke_report, tmp_path, capsys):
+    """``index.html`` and ``table4.csv`` planted as links to a file outside are replaced, not
+    written through; a report folder that is a link is refused in one line."""
+    from reports.build import main as report_main
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    out = tmp_path / "report"
+    out.mkdir()
+    for name in ("index.html", "table4.csv", "figures"):
+        (out / name).symlink_to(victim)
+    assert report_main([str(smoke_report["run"]), "--out", str(out)]) == 2  # a folder holding links
+    assert "symbolic link" in capsys.readouterr().err
+    for name in ("index.html", "table4.csv", "figures"):
+        (out / name).unlink()
+    (out / "index.html").symlink_to(victim)
+    linked = tmp_path / "linked-report"
+    linked.symlink_to(out, target_is_directory=True)
+    assert report_main([str(smoke_report["run"]), "--out", str(linked)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "is a symbolic link" in err
+    (out / "index.html").unlink()
+    assert report_main([str(smoke_report["run"]), "--out", str(out)]) == 0
+    assert victim.read_text() == "precious\n" and not (out / "index.html").is_symlink()
+
+
+def test_a_planted_link_under_a_reports_file_name_is_replaced(smoke_report, tmp_path):
+    from bench.io import atomic_csv
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    (tmp_path / "table4.csv").symlink_to(victim)
+    atomic_csv(pd.DataFrame({"a": [1]}), tmp_path / "table4.csv")
+    assert victim.read_text() == "precious\n" and pd.read_csv(tmp_path / "table4.csv").a.tolist() == [1]

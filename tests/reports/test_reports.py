@@ -4,7 +4,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.harness.run import parse, run
+from bench.harness.options import parse
+from bench.harness.run import run
 from reports import metrics, stats
 from reports.build import build
 

@@ -25,7 +25,7 @@ from bench.harness.policies import (
     policy_spaces,
     read_manifest,
 )
-from bench.harness.run import main
+from bench.harness.run_command import main
 from bench.io import sha256
 from envs.config import ScenarioConfig
 

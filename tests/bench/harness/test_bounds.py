@@ -5,7 +5,8 @@ import json
 
 import pandas as pd
 
-from bench.harness.run import parse, run
+from bench.harness.options import parse
+from bench.harness.run import run
 
 
 def test_bounds_join_every_row_and_lie_below_the_baseline(tmp_path):

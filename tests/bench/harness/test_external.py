@@ -9,7 +9,9 @@ import pandas as pd
 import pytest
 
 from bench.harness.external import AgentError, build, load_factory
-from bench.harness.run import main, parse, run
+from bench.harness.options import parse
+from bench.harness.run import run
+from bench.harness.run_command import main
 
 AGENT = textwrap.dedent('''
     import numpy as np

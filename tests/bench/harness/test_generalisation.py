@@ -13,9 +13,12 @@ import pytest
 
 from bench.harness import generalisation
 from bench.harness.cases import load as load_cases
+from bench.harness.errors import UsageError
 from bench.harness.generalisation import FamilyError, load, select
 from bench.harness.generalisation_run import run_family
-from bench.harness.run import UsageError, main, parse, resolve_methods
+from bench.harness.options import parse
+from bench.harness.run import resolve_methods
+from bench.harness.run_command import main
 from envs.config import SIGNALS, ScenarioConfig
 
 PAPER = ScenarioConfig()
@@ -109,7 +112,7 @@ def test_a_later_variant_that_is_refused_stops_the_profile_before_the_first_runs
 
 def test_the_profile_plans_every_method_with_the_oracle_and_transfer(tmp_path):
     opts = parse(["--profile", "generalisation", "--logs", str(tmp_path)])
-    assert opts["transfer"] is True and opts["run_id"] == "generalisation" and len(opts["family"]) == 6
+    assert opts.transfer is True and opts.run_id == "generalisation" and len(opts.family) == 6
     runs, _ = resolve_methods(opts)
     methods = {m for m, _, _ in runs}
     assert {"baseline", "baseline0", "oracle", "prl"} <= methods
@@ -127,13 +130,13 @@ def tiny(tmp_path_factory):
     argv = ["--profile", "generalisation", "--variants", "g3", "--methods", "prl", "baseline", "oracle",
             "--signals", "coordinated", "--train-seeds", "0", "--workers", "2", "--logs", str(logs)]
     opts = parse(argv)
-    opts["family"] = [dataclasses.replace(v, cases=v.cases[:1]) for v in opts["family"]]
+    opts.family = [dataclasses.replace(v, cases=v.cases[:1]) for v in opts.family]
     return run_family(opts, progress=False), logs / "generalisation", opts
 
 
 def test_a_shipped_policy_drives_a_held_out_variant_with_transfer(tiny):
     df, root, opts = tiny
-    variant = opts["family"][0]
+    variant = opts.family[0]
     assert len(df) == 3 and set(df.variant) == {variant.name} and df.terminated.all() and (df.collisions == 0).all()
     assert set(df.eval_scenario_hash) == {variant.config("coordinated").digest()}
     assert set(df.train_scenario_hash[df.method == "prl"]) == {ScenarioConfig(signals="coordinated").digest()}
@@ -153,7 +156,7 @@ def test_the_report_of_a_generalisation_run(tiny, tmp_path):
     _, root, opts = tiny
     assert report([str(root), "--out", str(tmp_path / "r")]) == 0
     md = (tmp_path / "r" / "index.md").read_text()
-    assert "## Generalisation: held-out corridors" in md and opts["family"][0].name in md
+    assert "## Generalisation: held-out corridors" in md and opts.family[0].name in md
     assert (tmp_path / "r" / "generalisation.csv").is_file() and (tmp_path / "r" / "figures" / "generalisation-coordinated.png").is_file()
     page = (tmp_path / "r" / "index.html").read_text()
     assert "Generalisation" in page

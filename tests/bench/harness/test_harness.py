@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -11,7 +12,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from bench.harness.run import parse, run
+from bench.harness.options import parse
+from bench.harness.run import run
 
 COMPARE = ["method", "signals", "case", "seed", "energy", "travel_time", "steps", "stops", "clips", "collisions"]
 
@@ -49,7 +51,7 @@ def test_ray_matches_local(local_results, tmp_path):
 
 def test_killed_run_resumes_to_the_same_results(local_results, tmp_path):
     df_local, _ = local_results
-    cmd = [sys.executable, "-m", "bench.harness.run", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
+    cmd = [sys.executable, "-m", "bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
            "--workers", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 120
@@ -76,7 +78,7 @@ def _alive(pid: int) -> bool:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux-only")
 def test_killing_the_parent_stops_its_workers(tmp_path):
     """A sweep killed by its PID alone (not its process group) leaves no worker computing on."""
-    cmd = [sys.executable, "-m", "bench.harness.run", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
+    cmd = [sys.executable, "-m", "bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
            "--workers", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
@@ -114,7 +116,7 @@ def test_bad_input_is_one_line_and_touches_nothing(args, words, tmp_path):
     keep = tmp_path / "smoke" / "coordinated" / "baseline" / "case-000.mcap"
     keep.parent.mkdir(parents=True)
     keep.write_bytes(b"existing")
-    cmd = [sys.executable, "-m", "bench.harness.run", "--logs", str(tmp_path), "--models", str(tmp_path / "no-models"), *args]
+    cmd = [sys.executable, "-m", "bench.harness.run_command", "--logs", str(tmp_path), "--models", str(tmp_path / "no-models"), *args]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     err = [line for line in out.stderr.splitlines() if "pyarrow" not in line and "Try to uninstall" not in line]
     assert out.returncode == 2 and len(err) == 1 and "Traceback" not in out.stderr
@@ -126,7 +128,7 @@ def test_bad_input_is_one_line_and_touches_nothing(args, words, tmp_path):
 def test_unwritable_log_folder(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    cmd = [sys.executable, "-m", "bench.harness.run", "--profile", "smoke", "--methods", "baseline", "--logs", str(blocker)]
+    cmd = [sys.executable, "-m", "bench.harness.run_command", "--profile", "smoke", "--methods", "baseline", "--logs", str(blocker)]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert out.returncode == 2 and "not writable" in out.stderr and "Traceback" not in out.stderr
     assert blocker.read_text() == "not a folder"
@@ -164,7 +166,7 @@ def test_rows_of_a_replaced_policy_are_not_kept_beside_the_new_ones(tmp_path):
     shutil.copytree(policy_dir("prl", "coordinated", seed=1), policy_dir("prl", "coordinated", models))
     man_path = policy_dir("prl", "coordinated", models) / "manifest.json"  # seed 0 trained again: a new policy
     man_path.write_text(json.dumps({**json.loads(man_path.read_text()), "seed": 0}))
-    again = run({**parse(common), "cases": load_cases()[:1]}, progress=False)
+    again = run(dataclasses.replace(parse(common), cases=load_cases()[:1]), progress=False)
     man = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
     assert len(again) == 1 and man["episodes_kept_from_earlier_commands"] == 0
     assert man["checkpoint_sha256"]["prl-coordinated/s0"] == json.loads(

@@ -14,7 +14,7 @@ from bench.harness import cases as cases_mod
 from bench.harness import generalisation
 from bench.harness.cases import CaseError, check_cases, load
 from bench.harness.generalisation import FamilyError
-from bench.harness.run import parse
+from bench.harness.options import parse
 from bench.harness.scenarios import parse_overrides
 
 SIGNALS = ["coordinated", "uncoordinated"]

@@ -9,9 +9,10 @@ import pytest
 from agents.registry import LEARNING, RULE_BASED, make_agent
 from bench.harness.cases import Case
 from bench.harness.episode import make_env, run_episode
+from bench.harness.options import parse
 from bench.harness.oracle import OracleAgent
 from bench.harness.policies import load_policy, policy_dir
-from bench.harness.run import parse, run
+from bench.harness.run import run
 from bench.logs.mcaplog import read_log
 from bench.oracle.dp import bound
 

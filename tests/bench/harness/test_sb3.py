@@ -18,7 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.harness.run import main, parse
+from bench.harness.options import parse
+from bench.harness.run_command import main
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -226,8 +227,8 @@ def test_bad_input_is_one_line_and_writes_nothing(args, words, sb3, env_spaces, 
 def test_without_sb3_the_package_imports_and_sb3_is_one_line(tmp_path):
     """Runs whether or not SB3 is installed: the import is blocked in a fresh interpreter."""
     code = ("import sys; sys.modules['stable_baselines3'] = None; sys.argv[0] = 'ecodrive run'; "
-            "import bench.cli, bench.harness.run, bench.harness.sb3; "
-            f"bench.harness.run.main(['--sb3', 'model.zip', '--sb3-algo', 'PPO', "
+            "import bench.cli, bench.harness.run_command, bench.harness.sb3; "
+            f"bench.harness.run_command.main(['--sb3', 'model.zip', '--sb3-algo', 'PPO', "
             f"'--logs', {str(tmp_path / 'logs')!r}])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
                          env={**os.environ, "PYTHONPATH": str(ROOT)})

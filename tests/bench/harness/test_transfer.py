@@ -11,8 +11,11 @@ import pandas as pd
 import pytest
 
 from bench.harness.bounds import BoundTask
+from bench.harness.errors import UsageError
+from bench.harness.options import parse
 from bench.harness.policies import CheckpointError, check_scenario, policy_dir, policy_spaces, read_manifest
-from bench.harness.run import UsageError, main, parse, run
+from bench.harness.run import run
+from bench.harness.run_command import main
 from bench.logs.mcaplog import episode_summary, read_log
 from envs.config import ScenarioConfig
 from envs.env import EcoDriveEnv

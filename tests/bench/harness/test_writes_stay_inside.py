@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from bench.harness.run import main
+from bench.harness.run_command import main
 from bench.io import atomic_bytes, atomic_json, atomic_parquet, exclusive_open
 
 SMOKE = ["--profile", "smoke", "--methods", "baseline", "--signals", "coordinated", "--workers", "1"]

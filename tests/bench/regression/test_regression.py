@@ -14,7 +14,8 @@ def test_recorded_failures_are_known_and_strict():
 def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_path):
     import pandas as pd
 
-    from bench.harness.run import parse, resolve_methods
+    from bench.harness.options import parse
+    from bench.harness.run import resolve_methods
     from bench.regression.check import claims
 
     models = tmp_path / "models"
@@ -24,7 +25,7 @@ def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_pat
     (models / "prl-coordinated" / "s3").mkdir()
     (models / "prl-coordinated" / "s3" / "manifest.json").write_text("{}")
     opts = parse(["--logs", str(tmp_path / "logs")])
-    opts["models"] = models
+    opts.models = models
     runs, skipped = resolve_methods(opts)
     assert ("ddpg", "coordinated", 0) in runs and not any(r[:2] == ("ddpg", "uncoordinated") for r in runs)
     assert ("prl", "coordinated", 0) in runs and ("prl", "coordinated", 3) in runs  # every shipped seed
@@ -79,7 +80,7 @@ def test_a_shipped_policy_that_cannot_drive_is_one_error_line(tmp_path, monkeypa
 
     import torch
 
-    import bench.harness.run as br
+    import bench.harness.options as br
     from bench.harness.policies import policy_dir
     from bench.io import sha256
     from bench.regression.check import main

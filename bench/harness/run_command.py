@@ -1,0 +1,36 @@
+"""``ecodrive run``: the profile dispatch above the two runners (one scenario:
+``bench.harness.run``; the held-out corridors: ``bench.harness.generalisation_run``), and the
+command's exit codes. Its options: ``bench.harness.options``."""
+from __future__ import annotations
+
+import sys
+
+from bench.args import InputError, fail
+from bench.harness import failures, runlock
+from bench.harness.errors import AgentError, UsageError
+from bench.harness.generalisation_run import run_family
+from bench.harness.options import parse, parser
+from bench.harness.policies import CheckpointError
+from bench.harness.run import run
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    opts = parse(argv)
+    try:
+        df = run_family(opts) if opts.profile == "generalisation" else run(opts)
+    except (UsageError, CheckpointError, AgentError, InputError, runlock.InUse) as e:
+        return fail(parser().prog, str(e))
+    except KeyboardInterrupt:
+        print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)
+        return 130
+    by = ["variant", "signals", "method"] if "variant" in df.columns else ["signals", "method"]
+    if len(df):
+        print(df.groupby(by)[["energy", "travel_time", "collisions"]].mean().round(2).to_string())
+    table = "generalisation.parquet" if "variant" in df.columns else "results.parquet"
+    print(f"results: {opts.run_dir / table}")
+    return failures.exit_code(opts.failures)  # 0, or 2 / 3 after failed episodes
+
+
+if __name__ == "__main__":
+    sys.exit(main())
