@@ -22,7 +22,7 @@ def tests(session: nox.Session) -> None:
 @nox.session
 def benchmark(session: nox.Session) -> None:
     """The main job: every available method over the fixed cases, MCAP logs, results, report."""
-    from bench.harness.options import parse
+    from ecodrive_bench.bench.harness.options import parse
 
     session.run("ecodrive", "run", "--bounds", *session.posargs)
     opts = parse(list(session.posargs))

@@ -8,7 +8,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from envs.validation import ConfigError, validate
+from ecodrive_bench.envs.validation import ConfigError, validate
 
 
 @runtime_checkable

@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from gymnasium import spaces
 
-from envs.validation import param
+from ecodrive_bench.envs.validation import param
 
 from .base import check_config
 from .device import OnDevice, host

@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from torch.func import functional_call
 
-from envs.validation import param
+from ecodrive_bench.envs.validation import param
 
 from .base import check_config
 from .device import OnDevice, host

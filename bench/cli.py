@@ -7,24 +7,24 @@ import errno
 import importlib
 import sys
 
-from bench.args import InputError, Parser, fail
+from ecodrive_bench.bench.args import InputError, Parser, fail
 
 # subcommand -> (module, one-line description)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "run": ("bench.harness.run_command", "evaluate methods over the fixed test cases: MCAP logs, results.parquet, manifest"),
-    "report": ("reports.build", "rebuild the paper's tables and figures from a run folder"),
-    "view": ("bench.logs.view", "open step logs in the Rerun viewer, or save an .rrd recording"),
-    "regress": ("bench.regression.check", "check the paper's claims and the own reference on the CI cases"),
-    "train": ("bench.training.train", "train one learning method on one signal setting (resumable)"),
-    "train-all": ("bench.training.train_all", "train every learning method for both settings (resumable)"),
-    "qcheck": ("bench.training.qcheck", "compare a trained critic's Q values with the returns it earns"),
-    "lateral": ("bench.experiments.lateral", "the lateral scenarios A and B (section 5.4)"),
-    "mixed": ("bench.experiments.mixed", "mixed traffic over MPR x demand (section 5.5)"),
-    "sweep": ("bench.experiments.sweep", "the reward study or the penalty heatmap (section 5.2)"),
-    "stalls": ("bench.experiments.stalls", "trace the CVs that stall in one mixed-traffic cell"),
-    "calibrate": ("bench.experiments.calibrate", "SUMO's driver over the fixed cases against Table 4's baseline row"),
-    "cases": ("bench.harness.case_files", "write or check the fixed test cases (bench/harness/cases.json)"),
-    "perf": ("bench.perf", "ratios from a pytest-benchmark JSON (env step vs raw SUMO, update vs FLOP floor)"),
+    "run": ("ecodrive_bench.bench.harness.run_command", "evaluate methods over the fixed test cases: MCAP logs, results.parquet, manifest"),
+    "report": ("ecodrive_bench.reports.build", "rebuild the paper's tables and figures from a run folder"),
+    "view": ("ecodrive_bench.bench.logs.view", "open step logs in the Rerun viewer, or save an .rrd recording"),
+    "regress": ("ecodrive_bench.bench.regression.check", "check the paper's claims and the own reference on the CI cases"),
+    "train": ("ecodrive_bench.bench.training.train", "train one learning method on one signal setting (resumable)"),
+    "train-all": ("ecodrive_bench.bench.training.train_all", "train every learning method for both settings (resumable)"),
+    "qcheck": ("ecodrive_bench.bench.training.qcheck", "compare a trained critic's Q values with the returns it earns"),
+    "lateral": ("ecodrive_bench.bench.experiments.lateral", "the lateral scenarios A and B (section 5.4)"),
+    "mixed": ("ecodrive_bench.bench.experiments.mixed", "mixed traffic over MPR x demand (section 5.5)"),
+    "sweep": ("ecodrive_bench.bench.experiments.sweep", "the reward study or the penalty heatmap (section 5.2)"),
+    "stalls": ("ecodrive_bench.bench.experiments.stalls", "trace the CVs that stall in one mixed-traffic cell"),
+    "calibrate": ("ecodrive_bench.bench.experiments.calibrate", "SUMO's driver over the fixed cases against Table 4's baseline row"),
+    "cases": ("ecodrive_bench.bench.harness.case_files", "write or check the fixed test cases (bench/harness/cases.json)"),
+    "perf": ("ecodrive_bench.bench.perf", "ratios from a pytest-benchmark JSON (env step vs raw SUMO, update vs FLOP floor)"),
 }
 
 # storage that refuses a write: no space, over quota, over the file-size limit (ulimit -f), read-only

@@ -10,7 +10,7 @@ import json
 import sys
 from pathlib import Path
 
-from bench.args import Parser, fail
+from ecodrive_bench.bench.args import Parser, fail
 
 STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes run longer than greedy ones)
 LEARNERS = ("prl", "mpdqn", "dqn", "ddpg")  # test_learner_update[...] benchmarks

@@ -5,6 +5,6 @@ from gymnasium.envs.registration import register
 
 from .config import ConfigError, EVParams, RewardConfig, ScenarioConfig
 
-register(id="EcoDrive-v0", entry_point="envs.env:EcoDriveEnv")
+register(id="EcoDrive-v0", entry_point="ecodrive_bench.envs.env:EcoDriveEnv")
 
 __all__ = ["ConfigError", "EVParams", "RewardConfig", "ScenarioConfig"]

@@ -37,7 +37,7 @@ class EcoDriveEnv(gym.Env):
 
     ## Example
     >>> import gymnasium as gym, numpy as np
-    >>> import envs  # registers EcoDrive-v0
+    >>> import ecodrive_bench.envs  # registers EcoDrive-v0
     >>> env = gym.make("EcoDrive-v0", signals="uncoordinated", reward="r")
     >>> obs, info = env.reset(options={"sumo_seed": 7, "insert_time": 210.0})  # one fixed case
     >>> obs["grid"].shape, obs["logic"].shape

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.args import Parser, fail
-from bench.io import atomic_csv, atomic_text, refuse_links
-from bench.logs.mcaplog import LogError, resolve_log
-from bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
+from ecodrive_bench.bench.args import Parser, fail
+from ecodrive_bench.bench.io import atomic_csv, atomic_text, refuse_links
+from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
+from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
 from . import claims, experiments, figures, generalisation, headline, metrics, stats, tables
 from .html import render

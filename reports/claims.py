@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import pandas as pd
 
-from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
-from bench.paper import TABLE4 as PAPER
+from ecodrive_bench.bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
+from ecodrive_bench.bench.paper import TABLE4 as PAPER
 
 PASS, FAIL, NOT_CHECKED = "PASS", "FAIL", "NOT CHECKED"
 STATUSES = (PASS, FAIL, NOT_CHECKED)

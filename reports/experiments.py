@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
-from bench.paper import HDV_TOL, HEATMAP_CHOICE, SPEED_LOSS_TOL
-from bench.paper import TRAINING_EPISODES as PAPER_TRAINING_EPISODES
+from ecodrive_bench.bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
+from ecodrive_bench.bench.paper import HDV_TOL, HEATMAP_CHOICE, SPEED_LOSS_TOL
+from ecodrive_bench.bench.paper import TRAINING_EPISODES as PAPER_TRAINING_EPISODES
 
 from . import claims, figures, metrics, tables
 from .load import RunError, load_run

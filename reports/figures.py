@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from bench.io import atomic_file  # noqa: E402
+from ecodrive_bench.bench.io import atomic_file  # noqa: E402
 
 LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
 

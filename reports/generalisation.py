@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.io import atomic_csv
+from ecodrive_bench.bench.io import atomic_csv
 
 from . import figures, metrics, tables
 from .load import RunError

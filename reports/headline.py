@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.io import atomic_text
-from bench.paper import TABLE4, improvement
+from ecodrive_bench.bench.io import atomic_text
+from ecodrive_bench.bench.paper import TABLE4, improvement
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
 SETTINGS = (("coordinated", "coord."), ("uncoordinated", "non-coord."))

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.logs.mcaplog import LogError, read_log
+from ecodrive_bench.bench.logs.mcaplog import LogError, read_log
 
 
 class RunError(RuntimeError):
@@ -66,7 +66,7 @@ def check_results(results: pd.DataFrame, where: Path | str) -> tuple[pd.DataFram
     if results.empty:
         raise RunError(f"{where}: the results table has no rows; expected one row per episode (`ecodrive run` "
                        "writes them)")
-    from envs.config import SIGNALS
+    from ecodrive_bench.envs.config import SIGNALS
 
     df, notes = results.reset_index(drop=True), []
     for col, what in TEXT.items():
@@ -188,7 +188,7 @@ def load_plan(path: Path) -> pd.DataFrame | None:
 def component_sums(path: Path) -> tuple[dict[str, float], str]:
     """The episode's sum of each reward component (``envs.rewards.COMPONENTS``) and of the reward,
     from the /step channel, and a warning ('' if the log is complete)."""
-    from envs.rewards import COMPONENTS
+    from ecodrive_bench.envs.rewards import COMPONENTS
 
     data = read_log(path)
     if not data.steps:

@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 from scipy import signal, stats
 
-from bench.paper import TABLE4 as PAPER_TABLE4
-from bench.paper import improvement
-from reports.stats import (
+from ecodrive_bench.bench.paper import TABLE4 as PAPER_TABLE4
+from ecodrive_bench.bench.paper import improvement
+from ecodrive_bench.reports.stats import (
     bootstrap_ci,
     by_case,
     iqm,

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-import envs  # noqa: F401  (registers EcoDrive-v0)
+import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
 
 # keep Rerun's config/data out of the user's home during tests
 _XDG = Path(tempfile.mkdtemp(prefix="ecodrive-xdg-"))
@@ -16,6 +16,6 @@ os.environ.setdefault("XDG_DATA_HOME", str(_XDG / "data"))
 
 @pytest.fixture(scope="session")
 def cases():
-    from bench.harness.cases import load
+    from ecodrive_bench.bench.harness.cases import load
 
     return load()

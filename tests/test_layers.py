@@ -1,5 +1,7 @@
 """The packages read bottom-up: no import runs back up a layer, and reports read from ``bench``
-only the logs, the paper's numbers and the shared helpers (io, args)."""
+only the logs, the paper's numbers and the shared helpers (io, args). Modules are named by their
+folders (``bench.harness.run``); their import names carry the distribution's prefix
+(``ecodrive_bench.bench.harness.run``)."""
 from __future__ import annotations
 
 import ast
@@ -27,7 +29,8 @@ def imports(path: Path) -> list[str]:
             if node.level:
                 base = ".".join(pkg.split(".")[: len(pkg.split(".")) - node.level + 1] + ([base] if base else []))
             out += [base] + [f"{base}.{a.name}" for a in node.names]
-    return out
+    # the packages are installed under one name (ecodrive_bench.envs, ...); their folders are the layers
+    return [m.removeprefix("ecodrive_bench.") for m in out]
 
 
 def test_no_import_runs_back_up():

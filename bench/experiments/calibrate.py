@@ -11,12 +11,12 @@ import time
 
 import numpy as np
 
-from agents import BaselineAgent
-from bench.args import Parser, int_in
-from bench.harness.cases import load
-from bench.harness.episode import make_env, run_episode
-from bench.harness.scenarios import parse_overrides
-from bench.paper import TABLE4
+from ecodrive_bench.agents import BaselineAgent
+from ecodrive_bench.bench.args import Parser, int_in
+from ecodrive_bench.bench.harness.cases import load
+from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.scenarios import parse_overrides
+from ecodrive_bench.bench.paper import TABLE4
 
 PAPER_BASELINE = {s: TABLE4[("baseline", s)] for s in ("coordinated", "uncoordinated")}  # [Wh], [s]
 

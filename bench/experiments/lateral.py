@@ -21,11 +21,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from agents.base import Agent
-from bench.args import Parser, fail, int_in, name
-from bench.harness.cases import Case
-from bench.harness.episode import make_env, run_episode
-from bench.io import Unwritable, atomic_parquet, writable_dir
+from ecodrive_bench.agents.base import Agent
+from ecodrive_bench.bench.args import Parser, fail, int_in, name
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0, "max_episode_time": 300.0}
 HDV1_BRAKE = -2.0  # [m/s^2] (paper)
@@ -180,8 +180,8 @@ def run_task(task: LateralTask) -> dict[str, Any]:
 def task_agent(task: LateralTask, env: Any) -> tuple[Agent, str]:
     """(agent, policy sha256) of a task: a rule-based agent, or a learning one holding its
     verified policy (a file that cannot be loaded is a ``CheckpointError`` naming it)."""
-    from agents.registry import LEARNING, make_agent
-    from bench.harness.policies import load_policy, policy_agent
+    from ecodrive_bench.agents.registry import LEARNING, make_agent
+    from ecodrive_bench.bench.harness.policies import load_policy, policy_agent
 
     spaces = (env.observation_space, env.action_space)
     if task.method not in LEARNING:
@@ -202,11 +202,11 @@ def main(argv: list[str] | None = None) -> int:
     line and exit code 2, before any episode runs or any folder is written."""
     import sys
 
-    from agents.registry import METHODS
-    from bench.harness.executors import EXECUTORS, run_local, run_ray
-    from bench.harness.policies import MODELS, CheckpointError
-    from bench.io import sha256
-    from bench.logs.mcaplog import episode_summary
+    from ecodrive_bench.agents.registry import METHODS
+    from ecodrive_bench.bench.harness.executors import EXECUTORS, run_local, run_ray
+    from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError
+    from ecodrive_bench.bench.io import sha256
+    from ecodrive_bench.bench.logs.mcaplog import episode_summary
 
     ap = Parser(description="Run the lateral scenarios A and B (section 5.4) for each method, every shipped "
                             "training seed of a learning method.")
@@ -262,8 +262,8 @@ def lateral_seeds(methods: list[str], models: Path,
     """(the shipped uncoordinated training seeds of each method, [None] for a rule-based one; the
     learning methods skipped for want of one). A learning method without one is a
     ``CheckpointError`` when ``explicit`` (named in --methods), else skipped."""
-    from agents.registry import LEARNING
-    from bench.harness.policies import CheckpointError, family_dir, shipped_seeds
+    from ecodrive_bench.agents.registry import LEARNING
+    from ecodrive_bench.bench.harness.policies import CheckpointError, family_dir, shipped_seeds
 
     seeds: dict[str, list[int | None]] = {
         m: list(shipped_seeds(m, "uncoordinated", models)) if m in LEARNING else [None] for m in methods}
@@ -278,7 +278,7 @@ def lateral_seeds(methods: list[str], models: Path,
 def lateral_tasks(seeds: dict[str, list[int | None]], models: Path, root: Path) -> list[LateralTask]:
     """Every (scenario, method, seed) task, each policy loaded into its agent once here first
     (``check_policy``): a file that cannot drive is a ``CheckpointError`` before anything runs."""
-    from bench.harness.policies import check_policy, policy_dir
+    from ecodrive_bench.bench.harness.policies import check_policy, policy_dir
 
     dirs = {(m, sd): "" if sd is None else str(policy_dir(m, "uncoordinated", models, sd))
             for m, sds in seeds.items() for sd in sds}

@@ -27,14 +27,14 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from bench.args import Parser, fail, float_in, int_in, name, prog_name
-from bench.harness.executors import EXECUTORS, run_local, run_ray
-from bench.harness.policies import MODELS, CheckpointError, policy_dir
-from bench.harness.provenance import git_sha
-from bench.io import Unwritable, atomic_parquet, writable_dir
-from bench.logs.mcaplog import read_log, write_records
-from envs.config import SIGNALS
-from envs.sumo import SPEED_MODE_SAFE  # the safety layer every CV drives under, recorded per cell
+from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
+from ecodrive_bench.bench.harness.executors import EXECUTORS, run_local, run_ray
+from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, policy_dir
+from ecodrive_bench.bench.harness.provenance import git_sha
+from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
+from ecodrive_bench.bench.logs.mcaplog import read_log, write_records
+from ecodrive_bench.envs.config import SIGNALS
+from ecodrive_bench.envs.sumo import SPEED_MODE_SAFE  # the safety layer every CV drives under, recorded per cell
 
 MPRS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)  # section 5.5
 DEMANDS = (200, 300, 400, 500, 600, 700)  # [veh/h/lane], section 5.5
@@ -66,7 +66,7 @@ class Cell:
 
 def cell_scenario(signals: str, mpr: float, demand: float):
     """The scenario of a mixed-traffic cell: ``demand`` [veh/h/lane] on every arterial lane."""
-    from envs.config import ScenarioConfig
+    from ecodrive_bench.envs.config import ScenarioConfig
 
     lanes = ScenarioConfig().lanes
     return ScenarioConfig(signals=signals, arterial_flow=demand * lanes, mpr=mpr)
@@ -75,10 +75,10 @@ def cell_scenario(signals: str, mpr: float, demand: float):
 def run_cell(cell: Cell) -> dict[str, Any]:
     import torch
 
-    from agents.registry import make_agent
-    from bench.harness.policies import load_policy
-    from bench.logs import schema
-    from envs.fleet import Fleet
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.harness.policies import load_policy
+    from ecodrive_bench.bench.logs import schema
+    from ecodrive_bench.envs.fleet import Fleet
 
     torch.set_num_threads(1)
     t0 = time.perf_counter()

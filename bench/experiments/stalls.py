@@ -19,12 +19,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.args import Parser, fail, float_in, int_in
-from bench.experiments.mixed import CI_DEMAND, CI_DURATION, MASTER_SEED, cell_scenario
-from bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
-from bench.io import Unwritable, atomic_parquet, writable_dir
-from envs.action import LATERAL
-from envs.config import SIGNALS
+from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
+from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, MASTER_SEED, cell_scenario
+from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
+from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
+from ecodrive_bench.envs.action import LATERAL
+from ecodrive_bench.envs.config import SIGNALS
 
 HEADS = ("left", "stay", "right")  # LATERAL order: k = -1, 0, +1
 
@@ -49,8 +49,8 @@ def trace(signals: str, mpr: float, demand: float, duration: float, at: tuple[in
     """(one row per CV reaching a stall length in ``at`` [steps], the cell's fleet summary)."""
     import torch
 
-    from agents.registry import make_agent
-    from envs.fleet import Fleet
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.envs.fleet import Fleet
 
     torch.set_num_threads(1)
     cfg = cell_scenario(signals, mpr, demand)

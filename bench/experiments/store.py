@@ -27,8 +27,8 @@ from typing import Any
 import pandas as pd
 from pyarrow import ArrowException
 
-from bench.io import atomic_json, atomic_parquet
-from envs.config import ConfigError
+from ecodrive_bench.bench.io import atomic_json, atomic_parquet
+from ecodrive_bench.envs.config import ConfigError
 
 STORE = Path(__file__).resolve().parents[2] / "results" / "sweeps"
 FILES = ("episodes.parquet", "metrics.parquet", "manifest.json")  # beside job.json

@@ -38,14 +38,14 @@ from typing import Any
 import pandas as pd
 from tqdm import tqdm
 
-from bench.args import Parser, fail, float_in, int_in, name, prog_name
-from bench.experiments import store
-from bench.harness.executors import EXECUTORS, run_local, run_ray
-from bench.harness.policies import CheckpointError
-from bench.io import atomic_json, atomic_parquet
-from bench.logs.mcaplog import episode_summary
-from bench.training.recipes import VALIDATION_CASES, recipe
-from envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig, accepted_range
+from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
+from ecodrive_bench.bench.experiments import store
+from ecodrive_bench.bench.harness.executors import EXECUTORS, run_local, run_ray
+from ecodrive_bench.bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.io import atomic_json, atomic_parquet
+from ecodrive_bench.bench.logs.mcaplog import episode_summary
+from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, recipe
+from ecodrive_bench.envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig, accepted_range
 
 STUDIES = ("reward", "heatmap")
 PHIS = (0.5, 1.0, 2.0)  # section 5.2 varies phi; our set
@@ -77,11 +77,11 @@ def run_job(job: Job) -> dict[str, Any]:
     """Train (or resume), copy the training log, evaluate greedily on the test cases."""
     import torch
 
-    from agents.registry import make_agent
-    from bench.harness.cases import load
-    from bench.harness.episode import make_env, run_episode
-    from bench.harness.policies import load_policy, policy_dir
-    from bench.training.train import train
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.harness.episode import make_env, run_episode
+    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir
+    from ecodrive_bench.bench.training.train import train
 
     torch.set_num_threads(1)
     run_dir, log_dir = Path(job.run_dir), Path(job.log_dir)
@@ -149,9 +149,9 @@ def shipped_training(job: Job, scenario: dict[str, Any], models: Path | None = N
     episodes, when the job trains by the recipe on that scenario (``scenario``: the job's) with the
     same validation cases (the reward study's r, phi = 1 cell; the heatmap's (40, 30)). Such a
     job takes the shipped policy and its training metrics instead of training it again."""
-    from bench.harness.policies import MODELS, policy_dir
-    from bench.training.train_all import is_reference_seed
-    from envs.config import diff
+    from ecodrive_bench.bench.harness.policies import MODELS, policy_dir
+    from ecodrive_bench.bench.training.train_all import is_reference_seed
+    from ecodrive_bench.envs.config import diff
 
     models = MODELS if models is None else models
     if (job.agent_config != recipe("prl", job.signals).overrides
@@ -261,7 +261,7 @@ def order(todo: list[Job]) -> list[Job]:
 
 def jobs(study: str, args: argparse.Namespace) -> list[Job]:
     """The job list of a study; every reward configuration is validated before anything runs."""
-    from bench.training.train import RUNS
+    from ecodrive_bench.bench.training.train import RUNS
 
     rec = recipe("prl", args.signals, paper=args.paper)
     episodes = rec.episodes if args.episodes is None else args.episodes

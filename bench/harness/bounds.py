@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.io import atomic_parquet
+from ecodrive_bench.bench.io import atomic_parquet
 
 NO_LIMIT = -1.0  # no baseline row, or it did not finish: no equal-time bound
 KEY = ["signals", "case", "depart_time", "time_limit"]
@@ -36,8 +36,8 @@ class BoundTask:
 
 def solve(task: BoundTask) -> dict[str, Any]:
     """Both bounds of one case (runs in a worker)."""
-    from bench.harness.scenarios import setting
-    from bench.oracle.dp import bound
+    from ecodrive_bench.bench.harness.scenarios import setting
+    from ecodrive_bench.bench.oracle.dp import bound
 
     cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
     t0 = time.perf_counter()

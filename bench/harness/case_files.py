@@ -12,8 +12,8 @@ from __future__ import annotations
 import json
 import sys
 
-from bench.args import Parser
-from bench.harness import cases, generalisation
+from ecodrive_bench.bench.args import Parser
+from ecodrive_bench.bench.harness import cases, generalisation
 
 
 def main(argv: list[str] | None = None) -> int:

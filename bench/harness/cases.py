@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.args import InputError, read_json
+from ecodrive_bench.bench.args import InputError, read_json
 
 MASTER_SEED = 20240501  # documented master seed of the protocol
 CASES_PER_SETTING = 100  # section 5.3

@@ -7,13 +7,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.base import Agent
-from bench.harness.cases import Case
-from bench.harness.provenance import git_sha, package_versions
-from bench.logs.mcaplog import EpisodeLog, meta_json
-from envs.env import EcoDriveEnv
-from envs.scenario import LANE_WIDTH
-from envs.sumo import sumo_version
+from ecodrive_bench.agents.base import Agent
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
+from ecodrive_bench.bench.logs.mcaplog import EpisodeLog, meta_json
+from ecodrive_bench.envs.env import EcoDriveEnv
+from ecodrive_bench.envs.scenario import LANE_WIDTH
+from ecodrive_bench.envs.sumo import sumo_version
 
 STOP_SPEED = 0.1  # [m/s] below this the ego counts as stopped
 
@@ -27,7 +27,7 @@ def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = None) -> EcoDriveEnv:
     """The raw env for an agent (or a method name), with the agent's scenario overrides."""
-    from agents.registry import ACTION_INTERFACE, ENV_OVERRIDES
+    from ecodrive_bench.agents.registry import ACTION_INTERFACE, ENV_OVERRIDES
 
     if isinstance(agent, str):
         interface, overrides = ACTION_INTERFACE[agent], ENV_OVERRIDES.get(agent, {})

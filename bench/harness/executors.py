@@ -15,9 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bench.harness.cases import Case
-from bench.harness.oracle import NAME as ORACLE
-from bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.oracle import NAME as ORACLE
+from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 
 EXECUTORS = ("local", "ray")
 
@@ -46,19 +46,19 @@ def run_task(task: Task) -> dict[str, Any]:
     """One greedy episode in this worker; envs and policies are loaded once per worker."""
     import torch
 
-    from bench.harness.episode import make_env, run_episode
+    from ecodrive_bench.bench.harness.episode import make_env, run_episode
 
     torch.set_num_threads(1)
     scenario = json.loads(task.scenario) if task.scenario else None
     env_key = (task.method, task.signals, task.scenario)
     key = (task.method, task.signals, task.policy_dir, task.scenario)
     if task.factory and key not in _AGENTS:
-        from bench.harness.external import make
+        from ecodrive_bench.bench.harness.external import make
 
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
         _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
     if task.method == ORACLE and key not in _AGENTS:
-        from bench.harness.oracle import OracleAgent
+        from ecodrive_bench.bench.harness.oracle import OracleAgent
 
         _ENVS[env_key] = env = make_env(OracleAgent, task.signals, scenario)  # type: ignore[arg-type]
         _AGENTS[key] = (OracleAgent(env.cfg), "")
@@ -81,8 +81,8 @@ def task_agent(task: Task, env: Any) -> tuple[Any, str]:
     """(agent, policy sha256) of a built-in method on ``env``: a rule-based one, or a learning
     one holding its verified policy (``bench.harness.policies``; a policy that cannot be loaded
     is a ``CheckpointError`` naming the file)."""
-    from agents.registry import LEARNING, make_agent
-    from bench.harness.policies import load_policy, policy_agent, policy_spaces
+    from ecodrive_bench.agents.registry import LEARNING, make_agent
+    from ecodrive_bench.bench.harness.policies import load_policy, policy_agent, policy_spaces
 
     if task.method not in LEARNING:
         return make_agent(task.method, env.observation_space, env.action_space), ""

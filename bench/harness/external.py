@@ -22,9 +22,9 @@ from collections.abc import Callable
 from importlib import metadata
 from typing import Any
 
-from agents.base import Agent
-from bench.args import NAME
-from bench.harness.errors import AgentError
+from ecodrive_bench.agents.base import Agent
+from ecodrive_bench.bench.args import NAME
+from ecodrive_bench.bench.harness.errors import AgentError
 
 GROUP = "ecodrive_bench.agents"
 INTERFACES = ("parameterized", "discrete27", "longitudinal")
@@ -53,7 +53,7 @@ def load_factory(spec: str) -> Callable[..., Any]:
     """The factory named by ``package.module:factory`` (or, for ``sb3:ALGO:PATH``, the one that
     loads a Stable-Baselines3 model: ``bench.harness.sb3``)."""
     if spec.startswith("sb3:"):
-        from bench.harness import sb3
+        from ecodrive_bench.bench.harness import sb3
 
         return sb3.factory(spec)
     if not SPEC.match(spec):
@@ -80,7 +80,7 @@ def interface_of(factory: Callable[..., Any]) -> str:
 def make(spec: str, signals: str, config: dict[str, Any] | None = None) -> tuple[Any, Agent]:
     """(env, agent) for the user's factory ``spec`` on ``signals``: the env has the factory's
     action type, and the agent's own ``env_overrides`` when it has any."""
-    from bench.harness.episode import make_env
+    from ecodrive_bench.bench.harness.episode import make_env
 
     factory = load_factory(spec)
     probe = make_env(_Interface(interface_of(factory)), signals, config)

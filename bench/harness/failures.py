@@ -20,9 +20,9 @@ from typing import Any
 
 from tqdm import tqdm
 
-from bench.harness.errors import AgentError
-from bench.harness.policies import CheckpointError
-from bench.harness.pool import Failure
+from ecodrive_bench.bench.harness.errors import AgentError
+from ecodrive_bench.bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.harness.pool import Failure
 
 BAD_INPUT, FAILED = 2, 3
 ERRORS = "errors"

@@ -33,9 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from bench.args import InputError, read_json
-from bench.harness.cases import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
-from envs.config import SIGNALS, ConfigError, ScenarioConfig
+from ecodrive_bench.bench.args import InputError, read_json
+from ecodrive_bench.bench.harness.cases import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
+from ecodrive_bench.envs.config import SIGNALS, ConfigError, ScenarioConfig
 
 MASTER_SEED = 20240621  # documented master seed of the family
 VERSION = 1

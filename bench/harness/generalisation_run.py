@@ -20,13 +20,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.harness import runlock
-from bench.harness.errors import UsageError
-from bench.harness.generalisation import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
-from bench.harness.options import RunOptions
-from bench.harness.provenance import git_sha
-from bench.harness.run import Preflight, check_writable, preflight, run
-from bench.io import atomic_json, atomic_parquet, sha256
+from ecodrive_bench.bench.harness import runlock
+from ecodrive_bench.bench.harness.errors import UsageError
+from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
+from ecodrive_bench.bench.harness.options import RunOptions
+from ecodrive_bench.bench.harness.provenance import git_sha
+from ecodrive_bench.bench.harness.run import Preflight, check_writable, preflight, run
+from ecodrive_bench.bench.io import atomic_json, atomic_parquet, sha256
 
 TABLE = "generalisation.parquet"
 

@@ -7,18 +7,18 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from agents.registry import METHODS
-from bench.args import Parser, int_in, name
-from bench.harness import scenarios
-from bench.harness.cases import Case
-from bench.harness.errors import AgentError
-from bench.harness.executors import EXECUTORS
-from bench.harness.external import GROUP, registered
-from bench.harness.generalisation import CASES_PER_VARIANT, FamilyError, Variant
-from bench.harness.oracle import NAME as ORACLE
-from bench.harness.policies import MODELS
-from bench.harness.sb3 import ALGOS as SB3_ALGOS
-from envs.config import SIGNALS
+from ecodrive_bench.agents.registry import METHODS
+from ecodrive_bench.bench.args import Parser, int_in, name
+from ecodrive_bench.bench.harness import scenarios
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.errors import AgentError
+from ecodrive_bench.bench.harness.executors import EXECUTORS
+from ecodrive_bench.bench.harness.external import GROUP, registered
+from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FamilyError, Variant
+from ecodrive_bench.bench.harness.oracle import NAME as ORACLE
+from ecodrive_bench.bench.harness.policies import MODELS
+from ecodrive_bench.bench.harness.sb3 import ALGOS as SB3_ALGOS
+from ecodrive_bench.envs.config import SIGNALS
 
 RUN_DOC = """The benchmark harness: every method over the fixed test cases, one MCAP per episode.
 
@@ -97,7 +97,7 @@ def parser() -> Parser:
                          f"policy; {ORACLE} (the energy-optimal plan replayed, a DP solve per case) and installed "
                          f"agents of the entry-point group {GROUP} run when named)")
     ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
-                    help="also evaluate your own agent: factory(observation_space, action_space) -> agents.base.Agent")
+                    help="also evaluate your own agent: factory(observation_space, action_space) -> ecodrive_bench.agents.base.Agent")
     ap.add_argument("--sb3", type=Path, default=None, metavar="MODEL.zip",
                     help="also evaluate a Stable-Baselines3 model trained on EcoDrive-v0 (needs the sb3 extra; "
                          "nothing in the zip is unpickled but its spaces and policy class and kwargs, through an "
@@ -145,7 +145,7 @@ def parse(argv: list[str]) -> RunOptions:
         if opts["scenario"] or opts["set_scenario"]:
             ap.error("--profile generalisation evaluates on its family's corridors; --scenario and --set "
                      "are for the other profiles")
-        from bench.harness import generalisation
+        from ecodrive_bench.bench.harness import generalisation
 
         try:
             opts["family"] = generalisation.select(generalisation.load(), opts["variants"])
@@ -170,7 +170,7 @@ def sb3_spec(ap: Parser, opts: dict[str, Any]) -> str:
         ap.error("--sb3 and --agent each add one agent; give one of them")
     if not (opts["sb3"] and opts["sb3_algo"]):
         ap.error(f"--sb3 MODEL.zip and --sb3-algo go together; --sb3-algo is one of {', '.join(SB3_ALGOS)}")
-    from bench.harness import sb3
+    from ecodrive_bench.bench.harness import sb3
 
     try:
         saved = sb3.inspect(opts["sb3"], opts["sb3_algo"])

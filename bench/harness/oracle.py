@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.oracle.dp import Plan, bound
-from envs.config import ScenarioConfig
+from ecodrive_bench.bench.oracle.dp import Plan, bound
+from ecodrive_bench.envs.config import ScenarioConfig
 
 NAME = "oracle"
 OBJECTIVE = "cost"  # the bound the oracle replays: least E + phi T

@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING, Any
 
 import torch
 
-from bench.io import atomic_json, atomic_torch_save, sha256
+from ecodrive_bench.bench.io import atomic_json, atomic_torch_save, sha256
 
 if TYPE_CHECKING:
-    from envs.config import ScenarioConfig
+    from ecodrive_bench.envs.config import ScenarioConfig
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 
@@ -102,7 +102,7 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
     ``agent_config`` the policy was trained with (``overrides`` on top) and holding its ``state``
     (from ``load_policy``). A config or a state the agent does not accept is a ``CheckpointError``
     naming the file: plain data of the wrong structure passes ``load_torch`` but not this."""
-    from agents.registry import make_agent
+    from ecodrive_bench.agents.registry import make_agent
 
     config = manifest.get("agent_config") or {}
     try:  # an experiment's policy (ecodrive train --set) is built with the config it trained with
@@ -141,7 +141,7 @@ def check_folder(folder: Path, manifest: dict[str, Any]) -> None:
     the folder's, or its episodes would be labelled with another policy's method, setting or seed.
     A folder outside that layout (a training run's export, a copy for a test) names nothing and
     is not compared; a manifest without one of the fields is compared on the others."""
-    from envs.config import SIGNALS
+    from ecodrive_bench.envs.config import SIGNALS
 
     where = folder / "manifest.json"
     family, _, signals = folder.parent.name.rpartition("-")
@@ -185,7 +185,7 @@ def read_manifest(folder: Path) -> dict[str, Any]:
 
 def trained_scenario(folder: Path, manifest: dict[str, Any]) -> ScenarioConfig:
     """The scenario the policy was trained on; fields added later read as their absence meant."""
-    from envs.config import ConfigError, ScenarioConfig, backfill
+    from ecodrive_bench.envs.config import ConfigError, ScenarioConfig, backfill
 
     try:
         return ScenarioConfig.from_dict(backfill(manifest.get("scenario", {})))
@@ -195,9 +195,9 @@ def trained_scenario(folder: Path, manifest: dict[str, Any]) -> ScenarioConfig:
 
 def policy_spaces(folder: Path, manifest: dict[str, Any]) -> tuple[Any, Any]:
     """(observation space, action space) the policy was trained with, from its manifest."""
-    from agents.registry import ACTION_INTERFACE
-    from envs.action import make_action
-    from envs.observation import observation_space
+    from ecodrive_bench.agents.registry import ACTION_INTERFACE
+    from ecodrive_bench.envs.action import make_action
+    from ecodrive_bench.envs.observation import observation_space
 
     cfg = trained_scenario(folder, manifest)
     return observation_space(cfg), make_action(ACTION_INTERFACE[manifest["method"]], cfg).space
@@ -208,7 +208,7 @@ def check_scenario(folder: Path, manifest: dict[str, Any], scenario: dict[str, A
     was trained with. Without ``transfer`` it must be the scenario it was trained on (the signals,
     the GLOSA device and the reward aside); with it, any scenario it can observe
     (``transfer_overrides``)."""
-    from envs.config import diff
+    from ecodrive_bench.envs.config import diff
 
     trained = trained_scenario(folder, manifest)
     if not transfer:
@@ -226,7 +226,7 @@ def transfer_overrides(folder: Path, trained: ScenarioConfig, scenario: dict[str
     """What a policy trained on ``trained`` needs to observe ``scenario``: its observation shape
     is fixed by training, so the road may have fewer lanes (``obs_lanes`` = the lanes it observed,
     the others padded as occupied) but the grid must have the same cells."""
-    from envs.config import ConfigError, ScenarioConfig
+    from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
 
     try:
         target = ScenarioConfig.from_dict({**scenario, "obs_lanes": None})

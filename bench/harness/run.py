@@ -22,20 +22,20 @@ from typing import Any
 import pandas as pd
 from tqdm import tqdm
 
-from agents.registry import LEARNING, METHODS
-from bench.harness import external, failures, runlock, scenarios
-from bench.harness.bounds import attach
-from bench.harness.cases import Case, load
-from bench.harness.errors import AgentError, UsageError
-from bench.harness.executors import Task, run_local, run_ray
-from bench.harness.options import PROFILES, RunOptions
-from bench.harness.oracle import NAME as ORACLE
-from bench.harness.policies import check_policy, family_dir, policy_dir, shipped_seeds
-from bench.harness.provenance import carry_forward, git_sha, package_versions
-from bench.harness.scenarios import Evaluation
-from bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
-from bench.logs.mcaplog import episode_summary, resolve_log
-from envs.config import ScenarioConfig
+from ecodrive_bench.agents.registry import LEARNING, METHODS
+from ecodrive_bench.bench.harness import external, failures, runlock, scenarios
+from ecodrive_bench.bench.harness.bounds import attach
+from ecodrive_bench.bench.harness.cases import Case, load
+from ecodrive_bench.bench.harness.errors import AgentError, UsageError
+from ecodrive_bench.bench.harness.executors import Task, run_local, run_ray
+from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
+from ecodrive_bench.bench.harness.oracle import NAME as ORACLE
+from ecodrive_bench.bench.harness.policies import check_policy, family_dir, policy_dir, shipped_seeds
+from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions
+from ecodrive_bench.bench.harness.scenarios import Evaluation
+from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
+from ecodrive_bench.bench.logs.mcaplog import episode_summary, resolve_log
+from ecodrive_bench.envs.config import ScenarioConfig
 
 KEEP = ("method", "signals", "train_seed", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
         "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import sys
 
-from bench.args import InputError, fail
-from bench.harness import failures, runlock
-from bench.harness.errors import AgentError, UsageError
-from bench.harness.generalisation_run import run_family
-from bench.harness.options import parse, parser
-from bench.harness.policies import CheckpointError
-from bench.harness.run import run
+from ecodrive_bench.bench.args import InputError, fail
+from ecodrive_bench.bench.harness import failures, runlock
+from ecodrive_bench.bench.harness.errors import AgentError, UsageError
+from ecodrive_bench.bench.harness.generalisation_run import run_family
+from ecodrive_bench.bench.harness.options import parse, parser
+from ecodrive_bench.bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.harness.run import run
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from bench.harness.errors import AgentError
-from bench.harness.sb3_zip import Saved, ZipError, read
+from ecodrive_bench.bench.harness.errors import AgentError
+from ecodrive_bench.bench.harness.sb3_zip import Saved, ZipError, read
 
 ALGOS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")  # Stable-Baselines3's algorithms (not sb3-contrib)
 PREFIX = "sb3:"

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bench.args import MAX_JSON_BYTES, MAX_JSON_DEPTH, InputError, depth, one_line, read_json
-from bench.harness.episode import deep_merge
-from envs.config import ConfigError, ScenarioConfig
+from ecodrive_bench.bench.args import MAX_JSON_BYTES, MAX_JSON_DEPTH, InputError, depth, one_line, read_json
+from ecodrive_bench.bench.harness.episode import deep_merge
+from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
 
 
 def add_options(ap) -> None:
@@ -87,7 +87,7 @@ def parse_overrides(path: Path | None, items: list[str], signals: list[str], bui
 def check_buildable(cfg: ScenarioConfig, where: str) -> None:
     """Build ``cfg``'s network (once: the build is cached); an ``InputError`` of one line naming the
     scenario and netconvert's message when it cannot be built."""
-    from envs.scenario import ScenarioBuildError, build
+    from ecodrive_bench.envs.scenario import ScenarioBuildError, build
 
     try:
         build(cfg)
@@ -130,8 +130,8 @@ class Evaluation:
 def evaluation(method: str, signals: str, policy: str, overrides: dict[str, Any], transfer: bool) -> Evaluation:
     """The evaluation of ``method`` (its policy folder ``policy``, "" for none) on the command's
     scenario; a ``CheckpointError`` when the policy may not or cannot drive it."""
-    from agents.registry import ENV_OVERRIDES
-    from bench.harness.policies import check_scenario, read_manifest, trained_scenario
+    from ecodrive_bench.agents.registry import ENV_OVERRIDES
+    from ecodrive_bench.bench.harness.policies import check_scenario, read_manifest, trained_scenario
 
     extras, train = {}, None
     if policy:

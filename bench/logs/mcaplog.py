@@ -24,8 +24,8 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from bench.io import exclusive_open
-from bench.logs import schema
+from ecodrive_bench.bench.io import exclusive_open
+from ecodrive_bench.bench.logs import schema
 
 CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
 TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode,

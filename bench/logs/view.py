@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.args import Parser, fail
-from bench.io import Unwritable, writable_dir
-from bench.logs.mcaplog import LogError, read_log
+from ecodrive_bench.bench.args import Parser, fail
+from ecodrive_bench.bench.io import Unwritable, writable_dir
+from ecodrive_bench.bench.logs.mcaplog import LogError, read_log
 
 GREEN, RED, YELLOW = (40, 180, 60), (220, 40, 40), (230, 190, 30)
 TRAIL_S = 60  # [s] of ego trail

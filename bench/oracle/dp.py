@@ -62,8 +62,8 @@ from typing import Any
 
 import numpy as np
 
-from envs.config import ScenarioConfig
-from envs.scenario import build
+from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.scenario import build
 
 from .energy import energy_wh
 from .kernel import backward_step, backward_step_numpy

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from envs.config import EVParams
+from ecodrive_bench.envs.config import EVParams
 
 GRAVITY = 9.80665  # [m/s^2] SUMO's GRAVITY constant (not 9.81: the roll term shows the difference)
 AIR_DENSITY = 1.2041  # [kg/m^3] at 20 degC, hard-coded in SUMO

@@ -1,5 +1,5 @@
 import sys
 
-from bench.regression.check import main
+from ecodrive_bench.bench.regression.check import main
 
 sys.exit(main())

@@ -21,14 +21,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.args import Parser, fail
-from bench.harness.errors import AgentError, UsageError
-from bench.harness.options import parse
-from bench.harness.policies import CheckpointError
-from bench.harness.run import run
-from bench.io import atomic_csv
-from bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
-from bench.paper import TABLE4 as PAPER_TABLE4
+from ecodrive_bench.bench.args import Parser, fail
+from ecodrive_bench.bench.harness.errors import AgentError, UsageError
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.bench.io import atomic_csv
+from ecodrive_bench.bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
+from ecodrive_bench.bench.paper import TABLE4 as PAPER_TABLE4
 
 CI_CASES = 20
 REFERENCE = Path(__file__).with_name("reference") / "ci.csv"
@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-mixed", action="store_true", help="skip the mixed-traffic cells (reported NOT CHECKED)")
     ap.add_argument("--logs", default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
     args = ap.parse_args(argv)
-    import bench.harness.options as br
+    import ecodrive_bench.bench.harness.options as br
 
     logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
     br.PROFILES["regression"] = CI_CASES  # for this run only: `ecodrive run` offers no such profile
@@ -182,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         REFERENCE.parent.mkdir(exist_ok=True)
         atomic_csv(df[REF_COLUMNS], REFERENCE, float_format="%.10g")
         print(f"wrote {REFERENCE} ({len(df)} episodes)")
-    from bench.regression import mixed as regression_mixed
+    from ecodrive_bench.bench.regression import mixed as regression_mixed
 
     mixed = (regression_mixed.claims(None, "--no-mixed given") if args.no_mixed
              else regression_mixed.claims(regression_mixed.run_cells()))

@@ -15,12 +15,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from bench.experiments.mixed import CI_DEMAND, CI_DURATION, CI_MPRS, Cell, run_cell
-from bench.harness.executors import run_local
-from bench.harness.policies import MODELS, policy_dir
-from bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
-from bench.paper import HDV_TOL, SPEED_LOSS_TOL
-from envs.config import SIGNALS
+from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, CI_MPRS, Cell, run_cell
+from ecodrive_bench.bench.harness.executors import run_local
+from ecodrive_bench.bench.harness.policies import MODELS, policy_dir
+from ecodrive_bench.bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
+from ecodrive_bench.bench.paper import HDV_TOL, SPEED_LOSS_TOL
+from ecodrive_bench.envs.config import SIGNALS
 
 
 def run_cells(workers: int = 2, logs: Path | None = None) -> pd.DataFrame | None:

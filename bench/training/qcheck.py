@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from bench.args import Parser, fail, int_in
-from bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
-from envs.action import LATERAL
+from ecodrive_bench.bench.args import Parser, fail, int_in
+from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
+from ecodrive_bench.envs.action import LATERAL
 
 HEADS = {-1: "left", 0: "stay", 1: "right"}
 
@@ -76,10 +76,10 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
     """Calibration of one policy overall and per chosen head, over ``cases`` validation cases."""
     import torch
 
-    from agents.registry import make_agent
-    from bench.harness.episode import make_env
-    from bench.training.train import load_agent, read_checkpoint, validation_cases
-    from envs.config import ConfigError, backfill
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.training.train import load_agent, read_checkpoint, validation_cases
+    from ecodrive_bench.envs.config import ConfigError, backfill
 
     torch.set_num_threads(1)
     agent_config: dict[str, Any] = {}
@@ -137,7 +137,7 @@ def format_report(res: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from envs.config import SIGNALS
+    from ecodrive_bench.envs.config import SIGNALS
 
     ap = Parser(description=__doc__.split("\n")[0])
     ap.add_argument("--method", default="prl", help="prl or mpdqn")

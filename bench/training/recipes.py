@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from bench.paper import TRAINING_EPISODES
+from ecodrive_bench.bench.paper import TRAINING_EPISODES
 
 VALIDATION_CASES = 20  # validation cases scored at every checkpoint to select the exported one (all recipes)
 

@@ -38,17 +38,17 @@ import pandas as pd
 import torch
 from tqdm import tqdm
 
-from agents.device import parse as parse_device
-from agents.registry import LEARNING, make_agent
-from bench.args import Parser, fail, int_in
-from bench.harness.cases import Case
-from bench.harness.episode import deep_merge, make_env, run_episode
-from bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
-from bench.harness.provenance import git_sha, package_versions
-from bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
-from bench.logs.mcaplog import write_train_log
-from bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
-from envs.config import SIGNALS, ConfigError, added_values, backfill, flat
+from ecodrive_bench.agents.device import parse as parse_device
+from ecodrive_bench.agents.registry import LEARNING, make_agent
+from ecodrive_bench.bench.args import Parser, fail, int_in
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.episode import deep_merge, make_env, run_episode
+from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
+from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
+from ecodrive_bench.bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
+from ecodrive_bench.bench.logs.mcaplog import write_train_log
+from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
+from ecodrive_bench.envs.config import SIGNALS, ConfigError, added_values, backfill, flat
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
 VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/harness/cases.json's test cases)
@@ -70,16 +70,16 @@ NOT_SET = ("seed", "multipass")  # agent config fields --set may not change (--s
 
 def config_class(method: str) -> type:
     """The agent config dataclass of a learning method."""
-    from agents.ddpg import DDPGConfig
-    from agents.dqn import DQNConfig
-    from agents.pdqn import PDQNConfig
+    from ecodrive_bench.agents.ddpg import DDPGConfig
+    from ecodrive_bench.agents.dqn import DQNConfig
+    from ecodrive_bench.agents.pdqn import PDQNConfig
 
     return {"prl": PDQNConfig, "mpdqn": PDQNConfig, "dqn": DQNConfig, "ddpg": DDPGConfig}[method]
 
 
 def fields_help() -> str:
     """``--help`` text: every field ``--set`` accepts, per config, from its declaration."""
-    from envs.validation import describe
+    from ecodrive_bench.envs.validation import describe
 
     out = ["agent config fields for --set FIELD=VALUE (name = default [unit]: meaning (accepted values)):"]
     for methods, m in (("prl, mpdqn", "prl"), ("dqn", "dqn"), ("ddpg", "ddpg")):
@@ -92,7 +92,7 @@ def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
     ValueError names the bad item and the accepted fields or values."""
     import dataclasses
 
-    from envs.validation import ConfigError, describe
+    from ecodrive_bench.envs.validation import ConfigError, describe
 
     cls = config_class(method)
     defaults = {f.name: f.default for f in dataclasses.fields(cls) if f.name not in NOT_SET}

@@ -18,21 +18,21 @@ import sys
 import time
 from pathlib import Path
 
-from agents.device import parse as parse_device
-from agents.registry import LEARNING
-from bench.args import Parser, fail, int_in
-from bench.harness.policies import MODELS, CheckpointError, policy_dir, read_manifest
-from bench.training.recipes import is_recipe, recipe
-from bench.training.train import RUNS
-from envs.config import SIGNALS
+from ecodrive_bench.agents.device import parse as parse_device
+from ecodrive_bench.agents.registry import LEARNING
+from ecodrive_bench.bench.args import Parser, fail, int_in
+from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, policy_dir, read_manifest
+from ecodrive_bench.bench.training.recipes import is_recipe, recipe
+from ecodrive_bench.bench.training.train import RUNS
+from ecodrive_bench.envs.config import SIGNALS
 
 
 def stale(trained: dict, method: str, signals: str) -> list[str]:
     """Scenario fields in which a policy trained under ``trained`` differs from what today's
     ``bench.training.train`` would train it under (``envs.config.diff``)."""
-    from agents.registry import ENV_OVERRIDES
-    from bench.harness.episode import deep_merge
-    from envs.config import ScenarioConfig, diff
+    from ecodrive_bench.agents.registry import ENV_OVERRIDES
+    from ecodrive_bench.bench.harness.episode import deep_merge
+    from ecodrive_bench.envs.config import ScenarioConfig, diff
 
     return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict())
 
@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
             m, s, sd = todo.pop(0)
             log = open(RUNS / f"{m}-{s}-s{sd}.log", "a")
             episodes = recipe(m, s, args.paper).episodes if args.episodes is None else args.episodes
-            cmd = [sys.executable, "-m", "bench.training.train", "--method", m, "--signals", s, "--episodes",
+            cmd = [sys.executable, "-m", "ecodrive_bench.bench.training.train", "--method", m, "--signals", s, "--episodes",
                    str(episodes), "--seed", str(sd), "--models", str(args.models), "--device", args.device,
                    *(["--paper"] if args.paper else [])]
             running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), f"{m}/{s}/s{sd}"))

@@ -8,15 +8,15 @@ import pandas as pd
 import pytest
 import torch
 
-import envs  # noqa: F401
-from agents.nets import linear_epsilon
-from agents.registry import LEARNING, make_agent
-from bench.harness.episode import make_env
-from bench.harness.policies import CheckpointError, load_policy, policy_dir
-from bench.logs.mcaplog import read_log
-from bench.training.train import snapshot, train, validate
-from envs.config import ScenarioConfig
-from envs.validation import ConfigError
+import ecodrive_bench.envs  # noqa: F401
+from ecodrive_bench.agents.nets import linear_epsilon
+from ecodrive_bench.agents.registry import LEARNING, make_agent
+from ecodrive_bench.bench.harness.episode import make_env
+from ecodrive_bench.bench.harness.policies import CheckpointError, load_policy, policy_dir
+from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.training.train import snapshot, train, validate
+from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.validation import ConfigError
 
 FAST_AGENT = {"learning_starts": 64, "batch_size": 16}
 FAST_SCENARIO = {"max_episode_time": 60.0}
@@ -93,7 +93,7 @@ def test_twin_q_target_is_the_smaller_critic_and_both_critics_learn():
 
 
 def test_agent_overrides_are_typed_and_checked():
-    from bench.training.train import agent_overrides
+    from ecodrive_bench.bench.training.train import agent_overrides
 
     assert agent_overrides("prl", ["twin_q=true", "lr_q=0.001", "batch_size=64"]) == {
         "twin_q": True, "lr_q": 0.001, "batch_size": 64}
@@ -119,10 +119,10 @@ def test_agent_overrides_are_typed_and_checked():
 def test_train_help_lists_every_agent_field_with_its_meaning_and_range(capsys):
     import dataclasses
 
-    from agents.ddpg import DDPGConfig
-    from agents.dqn import DQNConfig
-    from agents.pdqn import PDQNConfig
-    from bench.training.train import main
+    from ecodrive_bench.agents.ddpg import DDPGConfig
+    from ecodrive_bench.agents.dqn import DQNConfig
+    from ecodrive_bench.agents.pdqn import PDQNConfig
+    from ecodrive_bench.bench.training.train import main
 
     with pytest.raises(SystemExit):
         main(["--help"])
@@ -215,7 +215,7 @@ def test_training_smoke_and_checkpoint_round_trip(method, tmp_path):
 
 
 def _interface(method: str) -> str:
-    from agents.registry import ACTION_INTERFACE
+    from ecodrive_bench.agents.registry import ACTION_INTERFACE
 
     return ACTION_INTERFACE[method]
 
@@ -308,7 +308,7 @@ def test_policy_snapshot_is_a_copy():
 
 
 def test_train_all_resumes_started_runs_first_then_fills_seeds_in_order(tmp_path):
-    from bench.training.train_all import plan, stale
+    from ecodrive_bench.bench.training.train_all import plan, stale
 
     runs, models = tmp_path / "runs", tmp_path / "models"
     (runs / "ddpg-uncoordinated-s1").mkdir(parents=True)
@@ -335,8 +335,8 @@ def test_train_all_resumes_started_runs_first_then_fills_seeds_in_order(tmp_path
 
 
 def test_a_shipped_seed_is_finished_only_when_trained_by_its_recipe(tmp_path):
-    from bench.training.recipes import RECIPES, recipe
-    from bench.training.train_all import plan
+    from ecodrive_bench.bench.training.recipes import RECIPES, recipe
+    from ecodrive_bench.bench.training.train_all import plan
 
     (method, signals), r = next(iter(RECIPES.items()))
     assert r.overrides and recipe("ddpg", "coordinated").overrides == {}
@@ -351,8 +351,8 @@ def test_a_shipped_seed_is_finished_only_when_trained_by_its_recipe(tmp_path):
 
 
 def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path, monkeypatch, capsys):
-    import bench.training.train as tr
-    from bench.training.recipes import RECIPES
+    import ecodrive_bench.bench.training.train as tr
+    from ecodrive_bench.bench.training.recipes import RECIPES
 
     (method, signals), r = next(iter(RECIPES.items()))
     seen = {}
@@ -384,8 +384,8 @@ def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path
 
 
 def test_train_all_paper_schedule_needs_its_own_models_folder(tmp_path, capsys):
-    from bench.training.recipes import PAPER, RECIPES
-    from bench.training.train_all import main, plan
+    from ecodrive_bench.bench.training.recipes import PAPER, RECIPES
+    from ecodrive_bench.bench.training.train_all import main, plan
 
     (method, signals), r = next(iter(RECIPES.items()))
     with pytest.raises(SystemExit) as e:
@@ -402,9 +402,9 @@ def test_train_all_paper_schedule_needs_its_own_models_folder(tmp_path, capsys):
 
 
 def test_validation_cases_are_not_test_cases():
-    from bench.harness.cases import load
-    from bench.training.train import validation_cases
-    from envs.config import ScenarioConfig
+    from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.training.train import validation_cases
+    from ecodrive_bench.envs.config import ScenarioConfig
 
     val = {(c.sumo_seed, c.insert_time) for c in validation_cases(ScenarioConfig(), 100)}
     test = {(c.sumo_seed, c.insert_time) for c in load()}
@@ -412,7 +412,7 @@ def test_validation_cases_are_not_test_cases():
 
 
 def test_n_step_window_sums_discounted_rewards_and_flushes_at_the_end():
-    from agents.replay import NStepWindow
+    from ecodrive_bench.agents.replay import NStepWindow
 
     w = NStepWindow(3, 0.5)
     # (grid, logic, action, reward, next_grid, next_logic, done, next_mask)
@@ -469,7 +469,7 @@ def test_prl_n_step_replay_and_target_on_a_real_episode():
 
 
 def test_replay_round_trip_and_files_from_before_n_step(tmp_path):
-    from agents.replay import Replay
+    from ecodrive_bench.agents.replay import Replay
 
     rb = Replay(10, (60, 5), 9, 4)
     for i in range(4):

@@ -19,8 +19,17 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from torch.func import functional_call
 
-from agents.nets import ConvBlock, ConvPass, Workspace, clipped_adam_step, features, soft_update, trunk_dim, trunks
-from agents.registry import make_agent
+from ecodrive_bench.agents.nets import (
+    ConvBlock,
+    ConvPass,
+    Workspace,
+    clipped_adam_step,
+    features,
+    soft_update,
+    trunk_dim,
+    trunks,
+)
+from ecodrive_bench.agents.registry import make_agent
 
 K = 3
 LOGIC = spaces.Box(np.array([0, 0, 0, 0, 0, 0, 0, -1, -1], np.float32),

@@ -7,11 +7,11 @@ import sys
 
 import pytest
 
-from bench.cli import COMMANDS, main
+from ecodrive_bench.bench.cli import COMMANDS, main
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True, text=True, timeout=120)
+    return subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.cli", *args], capture_output=True, text=True, timeout=120)
 
 
 def test_top_level_help_lists_every_command(capsys):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.cli import COMMANDS, main
+from ecodrive_bench.bench.cli import COMMANDS, main
 
 DOC = Path(__file__).parents[2] / "docs" / "cli.md"
 

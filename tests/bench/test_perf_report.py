@@ -1,11 +1,11 @@
-"""bench.perf's arithmetic on a pytest-benchmark JSON (no timing here)."""
+"""ecodrive_bench.bench.perf's arithmetic on a pytest-benchmark JSON (no timing here)."""
 from __future__ import annotations
 
 import json
 
 import pytest
 
-from bench.perf import STEPS_PER_EPISODE, main, ratios
+from ecodrive_bench.bench.perf import STEPS_PER_EPISODE, main, ratios
 
 
 def _bench(name: str, median: float, mean: float | None = None, **extra) -> dict:

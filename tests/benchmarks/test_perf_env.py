@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from agents import BaselineAgent
-from bench.harness.episode import make_env, run_episode
+from ecodrive_bench.agents import BaselineAgent
+from ecodrive_bench.bench.harness.episode import make_env, run_episode
 
 STEPS = 150  # simulated seconds after the ego's insertion
 ROUNDS = 15
@@ -94,7 +94,7 @@ def test_episode_unlogged(benchmark, baseline_env, cases):
 def test_episode_logged(benchmark, baseline_env, cases, tmp_path, monkeypatch):
     """extra_info["log_share"]: time inside the logger (record + finish) over episode time
     without it, measured in the same episodes."""
-    from bench.logs import mcaplog
+    from ecodrive_bench.bench.logs import mcaplog
 
     agent, env = baseline_env
     spent = [0.0]

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from agents.registry import make_agent
-from envs.config import ScenarioConfig
-from envs.fleet import Fleet
+from ecodrive_bench.agents.registry import make_agent
+from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.fleet import Fleet
 
 
 @pytest.fixture(scope="module")

@@ -22,10 +22,10 @@ from gymnasium import spaces
 from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils.flop_counter import FlopCounterMode
 
-from agents.nets import ConvPass, Workspace
-from agents.registry import LEARNING, make_agent
-from agents.replay import Replay
-from bench.perf import KINDS  # test_prl_update_by_kind's extra_info: ops_<kind>_s
+from ecodrive_bench.agents.nets import ConvPass, Workspace
+from ecodrive_bench.agents.registry import LEARNING, make_agent
+from ecodrive_bench.agents.replay import Replay
+from ecodrive_bench.bench.perf import KINDS  # test_prl_update_by_kind's extra_info: ops_<kind>_s
 
 MATMUL = (128, 512, 256)  # (batch, in, out): about the size of the networks' first dense layers
 

@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from envs.config import ConfigError, ScenarioConfig
+from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
 
 
 def test_defaults_are_paper_values():
@@ -58,11 +58,11 @@ def test_every_config_field_is_declared_with_its_meaning_unit_and_range():
     learning agents' alike: the doc, the unit and the accepted values travel with the field."""
     import dataclasses
 
-    from agents.ddpg import DDPGConfig
-    from agents.dqn import DQNConfig
-    from agents.pdqn import PDQNConfig
-    from envs.config import EVParams, RewardConfig, ScenarioConfig
-    from envs.validation import describe
+    from ecodrive_bench.agents.ddpg import DDPGConfig
+    from ecodrive_bench.agents.dqn import DQNConfig
+    from ecodrive_bench.agents.pdqn import PDQNConfig
+    from ecodrive_bench.envs.config import EVParams, RewardConfig, ScenarioConfig
+    from ecodrive_bench.envs.validation import describe
 
     for cls in (EVParams, RewardConfig, ScenarioConfig, PDQNConfig, DQNConfig, DDPGConfig):
         for f in dataclasses.fields(cls):

@@ -10,7 +10,7 @@ from dataclasses import fields
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from envs.config import ConfigError, EVParams, RewardConfig, ScenarioConfig
+from ecodrive_bench.envs.config import ConfigError, EVParams, RewardConfig, ScenarioConfig
 
 FUZZ = settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 

@@ -8,11 +8,11 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from envs.config import ADDED_FIELDS, ConfigError, ScenarioConfig, backfill, diff
-from envs.env import EcoDriveEnv
-from envs.observation import occupancy_grid
-from envs.safety import lane_mask
-from envs.scenario import build
+from ecodrive_bench.envs.config import ADDED_FIELDS, ConfigError, ScenarioConfig, backfill, diff
+from ecodrive_bench.envs.env import EcoDriveEnv
+from ecodrive_bench.envs.observation import occupancy_grid
+from ecodrive_bench.envs.safety import lane_mask
+from ecodrive_bench.envs.scenario import build
 
 # 3 lanes, uneven links, a plan of its own at every junction
 UNEVEN = {"lanes": 3, "spacings": (300.0, 600.0, 250.0, 500.0), "junction_cycles": (90.0, 100.0, 60.0, 90.0, 120.0),
@@ -147,7 +147,7 @@ def test_an_episode_on_a_narrow_uneven_corridor_with_a_padded_observation():
     try:
         assert env.observation_space["grid"].shape == (60, 5) and env.observation_space["logic"].shape == (9,)
         obs, info = env.reset(options={"sumo_seed": 3, "insert_time": 40.0})
-        from envs.sumo import ls  # the session's own libsumo: check the programs SUMO loaded
+        from ecodrive_bench.envs.sumo import ls  # the session's own libsumo: check the programs SUMO loaded
 
         for k, (c, g, _) in enumerate(env.cfg.timing, start=1):
             logic = ls.trafficlight.getAllProgramLogics(f"J{k}")

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import envs  # noqa: F401  (registers EcoDrive-v0)
-from agents import BaselineAgent, GlosaAgent
-from bench.harness.episode import make_env, run_episode
-from envs.action import dqn_table
+import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
+from ecodrive_bench.agents import BaselineAgent, GlosaAgent
+from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.envs.action import dqn_table
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0}
 
@@ -182,7 +182,7 @@ def test_per_step_costs_keep_the_episode_return(cases):
 
 def test_steady_baseline_removes_the_egos_dawdling(cases):
     """baseline0 = SUMO's driver with the ego's sigma = 0: fewer speed swings, less braking."""
-    from agents import SteadyBaselineAgent
+    from ecodrive_bench.agents import SteadyBaselineAgent
 
     rows = {}
     for agent in (BaselineAgent(), SteadyBaselineAgent()):
@@ -219,7 +219,7 @@ def test_the_env_docstrings_example_runs():
     """The example in ``EcoDriveEnv``'s docstring (its front door) is run as a doctest."""
     import doctest
 
-    import envs.env
+    import ecodrive_bench.envs.env as env_module
 
-    res = doctest.testmod(envs.env)
+    res = doctest.testmod(env_module)
     assert res.attempted >= 8 and res.failed == 0

@@ -2,8 +2,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from envs.config import ScenarioConfig
-from envs.fleet import Fleet
+from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.fleet import Fleet
 
 
 def test_batched_control_of_many_cvs():
@@ -64,7 +64,7 @@ def test_summary_counts_the_vehicles_still_driving():
 
 
 def test_stalls_are_standing_with_free_road_and_no_red():
-    from envs.fleet import stalled
+    from ecodrive_bench.envs.fleet import stalled
 
     cfg = ScenarioConfig()
     rows, lanes = cfg.grid_shape

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from envs import safety
-from envs.config import RewardConfig, ScenarioConfig
-from envs.observation import logic_vector, occupancy_grid
-from envs.rewards import reward
+from ecodrive_bench.envs import safety
+from ecodrive_bench.envs.config import RewardConfig, ScenarioConfig
+from ecodrive_bench.envs.observation import logic_vector, occupancy_grid
+from ecodrive_bench.envs.rewards import reward
 
 CFG = ScenarioConfig()
 LANE_Y = np.array([-14.4, -11.2, -8.0, -4.8, -1.6])

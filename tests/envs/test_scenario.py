@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from envs.config import ScenarioConfig
-from envs.scenario import build
+from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.scenario import build
 
 
 def test_build_is_deterministic_and_cached(tmp_path, monkeypatch):
@@ -41,7 +41,7 @@ def test_network_matches_the_paper(tmp_path, monkeypatch):
 def test_the_cache_is_the_users_cache_folder_unless_ecodrive_cache_is_set(tmp_path, monkeypatch):
     import platformdirs
 
-    from envs.scenario import cache_root
+    from ecodrive_bench.envs.scenario import cache_root
 
     monkeypatch.delenv("ECODRIVE_CACHE", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))  # platformdirs' folder on Linux
@@ -54,7 +54,7 @@ def test_the_cache_is_the_users_cache_folder_unless_ecodrive_cache_is_set(tmp_pa
 
 
 def test_a_netconvert_failure_is_one_line_naming_the_scenario(tmp_path, monkeypatch):
-    import envs.scenario as scenario
+    import ecodrive_bench.envs.scenario as scenario
 
     fake = tmp_path / "netconvert"
     fake.write_text("#!/bin/sh\necho 'Error: the first line of the complaint' >&2\necho 'more detail' >&2\nexit 1\n")

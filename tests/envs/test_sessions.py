@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import envs  # noqa: F401  (registers EcoDrive-v0)
-from envs.action import InvalidAction
+import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
+from ecodrive_bench.envs.action import InvalidAction
 
 A = {"sumo_seed": 7, "insert_time": 210.0}
 B = {"sumo_seed": 99, "insert_time": 160.0}
@@ -142,8 +142,8 @@ def test_other_action_types_enforce_their_space(kind, bad):
 def test_action_check_agrees_with_the_space(k, params):
     """The action parser accepts exactly the actions of the space (fuzzed), never raising
     anything but ``InvalidAction``."""
-    from envs.action import make_action
-    from envs.config import ScenarioConfig
+    from ecodrive_bench.envs.action import make_action
+    from ecodrive_bench.envs.config import ScenarioConfig
 
     at = make_action("parameterized", ScenarioConfig.from_dict({"signals": "uncoordinated"}))
     action = (k, params if params is None or isinstance(params, str) else np.asarray(params, dtype=np.float64))

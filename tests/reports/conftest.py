@@ -6,9 +6,9 @@ import json
 import pandas as pd
 import pytest
 
-from bench.harness.options import parse
-from bench.harness.run import run
-from reports.build import build
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.reports.build import build
 
 
 @pytest.fixture(scope="session")

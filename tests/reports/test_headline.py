@@ -4,7 +4,7 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from reports.headline import END, START, rewrite, table
+from ecodrive_bench.reports.headline import END, START, rewrite, table
 
 
 def results() -> pd.DataFrame:

@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.paper import TABLE4, improvement
-from reports import html_markdown, html_parts
-from reports.build import build
-from reports.claims import NOT_CHECKED, paper_claims
-from reports.tables import frame_markdown
+from ecodrive_bench.bench.paper import TABLE4, improvement
+from ecodrive_bench.reports import html_markdown, html_parts
+from ecodrive_bench.reports.build import build
+from ecodrive_bench.reports.claims import NOT_CHECKED, paper_claims
+from ecodrive_bench.reports.tables import frame_markdown
 
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
 BAD_CELL = re.compile(r"^(nan|none|null|inf|-inf|<na>|nat)$|\bnan\b|\bNone\b", re.IGNORECASE)
@@ -229,8 +229,8 @@ def test_provenance_is_the_manifests(report):
 
 
 def test_provenance_lists_the_earlier_commands_of_a_folder():
-    from reports.html import render
-    from reports.html_parts import Page
+    from ecodrive_bench.reports.html import render
+    from ecodrive_bench.reports.html_parts import Page
 
     man = {"command": "ecodrive run --methods baseline", "git_sha": "b" * 40,
            "checkpoint_sha256": {"prl-coordinated/s0": "c" * 64},
@@ -321,8 +321,8 @@ def test_the_claims_speak_one_status_vocabulary():
     the run cannot judge is NOT CHECKED, the one word for it in every section."""
     import inspect
 
-    from reports import claims, experiments, html
-    from reports.claims import STATUSES
+    from ecodrive_bench.reports import claims, experiments, html
+    from ecodrive_bench.reports.claims import STATUSES
 
     rows = [{"method": "baseline", "signals": s, "case": c, "energy": 250.0 + c, "travel_time": 230.0, "collisions": 0}
             for s in ("coordinated", "uncoordinated") for c in range(3)]

@@ -7,9 +7,9 @@ import shutil
 import pandas as pd
 import pytest
 
-from bench.harness.options import parse
-from bench.harness.run import run
-from reports.build import build, main
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.reports.build import build, main
 
 
 @pytest.fixture(scope="module")
@@ -225,7 +225,7 @@ def test_numbers_stored_as_text_are_read_as_numbers(smoke, tmp_path, capsys):
 def test_report_files_are_never_written_through_a_planted_link(smoke_report, tmp_path, capsys):
     """``index.html`` and ``table4.csv`` planted as links to a file outside are replaced, not
     written through; a report folder that is a link is refused in one line."""
-    from reports.build import main as report_main
+    from ecodrive_bench.reports.build import main as report_main
 
     victim = tmp_path / "victim.txt"
     victim.write_text("precious\n")
@@ -249,7 +249,7 @@ def test_report_files_are_never_written_through_a_planted_link(smoke_report, tmp
 
 
 def test_a_planted_link_under_a_reports_file_name_is_replaced(smoke_report, tmp_path):
-    from bench.io import atomic_csv
+    from ecodrive_bench.bench.io import atomic_csv
 
     victim = tmp_path / "victim.txt"
     victim.write_text("precious\n")

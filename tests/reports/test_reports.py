@@ -4,10 +4,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.harness.options import parse
-from bench.harness.run import run
-from reports import metrics, stats
-from reports.build import build
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.reports import metrics, stats
+from ecodrive_bench.reports.build import build
 
 
 def test_metric_functions():
@@ -108,7 +108,7 @@ def test_optimality_gaps_by_hand():
 
 
 def test_the_sweep_header_counts_jobs_when_seeds_differ_between_configurations():
-    from reports.experiments import _jobs_text
+    from ecodrive_bench.reports.experiments import _jobs_text
 
     full = pd.DataFrame({"config": ["a", "a", "b", "b"], "seed": [0, 1, 0, 1]})
     assert _jobs_text(full) == "2 configurations x 2 seeds"
@@ -121,7 +121,7 @@ def test_a_method_whose_trips_do_not_finish_is_warned_about(smoke_report, tmp_pa
     under Warnings instead of letting its energy pass for a saving."""
     import shutil
 
-    from reports.build import unfinished_warnings
+    from ecodrive_bench.reports.build import unfinished_warnings
 
     run_dir = tmp_path / "run"
     shutil.copytree(smoke_report["run"], run_dir)

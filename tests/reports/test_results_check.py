@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reports.load import REQUIRED_COLUMNS, RunError, check_results
+from ecodrive_bench.reports.load import REQUIRED_COLUMNS, RunError, check_results
 
 WHERE = "logs/x/results.parquet"
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from reports.claims import complete_block, heatmap_claims, reward_claims
+from ecodrive_bench.reports.claims import complete_block, heatmap_claims, reward_claims
 
 
 def _reward(rows: list[tuple[str, float, int, float, float]]) -> pd.DataFrame:

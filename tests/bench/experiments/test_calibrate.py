@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from bench.experiments import calibrate
+from ecodrive_bench.bench.experiments import calibrate
 
 
 @pytest.fixture(autouse=True)

@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from agents import BaselineAgent
-from bench.experiments.lateral import run_scenario, summary
+from ecodrive_bench.agents import BaselineAgent
+from ecodrive_bench.bench.experiments.lateral import run_scenario, summary
 
 
 def test_scenario_a_hdv1_brakes_three_steps_beside_hdv2():
@@ -32,9 +32,9 @@ def test_scenario_b_platoon_queues_at_red():
 
 
 def test_lateral_command_logs_resumes_and_reports(tmp_path, capsys):
-    from bench.experiments.lateral import main
-    from bench.logs.mcaplog import is_complete
-    from reports.build import build
+    from ecodrive_bench.bench.experiments.lateral import main
+    from ecodrive_bench.bench.logs.mcaplog import is_complete
+    from ecodrive_bench.reports.build import build
 
     argv = ["--methods", "baseline", "--logs", str(tmp_path), "--run-id", "t", "--workers", "1"]
     assert main(argv) == 0
@@ -50,9 +50,9 @@ def test_lateral_command_logs_resumes_and_reports(tmp_path, capsys):
 
 def _shipped_prl(name: str) -> list[dict]:
     """The scenario's summary for every shipped uncoordinated PRL seed."""
-    from agents.registry import make_agent
-    from bench.experiments.lateral import scenario_env
-    from bench.harness.policies import load_policy, policy_dir, shipped_seeds
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.experiments.lateral import scenario_env
+    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir, shipped_seeds
 
     out = []
     for seed in shipped_seeds("prl", "uncoordinated"):
@@ -84,9 +84,9 @@ def test_shipped_prl_ends_in_the_lane_with_the_shortest_queue():
 def test_lateral_command_drives_every_shipped_seed(tmp_path):
     import shutil
 
-    from bench.experiments.lateral import main
-    from bench.harness.policies import policy_dir
-    from reports.build import build
+    from ecodrive_bench.bench.experiments.lateral import main
+    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.reports.build import build
 
     models = tmp_path / "models"
     for seed in (0, 1):
@@ -108,7 +108,7 @@ def _lateral_copy(tmp_path):
     """A models root with a copy of the shipped uncoordinated PRL seed 0, and that seed's folder."""
     import shutil
 
-    from bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.harness.policies import policy_dir
 
     models = tmp_path / "models"
     folder = policy_dir("prl", "uncoordinated", models)
@@ -120,7 +120,7 @@ def _match_manifest(folder):
     """The manifest's sha256 made to match the (replaced) policy.pt, as whoever replaced it could."""
     import json
 
-    from bench.io import sha256
+    from ecodrive_bench.bench.io import sha256
 
     man = json.loads((folder / "manifest.json").read_text())
     man["sha256"] = sha256(folder / "policy.pt")
@@ -169,7 +169,7 @@ def _bad_manifest(folder, tmp_path):
 @pytest.mark.parametrize("corrupt", [_truncated, _wrong_structure, _payload, _bad_manifest],
                          ids=["truncated", "wrong-structure", "payload", "bad-manifest"])
 def test_lateral_refuses_a_bad_policy_as_one_line_before_anything_runs(corrupt, tmp_path, capsys):
-    from bench.experiments.lateral import main
+    from ecodrive_bench.bench.experiments.lateral import main
 
     models, folder = _lateral_copy(tmp_path)
     path = corrupt(folder, tmp_path)
@@ -184,7 +184,7 @@ def test_lateral_refuses_a_bad_policy_as_one_line_before_anything_runs(corrupt, 
 
 
 def test_lateral_refuses_a_named_learning_method_without_a_shipped_policy(tmp_path, capsys):
-    from bench.experiments.lateral import main
+    from ecodrive_bench.bench.experiments.lateral import main
 
     models, logs = tmp_path / "nonexistent", tmp_path / "logs"
     rc = main(["--methods", "baseline", "prl", "--models", str(models), "--logs", str(logs)])
@@ -195,7 +195,7 @@ def test_lateral_refuses_a_named_learning_method_without_a_shipped_policy(tmp_pa
 
 
 def test_lateral_skips_a_default_learning_method_without_a_shipped_policy(tmp_path):
-    from bench.experiments.lateral import LATERAL_METHODS, lateral_seeds
+    from ecodrive_bench.bench.experiments.lateral import LATERAL_METHODS, lateral_seeds
 
     seeds, skipped = lateral_seeds(list(LATERAL_METHODS), tmp_path / "nonexistent", explicit=False)
     assert seeds == {"baseline": [None]} and skipped == ["prl", "ddpg"]
@@ -203,7 +203,7 @@ def test_lateral_skips_a_default_learning_method_without_a_shipped_policy(tmp_pa
 
 def test_lateral_with_default_methods_and_a_bad_policy_prints_the_error_only(tmp_path, capsys):
     """ddpg is skipped (no shipped policy) and prl refused: the refusal is the only line."""
-    from bench.experiments.lateral import main
+    from ecodrive_bench.bench.experiments.lateral import main
 
     models, folder = _lateral_copy(tmp_path)
     path = _wrong_structure(folder, tmp_path)
@@ -216,8 +216,8 @@ def test_the_lateral_worker_refuses_a_wrong_structure_as_a_checkpoint_error(tmp_
     """The worker's own load (a file replaced after the parent's check) names the file."""
     from types import SimpleNamespace
 
-    from bench.experiments.lateral import LateralTask, task_agent
-    from bench.harness.policies import CheckpointError, policy_spaces, read_manifest
+    from ecodrive_bench.bench.experiments.lateral import LateralTask, task_agent
+    from ecodrive_bench.bench.harness.policies import CheckpointError, policy_spaces, read_manifest
 
     _, folder = _lateral_copy(tmp_path)
     path = _wrong_structure(folder, tmp_path)

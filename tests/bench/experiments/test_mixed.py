@@ -5,12 +5,12 @@ import sys
 import pandas as pd
 import pytest
 
-from bench.experiments import mixed
-from bench.experiments.mixed import Cell, _done, run_cell
-from bench.logs.mcaplog import read_log
-from bench.training.train import train
-from reports.build import build
-from reports.metrics import mixed_cells, mpr_effect
+from ecodrive_bench.bench.experiments import mixed
+from ecodrive_bench.bench.experiments.mixed import Cell, _done, run_cell
+from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.training.train import train
+from ecodrive_bench.reports.build import build
+from ecodrive_bench.reports.metrics import mixed_cells, mpr_effect
 
 
 def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
@@ -43,7 +43,7 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
 
     import pytest
 
-    from bench.experiments.mixed import CellMismatch
+    from ecodrive_bench.bench.experiments.mixed import CellMismatch
 
     man = tmp_path / "models" / "prl-uncoordinated" / "s0" / "manifest.json"
     shipped = man.read_text()
@@ -52,18 +52,18 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
         _done(cell)
     man.write_text(shipped)
     # nor is one whose CVs ran under another safety layer (SUMO speed mode); a cell without CVs is
-    import bench.experiments.mixed
-    import envs.sumo
+    import ecodrive_bench.bench.experiments.mixed as mixed_module
+    import ecodrive_bench.envs.sumo as sumo_module
 
-    assert data.meta["speed_mode"] == str(envs.sumo.SPEED_MODE_SAFE)
-    monkeypatch.setattr(bench.experiments.mixed, "SPEED_MODE_SAFE", 31)
+    assert data.meta["speed_mode"] == str(sumo_module.SPEED_MODE_SAFE)
+    monkeypatch.setattr(mixed_module, "SPEED_MODE_SAFE", 31)
     with pytest.raises(CellMismatch, match=r"CV speed mode 27 \(asked 31\)"):
         _done(cell)
     assert _done(plain)["mpr"] == 0.0
 
 
 def test_mixed_claims_pass_fail_and_not_checked():
-    from bench.regression.mixed import claims
+    from ecodrive_bench.bench.regression.mixed import claims
 
     def cells(e1: float, hdv_v: float) -> pd.DataFrame:
         rows = []
@@ -84,7 +84,7 @@ def test_mixed_claims_pass_fail_and_not_checked():
 def test_lane_gaps_reads_the_grid():
     import numpy as np
 
-    from bench.experiments.stalls import lane_gaps
+    from ecodrive_bench.bench.experiments.stalls import lane_gaps
 
     grid = np.ones((60, 3), np.float32)  # 10 rows behind the front bumper, 50 ahead
     grid[10 + 12, 0] = 0.0  # 12 m free ahead in lane 0
@@ -100,9 +100,9 @@ def test_stall_trace_records_what_the_policy_did(tmp_path):
     no red, and the action applied is the greedy allowed head's."""
     import pytest
 
-    from bench.experiments.stalls import HEADS, main, trace
-    from bench.harness.policies import load_policy, policy_dir, save_policy
-    from envs.action import LATERAL
+    from ecodrive_bench.bench.experiments.stalls import HEADS, main, trace
+    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir, save_policy
+    from ecodrive_bench.envs.action import LATERAL
 
     models = tmp_path / "models"
     train("prl", "coordinated", 1, seed=0, out=tmp_path / "run", models=models,
@@ -131,7 +131,7 @@ def test_stall_trace_records_what_the_policy_did(tmp_path):
 def test_stay_ablation_masks_both_lane_changes():
     import numpy as np
 
-    from bench.experiments.mixed import _stay
+    from ecodrive_bench.bench.experiments.mixed import _stay
 
     seen = []
     policy = _stay(lambda g, l, m: seen.append(m) or [(1, np.zeros(3))] * len(m))
@@ -144,7 +144,7 @@ def test_sweep_table_collects_every_finished_cell_and_refuses_a_mismatch(tmp_pat
     """MPR-0 cells (SUMO alone, 20 s): a second sweep over another demand keeps the first sweep's
     cell in the table; a rerun asking another duration for a finished cell is refused and the cell
     file is left as it was."""
-    from bench.experiments.mixed import main
+    from ecodrive_bench.bench.experiments.mixed import main
 
     args = ["--signals", "coordinated", "--mpr", "0", "--reps", "1", "--workers", "1", "--logs", str(tmp_path),
             "--run-id", "m"]
@@ -160,7 +160,7 @@ def test_sweep_table_collects_every_finished_cell_and_refuses_a_mismatch(tmp_pat
 
 
 def test_mixed_coverage_and_like_for_like_effect():
-    from reports.metrics import mixed_coverage
+    from ecodrive_bench.reports.metrics import mixed_coverage
 
     rows = pd.DataFrame([{"signals": "coordinated", "mpr": m, "demand": d, "rep": 0, "all_energy_per_km": e,
                           "all_pending": 0.0 if m == 0 else 4.0}
@@ -174,7 +174,7 @@ def test_mixed_coverage_and_like_for_like_effect():
 
 
 def test_cells_run_repetition_by_repetition(tmp_path):
-    from bench.experiments.mixed import parse, plan
+    from ecodrive_bench.bench.experiments.mixed import parse, plan
 
     cells = plan(parse(["--reps", "3", "--mpr", "0", "1", "--demand", "200", "700"]), tmp_path)
     per_rep = 2 * 2 * 2  # settings x MPR x demand
@@ -184,7 +184,7 @@ def test_cells_run_repetition_by_repetition(tmp_path):
 
 
 def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
-    from reports.metrics import mpr_effect_spread
+    from ecodrive_bench.reports.metrics import mpr_effect_spread
 
     # rep 0: -10% at MPR 1; rep 1: -30%; rep 2 lacks a cell (not counted)
     rows = pd.DataFrame([{"signals": "uncoordinated", "mpr": m, "demand": d, "rep": r,
@@ -198,7 +198,7 @@ def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
     assert abs(s.loc[1.0, "all_energy_per_km_change_max"] - (-0.1)) < 1e-12
     assert mpr_effect_spread(rows[rows.rep == 2]).empty
     # the pooled effect over the runs every MPR level has drops rep 2's MPR-0 cell at 700 as well
-    from reports.metrics import common_runs
+    from ecodrive_bench.reports.metrics import common_runs
 
     kept = common_runs(rows)
     assert len(kept) == 10 and not ((kept.rep == 2) & (kept.demand == 700)).any()
@@ -208,7 +208,7 @@ def test_mpr_effect_spread_pairs_each_repetition_and_skips_unfinished_ones():
 
 
 def test_mixed_claims_on_a_grid():
-    from reports.claims import mixed_claims
+    from ecodrive_bench.reports.claims import mixed_claims
 
     effect = pd.DataFrame({"signals": ["coordinated"] * 3 + ["uncoordinated"] * 2, "mpr": [0.0, 0.5, 1.0, 0.0, 0.5],
                            "all_energy_per_km_change": [0.0, -0.1, -0.2, 0.0, 0.01],
@@ -231,7 +231,7 @@ def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
     at a yellow light at its decel of 4.5 m/s^2, 13 m ahead of a CV whose decel (the action bound)
     is 4 m/s^2. The safety layer (speed mode 27) lets SUMO brake it as hard as its safe speed asks,
     so it stops short (with speed mode 31 it could brake no harder than 4 m/s^2 and would hit it)."""
-    from bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.harness.policies import policy_dir
 
     cell = Cell("uncoordinated", 0.6, 200, 0, 520.0, str(tmp_path / "cell.mcap"),
                 str(policy_dir("prl", "uncoordinated")))

@@ -5,8 +5,8 @@ import sys
 
 import pytest
 
-from bench.experiments import stalls
-from bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.experiments import stalls
+from ecodrive_bench.bench.harness.policies import CheckpointError
 
 
 @pytest.fixture(autouse=True)

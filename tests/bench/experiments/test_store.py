@@ -6,8 +6,8 @@ import json
 import pandas as pd
 import pytest
 
-from bench.experiments import store
-from envs.config import ConfigError
+from ecodrive_bench.bench.experiments import store
+from ecodrive_bench.envs.config import ConfigError
 
 IDENTITY = {"signals": "uncoordinated", "seed": 0, "episodes": 2, "cases": 1, "reward": {"form": "r", "phi": 1.0},
             "validation_cases": 1, "max_episode_time": 30.0}

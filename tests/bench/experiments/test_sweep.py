@@ -7,12 +7,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import bench.training.train
-from bench.experiments import store, sweep
-from bench.logs.mcaplog import is_complete
-from envs.config import ConfigError
-from reports.build import build
-from reports.metrics import reward_curves, smooth
+import ecodrive_bench.bench.training.train as train_module
+from ecodrive_bench.bench.experiments import store, sweep
+from ecodrive_bench.bench.logs.mcaplog import is_complete
+from ecodrive_bench.envs.config import ConfigError
+from ecodrive_bench.reports.build import build
+from ecodrive_bench.reports.metrics import reward_curves, smooth
 
 
 @pytest.fixture(autouse=True)
@@ -22,7 +22,7 @@ def _store(tmp_path, monkeypatch):
 
 
 def test_heatmap_job_trains_evaluates_and_resumes(tmp_path, monkeypatch):
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     argv = ["heatmap", "--values", "20", "--episodes", "2", "--cases", "2", "--validation-cases", "1", "--max-episode-time", "60",
             "--workers", "1", "--logs", str(tmp_path / "logs"), "--run-id", "t"]
     assert sweep.main(argv) == 0
@@ -53,7 +53,7 @@ def test_jobs_follow_prls_recipe_unless_paper():
     """By default a job trains as the shipped PRL seeds were (the recipe's episodes and departures
     from Table 2); ``--paper`` gives the paper's 1000 episodes and Table 2, a different job with its
     own run folder and identity; ``--episodes`` shortens either."""
-    from bench.training.recipes import recipe
+    from ecodrive_bench.bench.training.recipes import recipe
 
     rec = recipe("prl", "uncoordinated")
     (job,) = sweep.jobs("reward", sweep.parse(["reward", "--forms", "r", "--phi", "1", "--seeds", "0"]))
@@ -70,10 +70,10 @@ def test_a_job_that_is_a_shipped_seeds_training_takes_its_policy(tmp_path, monke
     """The reward study's (r, phi = 1) cell by the recipe is how the shipped PRL seeds were trained:
     the job evaluates the shipped policy and keeps its training metrics instead of training again.
     Any other value (here the episode truncation) makes it a job of its own."""
-    from bench.harness.episode import make_env
-    from bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.harness.policies import policy_dir
 
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--cases", "1", "--workers", "1",
             "--logs", str(tmp_path / "logs"), "--run-id", "t"]
     assert sweep.main(argv) == 0
@@ -117,7 +117,7 @@ def test_a_recipe_jobs_folder_is_not_taken_for_a_paper_jobs(tmp_path, capsys):
 def test_heatmap_cells_run_coarse_to_fine(tmp_path, monkeypatch):
     """The corners first, then the middle, then the rest: every k^2 first jobs of a seed are a
     complete k x k block, the grid the heatmap claims are judged on."""
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     labels = [j.label for j in sweep.order(sweep.jobs("heatmap", sweep.parse(["heatmap", "--seeds", "0"])))]
     assert labels[:4] == ["s10-j10-s0", "s50-j10-s0", "s10-j50-s0", "s50-j50-s0"] and len(set(labels)) == 25
     cells = sweep.coarse_to_fine_cells([10.0, 20.0, 30.0, 40.0, 50.0])
@@ -127,7 +127,7 @@ def test_heatmap_cells_run_coarse_to_fine(tmp_path, monkeypatch):
 
 
 def test_jobs_run_started_first_then_lowest_seed_first(tmp_path, monkeypatch):
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     todo = sweep.jobs("reward", sweep.parse(["reward", "--forms", "r", "r2", "--phi", "1", "--seeds", "0", "1"]))
     assert [j.label for j in sweep.order(todo)] == ["r-phi1-s0", "r2-phi1-s0", "r-phi1-s1", "r2-phi1-s1"]
     started = next(j for j in todo if j.label == "r2-phi1-s1")
@@ -170,7 +170,7 @@ def test_a_sweep_without_a_finished_job_is_reported_as_such(tmp_path):
 
 
 def test_the_report_names_the_training_of_a_mixed_sweep():
-    from reports.experiments import _budget
+    from ecodrive_bench.reports.experiments import _budget
 
     both = pd.DataFrame({"episodes": [300, 300], "agent_n_step": [5.0, None]})  # a recipe job and a --paper one
     assert "(1 of 2 jobs by PRL's recipe, n_step 5; the others by Table 2)" in _budget(both)
@@ -197,7 +197,7 @@ def test_bad_sweep_input_is_one_line(tmp_path, capsys):
 def test_sweep_table_keeps_earlier_jobs_and_refuses_a_mismatch(tmp_path, monkeypatch, capsys):
     """Two commands over different heatmap cells add up in one table; asking a finished cell again
     with another episode count is refused and its folder is left as it was."""
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     common = ["--episodes", "1", "--cases", "1", "--validation-cases", "1", "--max-episode-time", "30",
               "--workers", "1", "--logs", str(tmp_path / "logs"), "--run-id", "t"]
     assert sweep.main(["heatmap", "--values", "10"] + common) == 0
@@ -216,7 +216,7 @@ def test_a_stored_job_is_restored_not_trained(tmp_path, monkeypatch, capsys):
     """A finished job's small results go to the store; a sweep on a machine without the run folder
     or the logs (a new session) restores them instead of training, and the report is built from them.
     A job asked with other values is not taken from the store; a broken stored job is one line, exit 2."""
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     common = ["--forms", "r", "--phi", "1", "--seeds", "0", "--episodes", "2", "--cases", "1",
               "--validation-cases", "1", "--max-episode-time", "30", "--workers", "1", "--store", str(tmp_path / "kept")]
     assert sweep.main(["reward", *common, "--logs", str(tmp_path / "a"), "--run-id", "t"]) == 0
@@ -229,7 +229,7 @@ def test_a_stored_job_is_restored_not_trained(tmp_path, monkeypatch, capsys):
     first = pd.read_parquet(tmp_path / "a" / "t" / "reward" / "sweep.parquet")
     stored = {p.name: p.read_bytes() for p in kept.iterdir()}
 
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs-elsewhere")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs-elsewhere")
     assert sweep.main(["reward", *common, "--logs", str(tmp_path / "b"), "--run-id", "t"]) == 0
     assert "1 finished job(s) restored" in capsys.readouterr().out
     root = tmp_path / "b" / "t" / "reward"
@@ -295,7 +295,7 @@ def test_a_truncated_stored_parquet_is_one_line_and_nothing_is_restored(name, tm
     import sys
 
     monkeypatch.setattr(sys, "argv", ["ecodrive sweep"])
-    monkeypatch.setattr(bench.training.train, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     monkeypatch.setattr(sweep, "run_local", lambda *a, **k: pytest.fail("a job was run"))
     argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--episodes", "2", "--cases", "1",
             "--validation-cases", "1", "--max-episode-time", "30", "--workers", "1", "--store", str(tmp_path / "kept"),

@@ -14,9 +14,9 @@ from typing import Any
 import pytest
 import torch
 
-from bench.harness.cases import Case
-from bench.harness.executors import Task, task_agent
-from bench.harness.policies import (
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.executors import Task, task_agent
+from ecodrive_bench.bench.harness.policies import (
     CheckpointError,
     check_policy,
     load_policy,
@@ -25,9 +25,9 @@ from bench.harness.policies import (
     policy_spaces,
     read_manifest,
 )
-from bench.harness.run_command import main
-from bench.io import sha256
-from envs.config import ScenarioConfig
+from ecodrive_bench.bench.harness.run_command import main
+from ecodrive_bench.bench.io import sha256
+from ecodrive_bench.envs.config import ScenarioConfig
 
 METHOD, SIGNALS = "prl", "coordinated"
 
@@ -120,7 +120,7 @@ def test_a_raw_pickle_policy_is_refused_as_one_line_without_a_warning(tmp_path, 
 
 
 def test_check_policy_accepts_every_shipped_policy():
-    from bench.harness.policies import MODELS
+    from ecodrive_bench.bench.harness.policies import MODELS
 
     folders = sorted(MODELS.glob("*-*/s*"))
     assert folders

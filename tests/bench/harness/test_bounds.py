@@ -5,8 +5,8 @@ import json
 
 import pandas as pd
 
-from bench.harness.options import parse
-from bench.harness.run import run
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run import run
 
 
 def test_bounds_join_every_row_and_lie_below_the_baseline(tmp_path):
@@ -29,7 +29,7 @@ def test_bounds_join_every_row_and_lie_below_the_baseline(tmp_path):
 
 
 def test_the_report_shows_the_gaps(tmp_path):
-    from reports.build import build
+    from ecodrive_bench.reports.build import build
 
     run(parse(["--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline", "baseline0",
                "--signals", "coordinated", "--workers", "2", "--bounds"]), progress=False)

@@ -8,10 +8,10 @@ import textwrap
 import pandas as pd
 import pytest
 
-from bench.harness.external import AgentError, build, load_factory
-from bench.harness.options import parse
-from bench.harness.run import run
-from bench.harness.run_command import main
+from ecodrive_bench.bench.harness.external import AgentError, build, load_factory
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.bench.harness.run_command import main
 
 AGENT = textwrap.dedent('''
     import numpy as np

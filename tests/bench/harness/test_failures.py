@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from bench.harness.run_command import main
+from ecodrive_bench.bench.harness.run_command import main
 
 AGENT = textwrap.dedent('''
     import os, signal
@@ -124,7 +124,7 @@ def test_an_agent_that_raises_is_one_line_and_the_other_rows_are_kept(agents, ca
 
 
 def test_a_second_command_on_the_same_run_folder_is_refused(tmp_path):
-    cmd = [sys.executable, "-m", "bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods",
+    cmd = [sys.executable, "-m", "ecodrive_bench.bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods",
            "baseline", "--signals", "uncoordinated", "--workers", "1"]
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[3])}
     procs = [subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)

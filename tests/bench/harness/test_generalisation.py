@@ -11,15 +11,15 @@ import sys
 import pandas as pd
 import pytest
 
-from bench.harness import generalisation
-from bench.harness.cases import load as load_cases
-from bench.harness.errors import UsageError
-from bench.harness.generalisation import FamilyError, load, select
-from bench.harness.generalisation_run import run_family
-from bench.harness.options import parse
-from bench.harness.run import resolve_methods
-from bench.harness.run_command import main
-from envs.config import SIGNALS, ScenarioConfig
+from ecodrive_bench.bench.harness import generalisation
+from ecodrive_bench.bench.harness.cases import load as load_cases
+from ecodrive_bench.bench.harness.errors import UsageError
+from ecodrive_bench.bench.harness.generalisation import FamilyError, load, select
+from ecodrive_bench.bench.harness.generalisation_run import run_family
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run import resolve_methods
+from ecodrive_bench.bench.harness.run_command import main
+from ecodrive_bench.envs.config import SIGNALS, ScenarioConfig
 
 PAPER = ScenarioConfig()
 
@@ -93,7 +93,7 @@ def test_a_tampered_family_file_stops_the_profile_in_one_line(tmp_path, monkeypa
 def test_a_later_variant_that_is_refused_stops_the_profile_before_the_first_runs(tmp_path, monkeypatch, capsys):
     """g2's folder holds another scenario's episodes: the command is refused before g1's folder is
     made, and each policy is loaded once for both variants."""
-    import bench.harness.run as harness_run
+    import ecodrive_bench.bench.harness.run as harness_run
 
     loads = []
     real = harness_run.check_policy
@@ -151,7 +151,7 @@ def test_a_shipped_policy_drives_a_held_out_variant_with_transfer(tiny):
 
 
 def test_the_report_of_a_generalisation_run(tiny, tmp_path):
-    from reports.build import main as report
+    from ecodrive_bench.reports.build import main as report
 
     _, root, opts = tiny
     assert report([str(root), "--out", str(tmp_path / "r")]) == 0

@@ -12,8 +12,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from bench.harness.options import parse
-from bench.harness.run import run
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run import run
 
 COMPARE = ["method", "signals", "case", "seed", "energy", "travel_time", "steps", "stops", "clips", "collisions"]
 
@@ -51,7 +51,7 @@ def test_ray_matches_local(local_results, tmp_path):
 
 def test_killed_run_resumes_to_the_same_results(local_results, tmp_path):
     df_local, _ = local_results
-    cmd = [sys.executable, "-m", "bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
+    cmd = [sys.executable, "-m", "ecodrive_bench.bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
            "--workers", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 120
@@ -78,7 +78,7 @@ def _alive(pid: int) -> bool:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux-only")
 def test_killing_the_parent_stops_its_workers(tmp_path):
     """A sweep killed by its PID alone (not its process group) leaves no worker computing on."""
-    cmd = [sys.executable, "-m", "bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
+    cmd = [sys.executable, "-m", "ecodrive_bench.bench.harness.run_command", "--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline",
            "--workers", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
@@ -116,7 +116,7 @@ def test_bad_input_is_one_line_and_touches_nothing(args, words, tmp_path):
     keep = tmp_path / "smoke" / "coordinated" / "baseline" / "case-000.mcap"
     keep.parent.mkdir(parents=True)
     keep.write_bytes(b"existing")
-    cmd = [sys.executable, "-m", "bench.harness.run_command", "--logs", str(tmp_path), "--models", str(tmp_path / "no-models"), *args]
+    cmd = [sys.executable, "-m", "ecodrive_bench.bench.harness.run_command", "--logs", str(tmp_path), "--models", str(tmp_path / "no-models"), *args]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     err = [line for line in out.stderr.splitlines() if "pyarrow" not in line and "Try to uninstall" not in line]
     assert out.returncode == 2 and len(err) == 1 and "Traceback" not in out.stderr
@@ -128,7 +128,7 @@ def test_bad_input_is_one_line_and_touches_nothing(args, words, tmp_path):
 def test_unwritable_log_folder(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    cmd = [sys.executable, "-m", "bench.harness.run_command", "--profile", "smoke", "--methods", "baseline", "--logs", str(blocker)]
+    cmd = [sys.executable, "-m", "ecodrive_bench.bench.harness.run_command", "--profile", "smoke", "--methods", "baseline", "--logs", str(blocker)]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert out.returncode == 2 and "not writable" in out.stderr and "Traceback" not in out.stderr
     assert blocker.read_text() == "not a folder"
@@ -154,8 +154,8 @@ def test_rows_of_a_replaced_policy_are_not_kept_beside_the_new_ones(tmp_path):
     other rows (the old policy's) leave the table, so the manifest's sha256 covers every row."""
     import shutil
 
-    from bench.harness.cases import load as load_cases
-    from bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.harness.cases import load as load_cases
+    from ecodrive_bench.bench.harness.policies import policy_dir
 
     models = tmp_path / "models"
     shutil.copytree(policy_dir("prl", "coordinated"), policy_dir("prl", "coordinated", models))

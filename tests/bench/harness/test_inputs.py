@@ -9,13 +9,13 @@ import sys
 
 import pytest
 
-from bench.args import MAX_JSON_BYTES, InputError
-from bench.harness import cases as cases_mod
-from bench.harness import generalisation
-from bench.harness.cases import CaseError, check_cases, load
-from bench.harness.generalisation import FamilyError
-from bench.harness.options import parse
-from bench.harness.scenarios import parse_overrides
+from ecodrive_bench.bench.args import MAX_JSON_BYTES, InputError
+from ecodrive_bench.bench.harness import cases as cases_mod
+from ecodrive_bench.bench.harness import generalisation
+from ecodrive_bench.bench.harness.cases import CaseError, check_cases, load
+from ecodrive_bench.bench.harness.generalisation import FamilyError
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.scenarios import parse_overrides
 
 SIGNALS = ["coordinated", "uncoordinated"]
 
@@ -166,7 +166,7 @@ def test_a_bad_set_value_is_one_line_exit_2(item, words, tmp_path, monkeypatch, 
 
 
 def test_a_scenario_netconvert_cannot_build_is_refused_at_parse_time(tmp_path, monkeypatch):
-    import envs.scenario as scenario
+    import ecodrive_bench.envs.scenario as scenario
 
     fake = tmp_path / "netconvert"
     fake.write_text("#!/bin/sh\necho 'Error: cannot do that' >&2\nexit 1\n")

@@ -11,10 +11,10 @@ from dataclasses import fields
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from bench.args import InputError
-from bench.harness.cases import CASE_KEYS, INSERT_RANGE, SEED_BOUND, CaseError, check_cases, load
-from bench.harness.scenarios import parse_overrides, setting
-from envs.config import EVParams, RewardConfig, ScenarioConfig
+from ecodrive_bench.bench.args import InputError
+from ecodrive_bench.bench.harness.cases import CASE_KEYS, INSERT_RANGE, SEED_BOUND, CaseError, check_cases, load
+from ecodrive_bench.bench.harness.scenarios import parse_overrides, setting
+from ecodrive_bench.envs.config import EVParams, RewardConfig, ScenarioConfig
 
 FUZZ = settings(max_examples=100, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])

@@ -6,15 +6,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from agents.registry import LEARNING, RULE_BASED, make_agent
-from bench.harness.cases import Case
-from bench.harness.episode import make_env, run_episode
-from bench.harness.options import parse
-from bench.harness.oracle import OracleAgent
-from bench.harness.policies import load_policy, policy_dir
-from bench.harness.run import run
-from bench.logs.mcaplog import read_log
-from bench.oracle.dp import bound
+from ecodrive_bench.agents.registry import LEARNING, RULE_BASED, make_agent
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.oracle import OracleAgent
+from ecodrive_bench.bench.harness.policies import load_policy, policy_dir
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.oracle.dp import bound
 
 FREE_FLOW = {"arterial_flow": 0.0, "side_flow": 0.0}  # the ego alone on the corridor
 CUT = {**FREE_FLOW, "max_episode_time": 400.0}  # [s] a stalled episode costs > 400 Wh-equivalent,

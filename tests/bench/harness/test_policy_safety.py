@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
-from bench.io import sha256
-from bench.training.qcheck import main as qcheck_main
-from bench.training.train import main as train_main
-from bench.training.train import train
+from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
+from ecodrive_bench.bench.io import sha256
+from ecodrive_bench.bench.training.qcheck import main as qcheck_main
+from ecodrive_bench.bench.training.train import main as train_main
+from ecodrive_bench.bench.training.train import train
 
 
 class Payload:

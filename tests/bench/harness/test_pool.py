@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.harness.executors import run_local, run_ray
-from bench.harness.pool import RETRIES, Failure, WorkerDied
+from ecodrive_bench.bench.harness.executors import run_local, run_ray
+from ecodrive_bench.bench.harness.pool import RETRIES, Failure, WorkerDied
 
 
 def flaky(task: tuple[str, str]) -> dict:

@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.harness.options import parse
-from bench.harness.run_command import main
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.run_command import main
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -32,7 +32,7 @@ def sb3():
 @pytest.fixture(scope="module")
 def env_spaces():
     """(observation space, action space) of EcoDrive-v0 per action type, SUMO not started."""
-    import envs  # noqa: F401  (registers EcoDrive-v0)
+    import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
 
     out = {}
     for action in ("longitudinal", "discrete27"):
@@ -72,7 +72,7 @@ def flat(spaces_):
 
 def cli(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}  # the workers import this checkout
-    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True, text=True, timeout=600,
+    return subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.cli", *args], capture_output=True, text=True, timeout=600,
                           cwd=cwd, env=env)
 
 
@@ -96,7 +96,7 @@ def test_a_trained_ppo_model_lands_in_the_results_beside_the_baseline(sb3, tmp_p
     assert sorted(set(table.method)) == ["baseline", "my-ppo"] and len(table) == 6
     mine = table[table.method == "my-ppo"]
     assert (mine.train_seed == -1).all() and all((logs / "smoke" / p).is_file() for p in mine.mcap)
-    from bench.io import sha256
+    from ecodrive_bench.bench.io import sha256
 
     manifest = json.loads((logs / "smoke" / "manifest.json").read_text())
     assert manifest["checkpoint_sha256"]["my-ppo-coordinated"] == sha256(tmp_path / "eco_ppo.zip")
@@ -111,8 +111,8 @@ def test_a_trained_ppo_model_lands_in_the_results_beside_the_baseline(sb3, tmp_p
     ("DQN", "discrete27", "MultiInputPolicy"), ("PPO", "longitudinal", "MultiInputPolicy"),
 ])
 def test_every_algorithm_acts_greedily_inside_the_space(algo, action, policy, sb3, env_spaces, tmp_path):
-    from bench.harness import sb3 as adapter
-    from bench.harness.external import build, interface_of, load_factory
+    from ecodrive_bench.bench.harness import sb3 as adapter
+    from ecodrive_bench.bench.harness.external import build, interface_of, load_factory
 
     obs, act = env_spaces[action]
     path = saved(sb3, tmp_path / "m.zip", algo, *(flat(env_spaces[action]) if policy == "MlpPolicy" else (obs, act)),
@@ -185,8 +185,8 @@ def test_a_planted_payload_in_a_decoded_entry_is_refused_and_never_runs(key, sb3
 def test_a_payload_in_any_other_entry_is_never_unpickled(sb3, env_spaces, tmp_path):
     """The schedules and buffers are replaced unread, a JSON "env" is dropped; SB3's own load, the
     control, runs the payload."""
-    from bench.harness import sb3 as adapter
-    from bench.harness.external import build
+    from ecodrive_bench.bench.harness import sb3 as adapter
+    from ecodrive_bench.bench.harness.external import build
 
     marker = tmp_path / "ran"
     good = saved(sb3, tmp_path / "good.zip", "PPO", *flat(env_spaces["longitudinal"]))
@@ -239,9 +239,9 @@ def test_without_sb3_the_package_imports_and_sb3_is_one_line(tmp_path):
 
 def test_sb3_cannot_unpickle_even_an_entry_left_out_of_custom_objects(sb3, env_spaces, tmp_path):
     """The second lock: during the load SB3's cloudpickle is swapped for one that refuses."""
-    from bench.harness import sb3 as adapter
-    from bench.harness.external import AgentError
-    from bench.harness.sb3_zip import read
+    from ecodrive_bench.bench.harness import sb3 as adapter
+    from ecodrive_bench.bench.harness.external import AgentError
+    from ecodrive_bench.bench.harness.sb3_zip import read
 
     marker = tmp_path / "ran"
     bad = planted(saved(sb3, tmp_path / "good.zip", "PPO", *flat(env_spaces["longitudinal"])), tmp_path / "bad.zip",

@@ -10,15 +10,21 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.harness.bounds import BoundTask
-from bench.harness.errors import UsageError
-from bench.harness.options import parse
-from bench.harness.policies import CheckpointError, check_scenario, policy_dir, policy_spaces, read_manifest
-from bench.harness.run import run
-from bench.harness.run_command import main
-from bench.logs.mcaplog import episode_summary, read_log
-from envs.config import ScenarioConfig
-from envs.env import EcoDriveEnv
+from ecodrive_bench.bench.harness.bounds import BoundTask
+from ecodrive_bench.bench.harness.errors import UsageError
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.policies import (
+    CheckpointError,
+    check_scenario,
+    policy_dir,
+    policy_spaces,
+    read_manifest,
+)
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.bench.harness.run_command import main
+from ecodrive_bench.bench.logs.mcaplog import episode_summary, read_log
+from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.env import EcoDriveEnv
 
 # 3 lanes, uneven links, every junction its own plan: a road the shipped policies never saw
 NARROW = {"lanes": 3, "spacings": [300.0, 600.0, 250.0, 500.0], "junction_cycles": [90.0, 100.0, 60.0, 90.0, 120.0],
@@ -155,8 +161,8 @@ def test_a_transferred_policy_keeps_the_spaces_it_trained_with():
 
 
 def test_the_bound_is_solved_on_the_runs_scenario(monkeypatch):
-    import bench.oracle.dp as dp
-    from bench.harness import bounds
+    import ecodrive_bench.bench.oracle.dp as dp
+    from ecodrive_bench.bench.harness import bounds
 
     seen = []
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from bench.harness.run_command import main
-from bench.io import atomic_bytes, atomic_json, atomic_parquet, exclusive_open
+from ecodrive_bench.bench.harness.run_command import main
+from ecodrive_bench.bench.io import atomic_bytes, atomic_json, atomic_parquet, exclusive_open
 
 SMOKE = ["--profile", "smoke", "--methods", "baseline", "--signals", "coordinated", "--workers", "1"]
 
@@ -84,7 +84,7 @@ def test_a_linked_run_or_method_folder_is_refused_in_one_line(tmp_path, capsys, 
 
 
 def test_an_entry_point_name_that_is_a_path_is_left_out(tmp_path, monkeypatch, capsys):
-    from bench.harness import external
+    from ecodrive_bench.bench.harness import external
 
     info = tmp_path / "evil-0.1.dist-info"
     info.mkdir()
@@ -117,7 +117,7 @@ def test_a_file_size_limit_is_one_line_naming_the_file_and_keeps_the_table(tmp_p
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
     assert len(before) > limit
-    p = subprocess.run([sys.executable, "-m", "bench.cli", "run", *SMOKE, "--logs", str(logs), "--run-id", "r"],
+    p = subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.cli", "run", *SMOKE, "--logs", str(logs), "--run-id", "r"],
                        capture_output=True, text=True, preexec_fn=small_files, timeout=300)
     assert p.returncode == 2, p.stderr
     lines = [line for line in p.stderr.splitlines() if "error" in line]

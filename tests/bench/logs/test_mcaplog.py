@@ -8,9 +8,9 @@ import textwrap
 import numpy as np
 import pytest
 
-from agents import BaselineAgent
-from bench.harness.episode import make_env, run_episode
-from bench.logs.mcaplog import LogError, is_complete, read_log
+from ecodrive_bench.agents import BaselineAgent
+from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.logs.mcaplog import LogError, is_complete, read_log
 
 
 def _rerun_cmd() -> list[str]:
@@ -79,10 +79,10 @@ def test_killed_run_leaves_readable_part(tmp_path, cases):
     target = tmp_path / "case-000.mcap"
     script = textwrap.dedent(f"""
         import os, signal
-        from agents import BaselineAgent
-        from bench.harness.cases import load
-        from bench.harness.episode import make_env
-        from bench.logs import mcaplog
+        from ecodrive_bench.agents import BaselineAgent
+        from ecodrive_bench.bench.harness.cases import load
+        from ecodrive_bench.bench.harness.episode import make_env
+        from ecodrive_bench.bench.logs import mcaplog
         agent = BaselineAgent(); env = make_env(agent, "uncoordinated")
         n = [0]
         orig = mcaplog.EpisodeLog.record
@@ -91,7 +91,7 @@ def test_killed_run_leaves_readable_part(tmp_path, cases):
             if n[0] == 150:
                 os.kill(os.getpid(), signal.SIGKILL)
         mcaplog.EpisodeLog.record = record
-        from bench.harness.episode import run_episode
+        from ecodrive_bench.bench.harness.episode import run_episode
         run_episode(env, agent, load()[0], "baseline", log_path={str(target)!r})
     """)
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=120)
@@ -117,7 +117,7 @@ def test_rerun_decodes_every_channel(logged, tmp_path):
 
 
 def test_log_of_another_policy_is_not_reused(logged):
-    from bench.logs.mcaplog import episode_summary
+    from ecodrive_bench.bench.logs.mcaplog import episode_summary
 
     path = logged[0] / "run0" / "case-000.mcap"
     assert episode_summary(path)["energy"] > 0

@@ -5,8 +5,8 @@ import sys
 
 import pytest
 
-from agents import BaselineAgent
-from bench.harness.episode import make_env, run_episode
+from ecodrive_bench.agents import BaselineAgent
+from ecodrive_bench.bench.harness.episode import make_env, run_episode
 
 ENTITIES = ("/world/ego", "/world/neighbours", "/world/signals", "/world/trail", "/grid", "/series/speed",
             "/series/requested_accel", "/series/applied_accel", "/series/energy_total", "/series/reward_parts/speed")
@@ -23,7 +23,7 @@ def log(tmp_path_factory, cases):
 
 
 def _view(*args):
-    return subprocess.run([sys.executable, "-m", "bench.logs.view", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.logs.view", *map(str, args)], capture_output=True, text=True,
                           timeout=300)
 
 
@@ -74,7 +74,7 @@ def test_garbage_is_a_clear_error(tmp_path):
 
 def test_a_plan_shows_beside_the_driven_trajectory(tmp_path, cases):
     """The oracle's log carries its plan: the recording has the planned speed and the ghost."""
-    from bench.harness.oracle import OracleAgent
+    from ecodrive_bench.bench.harness.oracle import OracleAgent
 
     env = make_env(OracleAgent, "coordinated", {"arterial_flow": 0.0, "side_flow": 0.0})
     try:

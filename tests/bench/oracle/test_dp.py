@@ -9,10 +9,10 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from bench.oracle.dp import Corridor, Grid, bound, solve
-from bench.oracle.energy import energy_wh
-from envs.config import ScenarioConfig
-from envs.env import EcoDriveEnv
+from ecodrive_bench.bench.oracle.dp import Corridor, Grid, bound, solve
+from ecodrive_bench.bench.oracle.energy import energy_wh
+from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.env import EcoDriveEnv
 
 CFG = ScenarioConfig()  # the paper's corridor: 5 coordinated signals, 90 s cycle, 42 s green
 FREE_FLOW = {"arterial_flow": 0.0, "side_flow": 0.0, "ego_sigma": 0.0}  # the ego alone, steady driver

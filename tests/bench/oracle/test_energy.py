@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agents.baseline import BaselineAgent
-from bench.oracle.energy import energy_wh
-from envs.config import EVParams
-from envs.env import EcoDriveEnv
+from ecodrive_bench.agents.baseline import BaselineAgent
+from ecodrive_bench.bench.oracle.energy import energy_wh
+from ecodrive_bench.envs.config import EVParams
+from ecodrive_bench.envs.env import EcoDriveEnv
 
 EPISODE_TOL = 0.01  # [-] model summed over an episode vs SUMO's episode energy, relative
 STEP_TOL = 1e-9  # [Wh] one step without a heading change vs SUMO's energy of that step

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.oracle.dp import Corridor, Grid, solve
-from bench.oracle.kernel import backward_step, backward_step_numpy
-from envs.config import ScenarioConfig
+from ecodrive_bench.bench.oracle.dp import Corridor, Grid, solve
+from ecodrive_bench.bench.oracle.kernel import backward_step, backward_step_numpy
+from ecodrive_bench.envs.config import ScenarioConfig
 
 
 @pytest.mark.parametrize("seed", range(20))

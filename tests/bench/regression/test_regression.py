@@ -1,6 +1,6 @@
 from __future__ import annotations
 
-from bench.regression.check import against_record
+from ecodrive_bench.bench.regression.check import against_record
 
 
 def test_recorded_failures_are_known_and_strict():
@@ -14,9 +14,9 @@ def test_recorded_failures_are_known_and_strict():
 def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_path):
     import pandas as pd
 
-    from bench.harness.options import parse
-    from bench.harness.run import resolve_methods
-    from bench.regression.check import claims
+    from ecodrive_bench.bench.harness.options import parse
+    from ecodrive_bench.bench.harness.run import resolve_methods
+    from ecodrive_bench.bench.regression.check import claims
 
     models = tmp_path / "models"
     for m, s in (("prl", "coordinated"), ("prl", "uncoordinated"), ("ddpg", "coordinated")):
@@ -45,7 +45,7 @@ def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_pat
 def test_ddpg_uncoordinated_travel_time_claim():
     import pandas as pd
 
-    from bench.regression.check import claims
+    from ecodrive_bench.bench.regression.check import claims
 
     name = "DDPG+LC2013 slower than baseline uncoordinated, more than coordinated"
 
@@ -64,7 +64,7 @@ def test_ddpg_uncoordinated_travel_time_claim():
 
 
 def test_a_reference_written_without_the_mixed_cells_keeps_their_recorded_claims():
-    from bench.regression.check import record_rows
+    from ecodrive_bench.bench.regression.check import record_rows
 
     earlier = [("a", "PASS", "old"), ("mixed x", "FAIL", "stalls"), ("gone", "NOT CHECKED", "")]
     now = [("a", "FAIL", "new"), ("mixed-traffic claims", "NOT CHECKED", "--no-mixed given")]
@@ -80,10 +80,10 @@ def test_a_shipped_policy_that_cannot_drive_is_one_error_line(tmp_path, monkeypa
 
     import torch
 
-    import bench.harness.options as br
-    from bench.harness.policies import policy_dir
-    from bench.io import sha256
-    from bench.regression.check import main
+    import ecodrive_bench.bench.harness.options as br
+    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.io import sha256
+    from ecodrive_bench.bench.regression.check import main
 
     models = tmp_path / "models"
     folder = policy_dir("prl", "coordinated", models)

@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.training.qcheck import calibration, main, returns_to_go
+from ecodrive_bench.bench.training.qcheck import calibration, main, returns_to_go
 
 
 def test_returns_to_go_discounts_and_bootstraps():
@@ -25,11 +25,11 @@ def test_rollout_earns_the_harness_return_on_a_real_episode():
     the episode's discounted return in the agent's units."""
     import torch
 
-    from agents.registry import make_agent
-    from bench.harness.episode import make_env, run_episode
-    from bench.harness.policies import load_policy, policy_dir
-    from bench.training.qcheck import rollout
-    from bench.training.train import validation_cases
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.harness.episode import make_env, run_episode
+    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir
+    from ecodrive_bench.bench.training.qcheck import rollout
+    from ecodrive_bench.bench.training.train import validation_cases
 
     torch.set_num_threads(1)
     state, _ = load_policy(policy_dir("prl", "coordinated"), "prl")
@@ -61,8 +61,8 @@ def test_a_folder_without_a_checkpoint_is_a_clear_error(tmp_path, capsys):
 
 
 def test_a_twin_q_run_folder_is_checked_with_its_own_agent_config(tmp_path):
-    from bench.training.qcheck import check
-    from bench.training.train import train
+    from ecodrive_bench.bench.training.qcheck import check
+    from ecodrive_bench.bench.training.train import train
 
     train("prl", "coordinated", 1, seed=0, out=tmp_path / "run", models=None, progress=False, validation_cases=0,
           agent_config={"learning_starts": 64, "batch_size": 16, "twin_q": True}, scenario={"max_episode_time": 60.0})
@@ -72,8 +72,8 @@ def test_a_twin_q_run_folder_is_checked_with_its_own_agent_config(tmp_path):
 
 def test_a_run_folder_needs_no_shipped_policy(tmp_path):
     """MP-DQN has no shipped policy yet; its run folders can still be checked."""
-    from bench.training.qcheck import check
-    from bench.training.train import train
+    from ecodrive_bench.bench.training.qcheck import check
+    from ecodrive_bench.bench.training.train import train
 
     train("mpdqn", "coordinated", 1, seed=0, out=tmp_path / "run", models=None, progress=False, validation_cases=0,
           agent_config={"learning_starts": 64, "batch_size": 16}, scenario={"max_episode_time": 30.0})

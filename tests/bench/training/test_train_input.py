@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from bench.harness.policies import CheckpointError, load_torch, policy_dir
-from bench.training import train_all
-from bench.training.train import main, read_checkpoint, train
+from ecodrive_bench.bench.harness.policies import CheckpointError, load_torch, policy_dir
+from ecodrive_bench.bench.training import train_all
+from ecodrive_bench.bench.training.train import main, read_checkpoint, train
 
 
 @pytest.fixture(autouse=True)
@@ -87,8 +87,8 @@ def test_a_checkpoint_error_from_train_has_the_command_prefix(tmp_path, capsys):
 
 
 def test_a_real_checkpoint_passes_the_structure_check(tmp_path):
-    from agents.registry import make_agent
-    from bench.harness.episode import make_env
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.harness.episode import make_env
 
     env = make_env("prl", "coordinated")
     agent = make_agent("prl", env.observation_space, env.action_space, seed=0)
@@ -104,8 +104,8 @@ def test_a_real_checkpoint_passes_the_structure_check(tmp_path):
 def _resumable(out, **change):
     """A checkpoint of the identity ``train("prl", "coordinated", 2, 0, out)`` has, with its replay
     buffer; ``change`` replaces entries."""
-    from agents.registry import make_agent
-    from bench.harness.episode import make_env
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.harness.episode import make_env
 
     env = make_env("prl", "coordinated")
     agent = make_agent("prl", env.observation_space, env.action_space, seed=0, eps_decay_episodes=2)
