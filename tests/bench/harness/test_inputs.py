@@ -178,3 +178,18 @@ def test_a_scenario_netconvert_cannot_build_is_refused_at_parse_time(tmp_path, m
     msg = str(e.value)
     assert "\n" not in msg and msg.startswith("--scenario/--set: scenario ") and "Error: cannot do that" in msg
     assert parse_overrides(None, ["lanes=3"], ["coordinated"], build=False) == {"lanes": 3}
+
+
+def test_ecodrive_run_with_a_bad_case_list_is_one_line_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    """A duplicate index (one MCAP would overwrite the other) is refused before the run folder is
+    made: the case list is read in the run's checks (``bench.harness.run.preflight``)."""
+    from ecodrive_bench.bench.harness import run as run_mod
+    from ecodrive_bench.bench.harness.run_command import main
+
+    bad = _write_cases(tmp_path, _duplicate)
+    monkeypatch.setattr(run_mod, "load", lambda: load(bad))
+    logs = tmp_path / "logs"
+    assert main(["--profile", "smoke", "--methods", "baseline", "--signals", "coordinated", "--logs", str(logs)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is also case" in err[0] and str(bad) in err[0]
+    assert not logs.exists()
