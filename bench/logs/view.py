@@ -2,8 +2,16 @@
 
     ecodrive view logs/<run>/<signals>/<method>/case-000.mcap [--save out.rrd]
 
+The blueprint puts the drive first: an ego close-up (``/world`` seen from ``/world/ego_frame``, which
+follows the ego) beside the time-distance diagram (``/td``), then the whole corridor with the
+occupancy grid, then the time series. The two drive views, and why the close-up is a moving frame
+rather than an ego-relative copy of the drawing, are in ``bench/logs/drive.py``.
+
 Entities (timeline ``sim_time``, simulation seconds):
   /world/lanes, /world/stop_lines    static corridor drawing (top-down, metres)
+  /world/ego_frame                   a frame at the ego's x, the close-up's origin
+  /td/ego, /td/plan, /td/signals/*   the time-distance diagram: position over time, the plan dashed,
+                                     red and yellow bands at each stop line the ego reached
   /world/signals                     signal heads coloured by the ego's phase
   /world/ego, /world/neighbours      vehicles as boxes; /world/trail the ego's last 60 s
   /world/plan                        where the plan puts the ego (logs with a plan: the oracle)
@@ -23,6 +31,7 @@ import numpy as np
 
 from ecodrive_bench.bench.args import Parser, fail
 from ecodrive_bench.bench.io import Unwritable, writable_dir
+from ecodrive_bench.bench.logs.drive import ROAD, log_ego_frame, log_time_distance, signal_links, views
 from ecodrive_bench.bench.logs.mcaplog import LogError, read_log
 
 GREEN, RED, YELLOW = (40, 180, 60), (220, 40, 40), (230, 190, 30)
@@ -53,11 +62,7 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
     stops = geo.get("stop_lines", [])
     rec.log("/world/stop_lines", rr.LineStrips2D([[[x, lane_y[0] - half], [x, lane_y[-1] + half]] for x in stops],
                                                  colors=(255, 255, 255)), static=True)
-    # the ego's link index at each signal, recovered from the log
-    links: dict[str, int] = {}
-    for s in steps:
-        if s.signal.tls and s.signal.tls not in links:
-            links[s.signal.tls] = s.signal.link
+    links = signal_links(steps)  # the ego's link index at each signal, recovered from the log
     tls_ids = geo.get("tls", sorted(links))
     times = np.array([s.time for s in steps])
     plan = data.plan
@@ -111,8 +116,11 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
     for c in COMPONENTS:
         vals = np.array([getattr(s.components, c) for s in steps])
         rec.send_columns(f"/series/reward_parts/{c}", indexes=[idx], columns=rr.Scalars.columns(scalars=vals))
+    log_ego_frame(rec, steps)
+    closeup, td = views(steps, lane_y, half, x_end, log_time_distance(rec, steps, geo, links, plan))
     blueprint = rrb.Blueprint(rrb.Vertical(
-        rrb.Horizontal(rrb.Spatial2DView(name="corridor", origin="/world"),
+        rrb.Horizontal(closeup, td, column_shares=[3, 2]),
+        rrb.Horizontal(rrb.Spatial2DView(name="corridor", origin="/world", background=ROAD),
                        rrb.Spatial2DView(name="occupancy grid", origin="/grid"), column_shares=[5, 1]),
         rrb.Horizontal(
             rrb.TimeSeriesView(name="speed [m/s]", origin="/series", contents=speed_views),
@@ -123,7 +131,7 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
             rrb.TimeSeriesView(name="reward", origin="/series", contents=["/series/reward", "/series/reward_parts/**"]),
             rrb.TextLogView(name="lane decisions", origin="/events"),
         ),
-        row_shares=[3, 2],
+        row_shares=[4, 1, 2],
     ), collapse_panels=True)
     rec.send_blueprint(blueprint)
     return len(steps), data.warning
