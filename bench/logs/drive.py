@@ -20,6 +20,8 @@ close-up (x 250-274 of a 958 px panel: its front at 60/210 of the width), with o
 stop lines around it. The alternative, logging every entity a second time relative to the ego
 (``x - ego_x``), was not needed: it would cost a second copy of the neighbours, stop lines and
 signal heads per step and two drawings kept in step by hand; the transform is one row per step.
+One flaw seen there: the viewer places a box's *label* at its untransformed x (the "ego" label drifts
+right as the ego drives while its box stays), so the close-up hides the ego's and the plan's labels.
 
 **The time-distance diagram is a TimeSeriesView**, not a 2D view: it has the axes with ticks in
 seconds and metres that a 2D view lacks, y pointing up, and the viewer's time cursor drawn across it
@@ -130,15 +132,18 @@ def log_ego_frame(rec: Any, steps: list[Any]) -> None:
 
 def views(steps: list[Any], lane_y: list[float], half: float, x_end: float, td_paths: list[str]) -> tuple[Any, Any]:
     """The close-up and time-distance views for the blueprint."""
+    import rerun as rr
     import rerun.blueprint as rrb
     from rerun.encodings import TimeRange
 
     episode = TimeRange(start=rrb.TimeRangeBoundary.absolute(seconds=steps[0].time),
                         end=rrb.TimeRangeBoundary.absolute(seconds=steps[-1].time))
 
+    no_label = rr.Boxes2D.from_fields(show_labels=False)  # rerun 0.41 leaves labels at the untransformed x
     closeup = rrb.Spatial2DView(
         name=f"ego close-up ({BEHIND:.0f} m behind, {AHEAD:.0f} m ahead)", origin="/world/ego_frame",
         contents=["/world/**", "- /world/trail"], background=ROAD,
+        overrides={"/world/ego": no_label, "/world/plan": no_label},
         visual_bounds=rrb.VisualBounds2D(x_range=[-BEHIND, AHEAD],
                                          y_range=[lane_y[0] - half - SIDE, lane_y[-1] + half + SIDE]))
     td = rrb.TimeSeriesView(

@@ -93,11 +93,16 @@ def oracle(tmp_path_factory, cases):
 
 
 @pytest.fixture(scope="module")
-def baseline_rrd(log, tmp_path_factory):
+def baseline_rrd_path(log, tmp_path_factory):
     rrd = tmp_path_factory.mktemp("view-rrd") / "base.rrd"
     out = _view(log[0], "--save", rrd)
     assert out.returncode == 0, out.stderr
-    return _read_rrd(rrd)
+    return rrd
+
+
+@pytest.fixture(scope="module")
+def baseline_rrd(baseline_rrd_path):
+    return _read_rrd(baseline_rrd_path)
 
 
 def _values(df, entity):
@@ -220,3 +225,187 @@ def test_a_refused_log_leaves_no_recording(tmp_path):
     bad.write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 10)
     _view(bad, "--save", tmp_path / "c.rrd")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
+
+
+# --- the saved recording in Rerun's web viewer under headless Chromium ---------------------------------------------
+# Needs Chromium (Debian's ``chromium``; ``$ECODRIVE_BROWSER`` names another binary); without one the test skips,
+# unless ``ECODRIVE_REQUIRE_BROWSER=1``, where it fails. The viewer (shipped in rerun-sdk) and the .rrd are served
+# from a child process; Chromium is driven over ``--remote-debugging-pipe`` (stdlib only) and screenshotted.
+SIZE = (1600, 1000)  # [px] browser window
+LOAD_S = 90.0  # [s] for the viewer's wasm to load and draw under a software rasterizer on a busy machine
+PLAY_S = 20.0  # [s] of playback (1x, from the episode's start) between the two looks at the close-up
+SERVE = """
+import functools, http.server, sys, threading, time
+import rerun as rr
+class H(http.server.SimpleHTTPRequestHandler):
+    def end_headers(self):
+        self.send_header("Access-Control-Allow-Origin", "*")
+        super().end_headers()
+    def log_message(self, *a):
+        pass
+files = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(H, directory=sys.argv[1]))
+threading.Thread(target=files.serve_forever, daemon=True).start()
+rr.serve_web_viewer(web_port=int(sys.argv[2]), open_browser=False)
+print(files.server_address[1], flush=True)
+time.sleep(3600)
+"""
+
+
+def _chromium() -> str:
+    import os
+    import shutil
+
+    exe = os.environ.get("ECODRIVE_BROWSER") or next(
+        (p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None)
+    if exe is not None and shutil.which(exe) is None:
+        pytest.fail(f"$ECODRIVE_BROWSER={exe!r} is not an executable")
+    if exe is None:
+        if os.environ.get("ECODRIVE_REQUIRE_BROWSER") == "1":
+            pytest.fail(f"ECODRIVE_REQUIRE_BROWSER=1 but no Chromium ({exe!r}): apt-get install chromium")
+        pytest.skip("no Chromium (apt-get install chromium, or set $ECODRIVE_BROWSER)")
+    return exe
+
+
+class _Browser:
+    """Headless Chromium over the DevTools pipe (fd 3 in, fd 4 out, NUL-separated JSON)."""
+
+    def __init__(self, exe: str, profile) -> None:
+        import os
+
+        r_in, self._w = os.pipe()
+        self._r, w_out = os.pipe()
+
+        def fds() -> None:
+            os.dup2(r_in, 3)
+            os.dup2(w_out, 4)
+
+        self.proc = subprocess.Popen(
+            [exe, "--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+             "--no-first-run", "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             "--hide-scrollbars", f"--window-size={SIZE[0]},{SIZE[1]}", f"--user-data-dir={profile}",
+             "--remote-debugging-pipe", "about:blank"],
+            pass_fds=(3, 4), preexec_fn=fds, start_new_session=True,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        os.close(r_in)
+        os.close(w_out)
+        self._n, self._buf = 0, b""
+        target = self.call("Target.createTarget", url="about:blank")["targetId"]
+        self.session = self.call("Target.attachToTarget", targetId=target, flatten=True)["sessionId"]
+        self.call("Emulation.setDeviceMetricsOverride", self.session, width=SIZE[0], height=SIZE[1],
+                  deviceScaleFactor=1, mobile=False)
+
+    def call(self, method: str, session: str | None = None, **params):
+        import json
+        import os
+
+        self._n += 1
+        msg = {"id": self._n, "method": method, "params": params, **({"sessionId": session} if session else {})}
+        os.write(self._w, json.dumps(msg).encode() + b"\0")
+        while True:
+            while b"\0" not in self._buf:
+                chunk = os.read(self._r, 1 << 20)
+                if not chunk:
+                    raise RuntimeError("chromium closed its DevTools pipe")
+                self._buf += chunk
+            raw, self._buf = self._buf.split(b"\0", 1)
+            reply = json.loads(raw)
+            if reply.get("id") == self._n:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return reply["result"]
+
+    def screenshot(self):
+        import base64
+        import io
+
+        from PIL import Image
+
+        data = base64.b64decode(self.call("Page.captureScreenshot", self.session, format="png")["data"])
+        return np.asarray(Image.open(io.BytesIO(data)).convert("RGB")).astype(int)
+
+    def close(self) -> None:
+        import os
+        import signal
+
+        try:
+            self.call("Browser.close")
+            self.proc.wait(10)
+        except Exception:
+            os.killpg(self.proc.pid, signal.SIGKILL)  # our own Chromium's process group, by its id
+            self.proc.wait(10)
+        os.close(self._w)
+        os.close(self._r)
+
+
+def _near(img, rgb, tol: int = 24):
+    return (np.abs(img - np.array(rgb)) <= tol).all(axis=-1)
+
+
+def _drive_views(img) -> dict:
+    """Find the close-up (the road-coloured panel in the top half) and the time-distance view right of it;
+    report where the ego is drawn in the close-up and what the time-distance view holds."""
+    from ecodrive_bench.bench.logs.drive import AHEAD, BEHIND, EGO, RED, ROAD
+
+    top = img[: img.shape[0] // 2]
+    road = _near(top, ROAD, 2)
+    if road.sum() < 10000:
+        return {"closeup": None}
+    ys, xs = np.nonzero(road)
+    y0, y1, x0, x1 = ys.min(), ys.max(), xs.min(), xs.max()
+    ego = _near(top[y0:y1, x0:x1], EGO, 30)
+    td = top[y0:y1, x1 + 20:]
+    ex = np.nonzero(ego)[1]
+    return {"closeup": (int(x0), int(x1)), "ego_px": int(ego.sum()),
+            "ego_front": (ex.max() / (x1 - x0)) if len(ex) else None, "expected_front": BEHIND / (BEHIND + AHEAD),
+            "td_ego_px": int(_near(td, EGO, 30).sum()), "td_red_px": int(_near(td, RED, 30).sum())}
+
+
+def _drawn(r: dict) -> bool:
+    return (r["closeup"] is not None and r["ego_px"] > 20 and r["ego_front"] is not None
+            and abs(r["ego_front"] - r["expected_front"]) < 0.03 and r["td_ego_px"] > 300 and r["td_red_px"] > 300)
+
+
+def test_the_recording_draws_the_drive_in_the_web_viewer(baseline_rrd_path, tmp_path):
+    """Rerun's own web viewer opens the saved recording and plays it: the close-up is drawn with the ego's
+    front at 60/210 of its width, and still there PLAY_S later (the ego has driven some 200 m by then, so a
+    close-up that did not follow would have lost it); the time-distance view holds the trajectory and red
+    bands. The viewer without a recording must fail the same check."""
+    import socket
+    import time
+
+    exe = _chromium()
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        web = s.getsockname()[1]
+    server = subprocess.Popen([sys.executable, "-c", SERVE, str(baseline_rrd_path.parent), str(web)],
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    browser = None
+    try:
+        files = int(server.stdout.readline())
+        browser = _Browser(exe, tmp_path / "profile")
+        viewer = f"http://127.0.0.1:{web}/"
+        browser.call("Page.navigate", browser.session, url=viewer)
+        time.sleep(15.0)
+        empty = _drive_views(browser.screenshot())
+        browser.call("Page.navigate", browser.session, url=f"{viewer}?url=http://127.0.0.1:{files}/{baseline_rrd_path.name}")
+        end, first = time.monotonic() + LOAD_S, None
+        while first is None and time.monotonic() < end:
+            time.sleep(2.0)
+            shot = browser.screenshot()
+            r = _drive_views(shot)
+            first = r if _drawn(r) else None
+        assert first is not None, f"the drive was not drawn within {LOAD_S:.0f} s: {r}"
+        time.sleep(PLAY_S)
+        shot2 = browser.screenshot()
+        later = _drive_views(shot2)
+    finally:
+        if browser is not None:
+            browser.close()
+        server.kill()  # the child started above, by its handle
+        server.wait(10)
+    assert not _drawn(empty), empty  # the bare viewer does not pass for a drawn drive
+    assert _drawn(later), later
+    x0, x1 = first["closeup"]
+    moved = (np.abs(shot[:SIZE[1] // 2, x0:x1] - shot2[:SIZE[1] // 2, x0:x1]).sum(axis=-1) > 30).sum()
+    assert moved > 1000  # playback went on: the neighbours and lanes moved under the ego
+    assert abs(first["ego_front"] - later["ego_front"]) * (x1 - x0) <= 2  # [px] while the ego stayed put
