@@ -11,6 +11,7 @@ from . import rewards
 from .action import make_action
 from .config import ScenarioConfig
 from .observation import GridLogicObservation
+from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
 from .scenario import build
 from .sumo import SumoSession
 from .vehicle import ControlledVehicle, StepMeasure
@@ -92,7 +93,7 @@ class EcoDriveEnv(gym.Env):
     ``gym.make_vec("EcoDrive-v0", n, vectorization_mode="async")``.
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 1}  # one frame per simulated second
 
     def __init__(
         self,
@@ -100,8 +101,11 @@ class EcoDriveEnv(gym.Env):
         action: str = "parameterized",
         reward: str = "r",
         config: ScenarioConfig | dict | None = None,
+        render_mode: str | None = None,
+        rerun_target: str = "spawn",
         **overrides: Any,
     ) -> None:
+        check_mode(render_mode)
         if isinstance(config, ScenarioConfig):
             base = config.to_dict()
         else:
@@ -118,6 +122,10 @@ class EcoDriveEnv(gym.Env):
         self.action_type = make_action(action, self.cfg)
         self.observation_space = self.obs_type.space
         self.action_space = self.action_type.space
+        self.render_mode, self._rerun_target = render_mode, rerun_target
+        self._closeup = CloseUp(self.files.lane_y, self.files.stop_lines, self.cfg.vehicle_length)
+        self._stream: RerunStream | None = None
+        self._spec: Any = None
         self.ego: ControlledVehicle | None = None
         self._ended = False  # the episode terminated or truncated: step() refuses until reset()
         self._last_obs: dict[str, np.ndarray] = {}
@@ -173,6 +181,8 @@ class EcoDriveEnv(gym.Env):
         info = self._info(None, {}, 0.0)
         if self.recorder is not None:
             self.recorder(self._record(obs, None, None, 0.0, {}, info))
+        if self.render_mode in ("rerun", "human"):
+            self._stream_step(0.0, info, new_episode=True)
         return obs, info
 
     def step(self, action):
@@ -214,13 +224,59 @@ class EcoDriveEnv(gym.Env):
         info["ego_left_simulation"] = gone
         if self.recorder is not None:
             self.recorder(self._record(obs, m, action, r, comps, info))
+        if self.render_mode in ("rerun", "human"):
+            self._stream_step(float(r), info, new_episode=False)
         return obs, float(r), bool(terminated), bool(truncated), info
 
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: the ego close-up, (rows, columns, 3) uint8 (``envs.render.CloseUp``);
+        ``rerun`` and ``human`` stream every step from ``reset`` and ``step`` and return None."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self.ego is None:
+            raise RuntimeError("call reset() before render()")
+        return self._frame()
+
     def close(self) -> None:
+        if self._stream is not None:
+            self._stream.close()
+            self._stream = None
         self.session.close()
         super().close()
 
+    @property
+    def max_episode_steps(self) -> int:
+        """Steps after which an episode is truncated: ``max_episode_time`` over the step length."""
+        return int(np.ceil(self.cfg.max_episode_time / self.cfg.step_length - 1e-9))
+
+    @property
+    def spec(self) -> Any:
+        """gymnasium's ``EnvSpec``, with ``max_episode_steps`` from the scenario (the env
+        truncates itself; no ``TimeLimit`` wrapper is added)."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, value: Any) -> None:
+        import dataclasses
+
+        self._spec = None if value is None else dataclasses.replace(value, max_episode_steps=self.max_episode_steps)
+
     # ------------------------------------------------------------------ helpers
+    def _frame(self) -> np.ndarray:
+        ego = self.ego
+        assert ego is not None
+        x, y = ego.kin.x, ego.kin.y
+        sig = ego.signal
+        c = self._closeup
+        others = others_in_view(self.session, EGO_ID, x, (c.y_bottom, c.y_top)) if self.session.running else []
+        return c.frame((x, y), others, None if sig is None else (x + sig.distance, sig.state))
+
+    def _stream_step(self, reward: float, info: dict[str, Any], new_episode: bool) -> None:
+        if self._stream is None:
+            self._stream = RerunStream(self._rerun_target)
+        self._stream.log(info["time"], self._frame(), {
+            "speed": self.ego.kin.speed, "energy": info["energy"], "reward": reward}, new_episode)
+
     def _info(self, m: StepMeasure | None, comps: dict, travel_time: float) -> dict[str, Any]:
         ego = self.ego
         assert ego is not None

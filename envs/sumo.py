@@ -222,6 +222,11 @@ class SumoSession:
         """Vehicles within the context range: id -> {var: value} (the vehicle itself included)."""
         return self._api.vehicle.getContextSubscriptionResults(vid)
 
+    def position(self, vid: str) -> tuple[float, float]:
+        """(x, y) [m] of the vehicle's front bumper."""
+        x, y = self._api.vehicle.getPosition(vid)
+        return x, y
+
     def odometer(self, vid: str) -> float:
         """Distance [m] driven since insertion."""
         return self._api.vehicle.getDistance(vid)
