@@ -32,7 +32,13 @@ from ecodrive_bench.bench.paper import TABLE4 as PAPER_TABLE4
 
 CI_CASES = 20
 REFERENCE = Path(__file__).with_name("reference") / "ci.csv"
-REF_RTOL = 1e-9  # own reference: runs are deterministic, so only float noise is allowed
+# own reference, relative per episode: runs are deterministic for a seed on one machine, but torch
+# picks its CPU kernels by instruction set (AVX2, AVX-512), and a continuous action that differs
+# in its last bits moves an episode's energy by up to 1e-7 (8.2e-8 measured, AVX-512 against the
+# reference's host; every discrete column identical, the rule-based and DQN rows bit-identical).
+# So energy is compared to 1e-6, and the counts and times exactly (up to formatting noise).
+REF_RTOL = 1e-9
+REF_RTOL_BY_COLUMN = {"energy": 1e-6}
 CLAIMS_RECORD = REFERENCE.with_name("claims.csv")  # the claims' statuses when the reference was written
 REF_COLUMNS = ["method", "signals", "train_seed", "case", "energy", "travel_time", "steps", "stops", "lane_changes_applied",
                "clips", "collisions"]
@@ -121,7 +127,7 @@ def reference(df: pd.DataFrame) -> list[tuple[str, str, str]]:
             out.append((name, "FAIL", f"{len(o)} episodes, reference has {len(r)}"))
             continue
         bad = [c for c in values if not np.allclose(o[c].to_numpy(float), r[c].to_numpy(float),
-                                                    rtol=REF_RTOL, atol=1e-9)]
+                                                    rtol=REF_RTOL_BY_COLUMN.get(c, REF_RTOL), atol=1e-9)]
         out.append((name, "FAIL" if bad else "PASS", f"differs in {', '.join(bad)}" if bad else f"{len(r)} episodes identical"))
     new = sorted(set(map(tuple, ours[keys[:-1]].values)) - set(map(tuple, ref[keys[:-1]].values)))
     for group in new:
