@@ -9,7 +9,9 @@ step). The arithmetic is the numpy form's, in the same order and the same float3
 with the same tie rule (the first choice that is strictly better wins), so both give the same
 values and the same plans bit for bit (tests/bench/oracle/test_kernel.py).
 
-The first call compiles (about a second; cached under ``__pycache__`` where that is writable).
+The first call in a process compiles (about a second). numba's on-disk cache is not used: an
+installed package's folder may be read-only, and a cache written under an earlier module name
+fails to load after a rename.
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True)
 def _relax(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: int, lo: int, jn: int,
            cost: np.float32, c: int) -> None:
     """States of rows ``a..b`` (one speed): a landing at speed ``jn`` improves on the best so far
@@ -29,7 +31,7 @@ def _relax(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: 
             arg_j[i - lo] = c
 
 
-@njit(cache=True, nogil=True)
+@njit(nogil=True)
 def backward_step(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
                   d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray) -> None:
     """Fill ``cur[jlo:jhi+1, lo:hi+1]`` with the best value over the acceleration choices and
