@@ -9,7 +9,7 @@ import nox
 LATERAL_ALL = ("baseline", "baseline0", "prl", "mpdqn", "dqn", "ddpg")
 
 nox.options.default_venv_backend = "none"
-nox.options.sessions = ["tests", "regression", "lint", "docs"]
+nox.options.sessions = ["tests", "regression", "lint", "docs", "wheel"]
 
 
 @nox.session
@@ -64,6 +64,31 @@ def docs(session: nox.Session) -> None:
     """The docs site (mkdocs.yml, docs/) built with --strict: a broken link or a page missing from
     the nav fails (CI runs this)."""
     session.run("mkdocs", "build", "--strict", "--site-dir", "build/site")
+
+
+@nox.session
+def wheel(session: nox.Session) -> None:
+    """Build the wheel, install it into a fresh virtualenv and run the smoke profile from a folder
+    outside the checkout: a non-editable install has its case files, references and shipped
+    policies (CI runs this)."""
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    root = Path.cwd()
+    tmp = Path(tempfile.mkdtemp(prefix="ecodrive-wheel-"))
+    session.run("python", "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp / "dist"), str(root))
+    (whl,) = (tmp / "dist").glob("ecodrive_bench-*.whl")
+    session.run("python", "-m", "venv", str(tmp / "venv"))
+    bin_dir = tmp / "venv" / "bin"
+    session.run(str(bin_dir / "python"), "-m", "pip", "install", "-q", str(whl), external=True)
+    session.chdir(tmp)
+    session.run(str(bin_dir / "ecodrive"), "run", "--profile", "smoke", "--workers", "2", "--logs", str(tmp / "logs"),
+                external=True, env={"PYTHONPATH": ""})
+    session.run(str(bin_dir / "ecodrive"), "report", str(tmp / "logs" / "smoke"), "--out", str(tmp / "report"),
+                external=True, env={"PYTHONPATH": ""})
+    session.chdir(root)
+    shutil.rmtree(tmp)
 
 
 @nox.session
