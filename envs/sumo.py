@@ -14,6 +14,7 @@ vectorization_mode="async")``).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -103,6 +104,7 @@ class SumoSession:
         self.backend = ""  # "libsumo" or "traci" while running
         self._api: Any = _Closed()  # the libsumo module, or this session's TraCI connection
         self.busy = False  # in the middle of an episode: its libsumo is not handed to another session
+        self.sumo_seconds = 0.0  # [s] wall time inside SUMO since start(): loading and stepping (the floor)
         self._plans: dict[str, TlsPlan] = {}
         self._context_range = max(cfg.grid_ahead, cfg.grid_behind) + 2 * cfg.vehicle_length
 
@@ -123,6 +125,7 @@ class SumoSession:
         closed), else in a SUMO process of its own through TraCI."""
         global _LIBSUMO_OWNER
         self.close()
+        t0 = time.perf_counter()
         owner = _LIBSUMO_OWNER
         if owner is not None and not owner.busy:
             owner.close()
@@ -133,6 +136,7 @@ class SumoSession:
             self._api, self.backend = _traci_start(self.command(seed)[1:]), "traci"
         self.busy = True
         self.running = True
+        self.sumo_seconds = time.perf_counter() - t0  # loading counts, as the warm-up's steps will
         if not self._plans:
             api = self._api
             for tls in self.files.tls_ids:
@@ -156,7 +160,9 @@ class SumoSession:
         return self._api.simulation.getTime()
 
     def step(self, until: float = 0.0) -> None:
+        t0 = time.perf_counter()
         self._api.simulationStep(until)
+        self.sumo_seconds += time.perf_counter() - t0
 
     def departed(self) -> tuple[str, ...]:
         return self._api.simulation.getDepartedIDList()

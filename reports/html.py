@@ -294,7 +294,13 @@ def provenance_section(page: Page) -> str:
              ("Episodes", esc(f"{man.get('episodes_run', DASH)} run, {man.get('episodes_reused', DASH)} reused from "
                               f"complete logs, {man.get('episodes_kept_from_earlier_commands', DASH)} kept from earlier "
                               "commands")),
-             ("Wall time", esc(duration(man.get("wall_time_s")))),
+             ("Wall time", esc(duration(man.get("wall_time_s")))
+              + (f" <span class='ci'>(every command that wrote the folder: "
+                 f"{esc(duration(man.get('wall_time_all_commands_s')))})</span>"
+                 if man.get("wall_time_all_commands_s") else "")),
+             ("Time in SUMO (the floor)", esc(duration(man.get("sumo_time_s"))) + (
+                 f" <span class='ci'>(wall time \u00d7 workers / SUMO's time = {man['floor_ratio']:.2f})</span>"
+                 if man.get("floor_ratio") else "")),
              ("Sum of episode times", esc(duration(man.get("episode_time_sum_s")))),
              ("Harness overhead", esc(pct(overhead, 1) if not missing(overhead) else DASH)
               + " <span class='ci'>(wall time \u00d7 workers / sum of episode times \u2212 1)</span>")]

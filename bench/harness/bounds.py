@@ -3,8 +3,9 @@
 For each (signal setting, case) the ego's own departure time fixes the problem; two bounds are
 solved: ``cost_bound``, the least E + phi T through the signals (phi of the scenario's reward),
 and ``energy_bound``, the least energy that arrives no later than SUMO's driver (``baseline``)
-did on that case, an equal-time comparison. Solutions are kept in ``<run>/bounds.parquet`` and
-reused by a rerun (the DP takes a few seconds per case).
+did on that case, an equal-time comparison. Solutions are kept in ``<run>/bounds.parquet``,
+rewritten as each case finishes (a killed run loses only the cases in flight), and reused by a
+rerun (the DP takes a second or two per case); a progress bar with an ETA shows the phase.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from tqdm import tqdm
 
 from ecodrive_bench.bench.io import atomic_parquet
 
@@ -64,7 +66,7 @@ def tasks_for(results: pd.DataFrame, scenario: str = "") -> list[BoundTask]:
 
 
 def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
-           scenario: dict[str, Any] | None = None) -> pd.DataFrame:
+           scenario: dict[str, Any] | None = None, progress: bool = True) -> pd.DataFrame:
     """``results`` with the bound columns of its case, solving (with ``runner(tasks, workers,
     fn)``, an executor of ``bench.harness.executors``) only what ``bounds.parquet`` lacks, on the
     run's ``scenario`` (overrides; one per run folder)."""
@@ -73,9 +75,13 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
     have = set(map(tuple, done[KEY].astype(object).values)) if len(done) else set()
     todo = [t for t in tasks_for(results, json.dumps(scenario, sort_keys=True) if scenario else "") if (t.signals, t.case, t.depart_time, t.time_limit) not in have]
     if todo:
-        new = pd.DataFrame(list(runner(todo, workers, solve)), columns=COLUMNS)
-        done = pd.concat([done, new], ignore_index=True) if len(done) else new
-        atomic_parquet(done, path)
+        rows: list[dict[str, Any]] = []
+        for row in tqdm(runner(todo, workers, solve), total=len(todo), desc="bounds", unit="case",
+                        disable=not progress):
+            rows.append(row)
+            new = pd.DataFrame(rows, columns=COLUMNS)
+            atomic_parquet(pd.concat([done, new], ignore_index=True) if len(done) else new, path)
+        done = pd.read_parquet(path)
     cols = ["signals", "case", "cost_bound", "energy_bound"]
     latest = done.drop_duplicates(["signals", "case"], keep="last")[cols]
     return results.drop(columns=[c for c in cols[2:] if c in results.columns]).merge(latest, on=["signals", "case"],

@@ -112,7 +112,7 @@ def run_episode(
             if plan is not None:
                 log.add_plan(plan)
             log.finish(summary)
-        return summary
+        return {**summary, "sumo_s": env.session.sumo_seconds}  # [s] inside SUMO: the episode's floor
     except BaseException:
         if log is not None:
             log.abort()

@@ -43,7 +43,8 @@ def carry_forward(manifest: dict[str, Any], earlier_path: Path, kept: set[str]) 
     scenarios, and ``commands``, one entry per command that wrote the folder, oldest first. An
     earlier manifest that cannot be read adds nothing (its rows' MCAP logs still record their own
     policy and scenario)."""
-    summary = {k: manifest.get(k) for k in ("command", "git_sha", "methods", "signals", "episodes_run", "wall_time_s")}
+    summary = {k: manifest.get(k) for k in ("command", "git_sha", "methods", "signals", "episodes_run", "wall_time_s",
+                                            "sumo_time_s", "phases_s")}
     try:
         old = json.loads(earlier_path.read_text()) if earlier_path.is_file() else {}
     except (OSError, ValueError):
@@ -55,6 +56,9 @@ def carry_forward(manifest: dict[str, Any], earlier_path: Path, kept: set[str]) 
         history = [{k: old.get(k) for k in summary}] if old.get("command") else []
     out = dict(manifest)
     out["commands"] = [*history, summary]
+    # the folder's whole cost, every command that wrote it (a report shows these, not the last command's)
+    for key in ("wall_time_s", "sumo_time_s"):
+        out[f"{key.removesuffix('_s')}_all_commands_s"] = round(sum(float(c.get(key) or 0.0) for c in out["commands"]), 2)
     shas = old.get("checkpoint_sha256") if isinstance(old.get("checkpoint_sha256"), dict) else {}
     out["checkpoint_sha256"] = {**{k: v for k, v in shas.items() if k in kept}, **manifest.get("checkpoint_sha256", {})}
     for key in ("scenario", "train_scenarios"):

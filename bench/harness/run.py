@@ -149,7 +149,7 @@ def run(opts: RunOptions, progress: bool = True, checks: Preflight | None = None
         todo = plan(opts, pre)
         t0 = time.perf_counter()
         rows, failed = execute(opts, todo, progress)
-        return write(opts, pre, todo, rows, failed, time.perf_counter() - t0)
+        return write(opts, pre, todo, rows, failed, time.perf_counter() - t0, progress)
 
 
 def plan(opts: RunOptions, pre: Preflight) -> Plan:
@@ -191,7 +191,7 @@ def execute(opts: RunOptions, todo: Plan, progress: bool = True) -> tuple[list[d
 
 
 def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any]], failed: failures.Failures,
-          wall: float) -> pd.DataFrame:
+          wall: float, progress: bool = True) -> pd.DataFrame:
     """``results.parquet`` (this command's rows, the earlier commands' kept rows, the bounds) and
     ``manifest.json``, each replaced atomically; returns the table."""
     run_dir = opts.run_dir
@@ -200,15 +200,21 @@ def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any
     for i, col in enumerate(SCENARIO_COLUMNS):
         df[col] = [(ev.eval_hash, ev.train_hash)[i] for ev in map(pre.where.get, zip(df.method, df.signals, df.train_seed))]
     ran = df["episode_wall_s"].dropna()
+    if "sumo_s" not in df.columns:  # every row reused from a finished log
+        df["sumo_s"] = float("nan")
+    sumo_s = float(df["sumo_s"].sum())  # [s] inside SUMO for the episodes run now: the floor
     kept = earlier_rows(run_dir, df, todo.shas)
-    df = pd.concat([df[list(KEEP)], kept], ignore_index=True) if len(kept) else df[list(KEEP)]
+    cols = [*KEEP, "sumo_s"]  # sumo_s: NaN for rows reused or kept from earlier commands
+    df = pd.concat([df[cols], kept], ignore_index=True) if len(kept) else df[cols]
     df = df.sort_values(["signals", "method", "train_seed", "case"], ignore_index=True)
     df["mcap"] = [_relative(run_dir, m) for m in df.mcap]  # the run folder moves as a whole
+    t_bounds = time.perf_counter()
     if opts.bounds:
         def runner(tasks, workers, fn):
             return (run_local(tasks, workers, fn) if opts.executor == "local"
                     else run_ray(tasks, opts.address, workers, fn))
-        df = attach(run_dir, df, opts.workers, runner, opts.scenario)
+        df = attach(run_dir, df, opts.workers, runner, opts.scenario, progress)
+    bounds_s = time.perf_counter() - t_bounds
     atomic_parquet(df, run_dir / "results.parquet")
     manifest = {
         "command": " ".join(["ecodrive", "run", *opts.argv]), "profile": opts.profile,
@@ -217,7 +223,11 @@ def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any
         "git_sha": git_sha(), "packages": package_versions(), "checkpoint_sha256": todo.shas,
         "episodes_run": int(len(ran)), "episodes_reused": int(len(df) - len(ran) - len(kept)),
         "episodes_kept_from_earlier_commands": int(len(kept)),
-        "wall_time_s": round(wall, 2), "episode_time_sum_s": round(float(ran.sum()), 2),
+        "wall_time_s": round(wall + bounds_s, 2), "episode_time_sum_s": round(float(ran.sum()), 2),
+        "phases_s": {"episodes": round(wall, 2), "bounds": round(bounds_s, 2)},
+        "sumo_time_s": round(sumo_s, 2),  # the floor: SUMO's own time for the episodes run now
+        # wall time x workers over SUMO's time: 1 would be SUMO alone on every worker all along
+        "floor_ratio": round((wall + bounds_s) * min(opts.workers, max(len(ran), 1)) / sumo_s, 3) if sumo_s > 0 else None,
         "harness_overhead": round(float(wall * min(opts.workers, max(len(ran), 1)) / ran.sum() - 1), 4)
         if len(ran) else None,
     }

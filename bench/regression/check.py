@@ -177,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
     br.PROFILES["regression"] = CI_CASES  # for this run only: `ecodrive run` offers no such profile
     try:
-        df = run(parse(["--profile", "regression", "--logs", logs]), progress=False)
+        df = run(parse(["--profile", "regression", "--logs", logs]))  # progress bars on stderr
     except (UsageError, CheckpointError, AgentError) as e:  # a shipped policy that cannot drive included
         if not args.logs:
             _drop_if_empty(Path(logs))

@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 
 import pandas as pd
+import pytest
 
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import run
@@ -38,3 +39,49 @@ def test_the_report_shows_the_gaps(tmp_path):
     gaps = pd.read_csv(tmp_path / "report" / "optimality_gaps.csv").set_index("method")
     assert gaps.loc["baseline", "share_closed"] == 0.0 and (gaps.cost_gap > 0).all()
     assert "Distance to the energy-optimal bound" in (tmp_path / "report" / "index.html").read_text()
+
+
+def test_bounds_are_written_case_by_case_so_a_kill_keeps_the_finished_ones(tmp_path):
+    """The bounds phase rewrites bounds.parquet as each case finishes: interrupted after two of
+    three cases, the two are kept, and the rerun solves only the third."""
+    import pytest
+
+    from ecodrive_bench.bench.harness.bounds import COLUMNS, BoundTask, attach
+
+    results = pd.DataFrame({"method": ["baseline"] * 3, "signals": ["coordinated"] * 3, "case": [0, 1, 2],
+                            "depart_time": [200.0, 210.0, 220.0], "travel_time": [190.0, 191.0, 192.0],
+                            "terminated": [True] * 3})
+    solved: list[int] = []
+
+    def fake(task: BoundTask) -> dict:
+        solved.append(task.case)
+        return {c: 0.0 for c in COLUMNS} | {"signals": task.signals, "case": task.case,
+                                            "depart_time": task.depart_time, "time_limit": task.time_limit}
+
+    def interrupted(tasks, workers, fn):
+        for t in tasks[:2]:
+            yield fake(t)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        attach(tmp_path, results, 1, interrupted, progress=False)
+    assert sorted(pd.read_parquet(tmp_path / "bounds.parquet").case) == [0, 1]
+    solved.clear()
+    out = attach(tmp_path, results, 1, lambda tasks, workers, fn: map(fake, tasks), progress=False)
+    assert solved == [2] and out.cost_bound.notna().all()
+
+
+def test_the_manifest_measures_the_floor_and_every_commands_wall_time(tmp_path):
+    """Every episode run records its seconds inside SUMO; the manifest has the phase times, SUMO's
+    time, their ratio, and the wall time summed over every command that wrote the folder."""
+    common = ["--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline", "--workers", "2"]
+    run(parse([*common, "--signals", "coordinated"]), progress=False)
+    df = run(parse([*common, "--signals", "uncoordinated"]), progress=False)
+    man = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
+    new = df[df.signals == "uncoordinated"]
+    assert (new.sumo_s > 0).all() and (new.sumo_s < 60).all()
+    assert df[df.signals == "coordinated"].sumo_s.isna().all()  # kept from the first command: not run now
+    assert man["sumo_time_s"] == pytest.approx(new.sumo_s.sum(), abs=0.01)
+    assert man["floor_ratio"] > 1 and set(man["phases_s"]) == {"episodes", "bounds"}
+    assert man["wall_time_all_commands_s"] == pytest.approx(sum(c["wall_time_s"] for c in man["commands"]), abs=0.02)
+    assert len(man["commands"]) == 2 and man["wall_time_all_commands_s"] > man["wall_time_s"]
