@@ -77,7 +77,7 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
     if todo:
         rows: list[dict[str, Any]] = []
         for row in tqdm(runner(todo, workers, solve), total=len(todo), desc="bounds", unit="case",
-                        disable=not progress):
+                        disable=None if progress else True):  # None: off where stderr is no terminal
             rows.append(row)
             new = pd.DataFrame(rows, columns=COLUMNS)
             atomic_parquet(pd.concat([done, new], ignore_index=True) if len(done) else new, path)

@@ -183,7 +183,7 @@ def execute(opts: RunOptions, todo: Plan, progress: bool = True) -> tuple[list[d
           else run_ray(todo.tasks, opts.address, opts.workers, on_failure=failed, skip=failed.skip))
     rows = []
     with tqdm(total=len(todo.reused) + len(todo.tasks), initial=len(todo.reused), desc="episodes", unit="ep",
-              disable=not progress) as bar:
+              disable=None if progress else True) as bar:  # None: off where stderr is no terminal (CI logs)
         for row in it:
             rows.append(row)
             bar.update(1)
