@@ -64,8 +64,8 @@ def _shipped_prl(name: str) -> list[dict]:
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "known failure (docs/results.md, lateral scenarios): no shipped uncoordinated PRL seed leaves "
-    "HDV1's lane in A; they brake behind it (some change lanes later, away from the event)"))
+    "known failure (docs/experiments.md, Why scenario A fails): the scenario's script places HDV1 "
+    "behind the ego, so no policy can leave its lane while behind it; fix the script, then re-judge A"))
 def test_shipped_prl_leaves_the_braking_vehicles_lane():
     """A (section 5.4): PRL leaves HDV1's lane, judged over the shipped seeds (at least half).
     Strict: when the shipped policies start to behave so, this fails until the mark goes."""
