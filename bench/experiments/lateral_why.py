@@ -1,4 +1,4 @@
-"""Why lateral scenario A fails (issue 32 §2): an analysis, no training.
+"""Why lateral scenario A fails: an analysis, no training.
 
     python -m ecodrive_bench.bench.experiments.lateral_why [--out /tmp/lateral-why] [--episodes 20]
 
