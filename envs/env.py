@@ -86,6 +86,12 @@ class EcoDriveEnv(gym.Env):
     after the end raises until the next ``reset()``; an action outside ``action_space`` raises
     ``envs.action.InvalidAction`` naming it, and nothing is simulated.
 
+    ## Info
+    ``time`` and ``travel_time`` [s], ``position`` (the ego's front bumper x [m] along the
+    arterial, in the network's coordinates), ``energy`` [Wh] so far, the step's ``requested``
+    and ``applied`` action and whether the safety layer ``clipped`` it, ``action_mask``,
+    ``reward_components``, counters (lane changes, clips, collisions, teleports) and the ``case``.
+
     ## Several envs in one process
     Each env drives its own simulation. The first to reset runs in libsumo (in-process); one
     that resets while another is mid-episode there runs its own SUMO through TraCI (same SUMO,
@@ -283,6 +289,7 @@ class EcoDriveEnv(gym.Env):
         return {
             "action_mask": ego.mask.copy(),
             "time": self.session.time(),
+            "position": float(ego.kin.x),
             "travel_time": travel_time,
             "energy": ego.energy,
             "energy_step": 0.0 if m is None else m.energy,

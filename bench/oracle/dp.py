@@ -250,10 +250,10 @@ class _Run:
         self.cor, self.cfg, self.depart_time, self.phi, self.kernel = cor, cfg, depart_time, phi, kernel
         self.states = 0  # evaluated, all passes
 
-    def backward(self, lat: _Lattice, windows: list[Window]) -> _Solution:
+    def backward(self, lat: _Lattice, windows: list[Window], keep: bool = False) -> _Solution:
         dt = self.cfg.step_length
         green = self.cor.green(self.depart_time + np.arange(len(windows)) * dt, dt) if self.cor.stop_lines else None
-        out = _backward(lat, green, windows, self.phi * dt, self.kernel)
+        out = _backward(lat, green, windows, self.phi * dt, self.kernel, keep)
         self.states += out.states
         return out
 
@@ -288,6 +288,7 @@ class _Solution:
     value: float  # [Wh] optimal value of the start state (float32 sums)
     policy: list[tuple[int, int, np.ndarray] | None]  # per step: first row, first speed, best choice
     states: int  # states evaluated
+    values: list[np.ndarray | None] | None = None  # per step: [speed, row] values of its window (``keep``)
 
 
 class _Lattice:
@@ -347,9 +348,10 @@ class _Lattice:
 
 
 def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float,
-              kernel: str = "numba") -> _Solution:
+              kernel: str = "numba", keep: bool = False) -> _Solution:
     """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start,
-    one ``bench.oracle.kernel`` step per time step."""
+    one ``bench.oracle.kernel`` step per time step; ``keep``: also return every step's values
+    (the cost-to-go table a re-planning controller reads, ``bench.oracle.mpc``)."""
     step = KERNELS[kernel]
     nv, n_d, i_end = lat.nv, lat.n_d, lat.i_end
     n_rows = i_end + nv + 1  # rows >= i_end: arrived, value 0
@@ -361,6 +363,7 @@ def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], ti
     step_cost = np.ascontiguousarray((lat.energy + time_cost).astype(np.float32))
     arg_type = np.int8 if n_d < 127 else np.int16
     policy: list[tuple[int, int, np.ndarray] | None] = [None] * len(windows)
+    values: list[np.ndarray | None] | None = [None] * len(windows) if keep else None
     no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))
     states = 0
     for k in range(len(windows) - 1, -1, -1):
@@ -378,9 +381,11 @@ def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], ti
             step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red)
             reg_cur = (lo, hi, jlo, jhi)
             policy[k] = (lo, jlo, arg)
+            if values is not None:
+                values[k] = cur[jlo:jhi + 1, lo:hi + 1].copy()
         nxt, cur, reg_nxt, reg_cur = cur, nxt, reg_cur, reg_nxt
     value = float(nxt[nv, 0]) if i_end > 0 else 0.0
-    return _Solution(value=value, policy=policy, states=states)
+    return _Solution(value=value, policy=policy, states=states, values=values)
 
 
 if __name__ == "__main__":  # timing note: python -m bench.oracle.dp [depart_time ...]

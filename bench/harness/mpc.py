@@ -1,0 +1,155 @@
+"""The ``mpc`` method: a closed-loop controller that knows the signal plans (``bench.oracle.mpc``).
+
+At the first step of an episode it takes the case's energy-optimal plan (the ``oracle``'s, on the
+fine lattice) as the plan in force, and builds the cost-to-go table of the departure. At every
+step it reads the ego's state (speed from the observation, position from ``info["position"]``)
+and the vehicle ahead from the occupancy grid, and re-plans when an event says the plan in force
+no longer holds:
+
+- ``drift``: the ego left the plan's cell (speed off by more than ``TOL_V``, or the position out
+  of ``[x_plan - one global row - TOL_X, x_plan + TOL_X]``); between re-plans the state therefore
+  stays within these bounds of the plan in force, which is what the trigger guarantees;
+- ``leader``: over the look-ahead, the plan in force comes closer to the predicted vehicle ahead
+  than ``MIN_GAP + HEADWAY v``;
+- ``end``: the plan in force has ended before the corridor.
+
+A re-plan costs about a millisecond (``nox -s perf``), so the trigger only spares work; with no
+event the re-plan would return the rest of the plan in force anyway (tests/bench/oracle).
+
+The vehicle ahead: the first occupied cell ahead of the front bumper in the ego's lane column of
+the grid (its rear bumper, to the cell: the gap is rounded down). Its speed is the ego's speed
+plus the gap's change over the last two steps (SUMO's update ``x' = x + v' dt``), at least 0; a
+vehicle first seen this step is taken at the ego's speed. This is what the observation tells.
+
+It drives the ``longitudinal`` action type through the same safety layer as ``oracle`` and
+DDPG+LC2013: Krauss clips the request, LC2013 changes lanes. It requests ``a = (v_plan[k+1] -
+v) / dt`` within [a_min, a_max]. The plans in force are kept (``plan_trace``: the first, and each
+re-plan with its step, event and wall time) for the step log, where the viewer draws them.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ecodrive_bench.bench.oracle import mpc as planner
+from ecodrive_bench.bench.oracle.dp import Corridor, Plan, bound
+from ecodrive_bench.envs.config import ScenarioConfig
+
+NAME = "mpc"
+TOL_V = 0.05  # [m/s] speed drift that triggers a re-plan
+TOL_X = 0.05  # [m] position drift (beyond the one-row rounding) that triggers a re-plan
+MAX_PLANS_LOGGED = 400  # re-plans kept for the step log per episode (the first ones)
+
+
+class MPCAgent:
+    """Re-plans on the DP's cost-to-go table when the ego drifts or the vehicle ahead is in the way."""
+
+    name = NAME
+    action_interface = "longitudinal"
+    env_overrides: dict[str, Any] = {}
+
+    def __init__(self, cfg: ScenarioConfig) -> None:
+        self.cfg = cfg
+        self.cor = Corridor.from_config(cfg)
+        self.plan: Plan | None = None
+        self.table: planner.Table | None = None
+        self.k0 = 0  # [steps] the step the plan in force starts at
+        self.x = np.zeros(0)  # [m] plan in force from step k0
+        self.v = np.zeros(0)  # [m/s]
+        self.gaps: list[float | None] = []  # last two gaps to the vehicle ahead [m]
+        self.events: list[dict[str, Any]] = []
+        self.counts: dict[str, int] = {}
+
+    def start(self, depart_time: float) -> None:
+        """A new episode departing at ``depart_time`` [s]."""
+        self.plan = bound(self.cfg, depart_time, "cost")
+        self.table = planner.table(self.cor, self.cfg, depart_time, int(self.plan.grid["horizon"]))
+        self.k0, self.x, self.v = 0, self.plan.x, self.plan.v
+        self.gaps, self.events = [], []
+        self.counts = {"drift": 0, "leader": 0, "end": 0, "step": 0, "relaxed": 0, "lost": 0}
+
+    def leader(self, obs: dict[str, np.ndarray], speed: float) -> planner.Leader | None:
+        """The vehicle ahead in the ego's lane, from the grid; updates the gap history."""
+        cfg = self.cfg
+        lanes = cfg.observed_lanes
+        lane = int(np.argmax(obs["logic"][:lanes]))
+        ahead = int(round(cfg.grid_behind / cfg.cell_length))  # first row ahead of the front bumper
+        column = obs["grid"][ahead:, lane]
+        occupied = np.nonzero(column < 0.5)[0]
+        gap = float(occupied[0]) * cfg.cell_length if len(occupied) else None
+        self.gaps = (self.gaps + [gap])[-3:]
+        if gap is None:
+            return None
+        est = speed
+        dt = cfg.step_length
+        if len(self.gaps) == 3 and self.gaps[0] is not None and self.gaps[1] is not None:
+            est = speed + (gap - self.gaps[0]) / (2 * dt)
+        elif len(self.gaps) >= 2 and self.gaps[-2] is not None:
+            est = speed + (gap - self.gaps[-2]) / dt
+        return planner.Leader(gap=gap, speed=max(0.0, est))
+
+    def _event(self, k: int, x: float, v: float, lead: planner.Leader | None) -> str | None:
+        idx = k - self.k0
+        if idx + 1 >= len(self.v):
+            return "end"
+        dx = self.table.lat.dx if self.table is not None else 0.0
+        if abs(v - self.v[idx]) > TOL_V or x > self.x[idx] + TOL_X or x < self.x[idx] - dx - TOL_X:
+            return "drift"
+        if lead is not None:
+            m = np.arange(1, min(planner.LOOKAHEAD, len(self.v) - 1 - idx) + 1)
+            limit = x + lead.gap + lead.speed * m * self.cfg.step_length - planner.MIN_GAP
+            if np.any(self.x[idx + m] > limit - planner.HEADWAY * self.v[idx + m]):
+                return "leader"
+        return None
+
+    def act(self, obs: dict[str, np.ndarray], info: dict[str, Any], explore: bool = False) -> np.ndarray:
+        cfg, dt = self.cfg, self.cfg.step_length
+        if info["travel_time"] == 0.0 or self.plan is None:  # the reset's info: a new departure
+            self.start(float(info["time"]))
+        assert self.plan is not None and self.table is not None
+        k = int(round((float(info["time"]) - self.plan.t[0]) / dt))
+        speed = float(obs["logic"][cfg.observed_lanes + 1])
+        x = float(info["position"])
+        lead = self.leader(obs, speed)
+        event = self._event(k, x, speed, lead) if self.k0 == 0 and self.events == [] else "step"
+        if event is not None:
+            self.counts[event] += 1
+            started = time.perf_counter()
+            new = planner.replan(self.table, k, x, speed, lead)
+            if new is None:  # no plan arrives within the table: hold the speed limit (Krauss governs)
+                self.counts["lost"] += 1
+                self.k0, self.x, self.v = k, np.array([x, x]), np.array([speed, cfg.speed_limit])
+            else:
+                self.counts["relaxed"] += new.leader == "relaxed"
+                self.k0, self.x, self.v = k, new.x, new.v
+                if len(self.events) < MAX_PLANS_LOGGED:
+                    self.events.append({"time": float(info["time"]), "event": event, "leader": new.leader,
+                                        "wall_s": time.perf_counter() - started, "x": new.x.tolist(),
+                                        "speed": new.v.tolist()})
+        idx = k - self.k0
+        target = float(self.v[idx + 1]) if idx + 1 < len(self.v) else cfg.speed_limit
+        accel = min(max((target - speed) / dt, cfg.a_min), cfg.a_max)
+        return np.array([accel], dtype=np.float32)
+
+    @property
+    def plan_trace(self) -> dict[str, Any] | None:
+        """The first plan as plain lists, the re-plans and the event counts (step log metadata)."""
+        if self.plan is None:
+            return None
+        p = self.plan
+        return {"time": p.t.tolist(), "x": p.x.tolist(), "speed": p.v.tolist(), "energy": p.energy,
+                "travel_time": p.travel_time, "cost": p.cost, "objective": p.objective,
+                "replans": self.events, "events": dict(self.counts),
+                "table_wall_s": self.table.wall_s if self.table is not None else 0.0}
+
+    def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
+        return {}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"name": self.name}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state.get("name") != self.name:
+            raise ValueError(f"state is for agent {state.get('name')!r}, not {self.name!r}")

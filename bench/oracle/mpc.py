@@ -1,0 +1,214 @@
+"""Re-planning on the DP: a cost-to-go table per departure, and a leader-aware re-plan onto it.
+
+The signal plans are fixed, so the least cost-to-go ``V(t, x, v)`` of the ``"cost"`` objective
+(E + phi T, the ego alone) does not change during an episode. ``table`` solves it once per
+departure on the global lattice of ``bench.oracle.dp`` (``Grid.n_v`` speed cells) over the whole
+forward-reachable band, for ``SLACK`` steps more than the bound's certified horizon, so that a
+delayed ego still finds its cost-to-go there, and keeps every step's values and choices.
+
+``replan`` is then a small problem: from the ego's state at step ``k``, a backward DP over the
+next ``LOOKAHEAD`` steps on the states reachable from it, onto the table's values at step
+``k + LOOKAHEAD``, with the vehicle ahead as a constraint; then the table's own choices to the end
+of the corridor. The look-ahead uses the same compiled kernel and the same float32 arithmetic as
+the table, so with no leader it reproduces the table's values and choices exactly: a re-plan from
+a state on a table plan returns the rest of that plan (tests/bench/oracle/test_mpc.py).
+
+Prediction model of the vehicle ahead: constant speed over the look-ahead, ``x_l(t + m dt) =
+x_l(t) + v_l m dt`` (its rear bumper). Constraint at every look-ahead step: the ego's front bumper
+stays ``MIN_GAP + HEADWAY v`` behind it (SUMO's default minGap and Krauss' tau), so the plan keeps
+the gap SUMO's own car-following model keeps. Where no plan keeps it (a vehicle cut in closer),
+the re-plan drops the constraint and leaves the vehicle to the safety layer (``Replan.leader``
+says which). Beyond the look-ahead the plan is the free-flow optimum.
+
+Snapping: the ego's speed is rounded to the nearest speed cell, its position rounded *up* to the
+next row, so the planned position is never behind the real one by less than zero and never more
+than one row: a plan that stops before a red stop line or keeps a gap keeps it in SUMO too.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ecodrive_bench.envs.config import ScenarioConfig
+
+from .dp import GRID_EPS, Corridor, Grid, Window, _Lattice, _Run
+from .kernel import backward_step
+
+LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
+SLACK = 150  # [steps] the table reaches this far past the bound's certified horizon
+MIN_GAP = 2.5  # [m] SUMO's default minGap: bumper-to-bumper gap kept at standstill
+HEADWAY = 1.0  # [s] SUMO's default tau (Krauss): time gap kept at speed
+
+
+@dataclass(frozen=True)
+class Leader:
+    """The vehicle ahead in the ego's lane, as the ego sees it now."""
+
+    gap: float  # [m] from the ego's front bumper to its rear bumper
+    speed: float  # [m/s] estimated
+
+
+@dataclass
+class Table:
+    """The cost-to-go of one departure on the global lattice: ``values[k]`` and ``choices[k]``
+    cover the window ``windows[k]`` of step ``k`` (rows ``lo..hi``, speeds ``jlo..jhi``)."""
+
+    cor: Corridor
+    cfg: ScenarioConfig
+    depart_time: float  # [s]
+    lat: _Lattice
+    windows: list[Window]
+    values: list[np.ndarray | None]  # [speed, row] float32 [Wh]
+    choices: list[np.ndarray | None]  # [speed, row] acceleration choice index
+    green: np.ndarray  # (steps, stop lines) bool: the arterial is green in the step from step k
+    step_cost: np.ndarray  # [speed, choice] float32 [Wh]: energy + phi dt
+    wall_s: float  # [s] to build
+
+    @property
+    def horizon(self) -> int:
+        return len(self.windows)
+
+
+@dataclass
+class Replan:
+    """A plan from step ``k``: ``x``, ``v`` have one entry per step from ``k`` to the arrival."""
+
+    k: int  # [steps] after the departure
+    x: np.ndarray  # [m] front bumper on the lattice
+    v: np.ndarray  # [m/s]
+    value: float  # [Wh] its cost-to-go (float32 sums)
+    leader: str  # "none" (no vehicle ahead), "kept" (the gap constraint holds) or "relaxed"
+    wall_s: float  # [s]
+
+
+def table(cor: Corridor, cfg: ScenarioConfig, depart_time: float, horizon: int, grid: Grid | None = None) -> Table:
+    """The cost-to-go table of ``depart_time`` over ``horizon + SLACK`` steps (``horizon``: the
+    bound's certified one, ``Plan.grid["horizon"]``)."""
+    started = time.perf_counter()
+    grid = grid or Grid()
+    run = _Run(cor, cfg, depart_time, cfg.reward.phi, "numba")
+    lat = _Lattice(cor, cfg, grid.n_v)
+    windows = lat.windows(horizon + SLACK)
+    sol = run.backward(lat, windows, keep=True)
+    assert sol.values is not None
+    dt = cfg.step_length
+    steps = len(windows) + LOOKAHEAD
+    green = (cor.green(depart_time + np.arange(steps) * dt, dt) if cor.stop_lines
+             else np.ones((steps, 0), dtype=bool))
+    cost = np.ascontiguousarray((lat.energy + cfg.reward.phi * dt).astype(np.float32))
+    return Table(cor=cor, cfg=cfg, depart_time=depart_time, lat=lat, windows=windows, values=sol.values,
+                 choices=[p[2] if p is not None else None for p in sol.policy], green=green, step_cost=cost,
+                 wall_s=time.perf_counter() - started)
+
+
+def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
+    """(row, speed cell) of a real state: position rounded up, speed to the nearest cell."""
+    lat = tab.lat
+    i = max(0, math.ceil((x - tab.cor.x0) / lat.dx - GRID_EPS))
+    j = min(lat.nv, max(0, int(round(v / lat.dv))))
+    return i, j
+
+
+def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
+           lookahead: int = LOOKAHEAD) -> Replan | None:
+    """The least-cost plan from the ego's state (``x`` [m], ``v`` [m/s]) at step ``k`` after the
+    departure, keeping the gap to ``leader`` over the look-ahead; None when no plan arrives within
+    the table's horizon."""
+    started = time.perf_counter()
+    i0, j0 = snap(tab, x, v)
+    mode = "none"
+    if leader is not None:
+        plan = _solve(tab, k, i0, j0, lookahead, x + leader.gap, leader.speed)
+        mode = "kept"
+        if plan is None:
+            mode = "relaxed"
+    if leader is None or plan is None:
+        plan = _solve(tab, k, i0, j0, lookahead, None, 0.0)
+    if plan is None:
+        return None
+    rows, speeds, value = plan
+    lat = tab.lat
+    return Replan(k=k, x=tab.cor.x0 + rows * lat.dx, v=speeds * lat.dv, value=value, leader=mode,
+                  wall_s=time.perf_counter() - started)
+
+
+def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: float | None,
+           leader_speed: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+    lat, nv, dt = tab.lat, tab.lat.nv, tab.cfg.step_length
+    if i0 >= lat.i_end:
+        return np.array([i0]), np.array([j0]), 0.0
+    horizon = tab.horizon
+    if k >= horizon:
+        return None
+    steps = min(lookahead, horizon - k)
+    wins: list[Window] = []
+    lo = hi = i0
+    jl = jh = j0
+    for _ in range(steps):  # the states reachable from (i0, j0)
+        wins.append((lo, min(hi, lat.i_end - 1), jl, jh))
+        jl, jh = max(0, jl + lat.d_min), min(nv, jh + lat.d_max)
+        lo, hi = lo + jl, hi + jh
+    n_rows = lat.i_end + nv + 1
+    nxt = np.full((nv + 1, n_rows), np.inf, dtype=np.float32)
+    nxt[:, lat.i_end:] = 0.0
+    if k + steps < horizon:  # the table's cost-to-go after the look-ahead
+        tlo, thi, tjlo, tjhi = tab.windows[k + steps]
+        if tlo <= thi and tjlo <= tjhi:
+            nxt[tjlo:tjhi + 1, tlo:thi + 1] = tab.values[k + steps]
+    cur = np.full_like(nxt, np.inf)
+    cur[:, lat.i_end:] = 0.0
+    speeds_ms = np.arange(nv + 1) * lat.dv
+
+    def keep_gap(buf: np.ndarray, m: int) -> None:  # states at look-ahead step m that come too close
+        if leader_rear is None:
+            return
+        limit = leader_rear + leader_speed * m * dt - MIN_GAP - HEADWAY * speeds_ms  # [m] per speed
+        top = np.floor((limit - tab.cor.x0) / lat.dx + GRID_EPS).astype(np.int64)
+        for j in range(nv + 1):
+            first = max(int(top[j]) + 1, 0)
+            if first < lat.i_end:
+                buf[j, first:lat.i_end] = np.inf
+
+    keep_gap(nxt, steps)
+    args: list[np.ndarray | None] = [None] * steps
+    no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))
+    for m in range(steps - 1, -1, -1):
+        lo, hi, jlo, jhi = wins[m]
+        cur[:, :lat.i_end] = np.inf
+        if lo <= hi:
+            green = tab.green[k + m]
+            red = no_red
+            if not green.all():
+                r = np.nonzero(~green)[0]
+                red = (lat.cross_low[r], lat.cross_top[r])
+            arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=np.int8 if lat.n_d < 127 else np.int16)
+            backward_step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, tab.step_cost, *red)
+            args[m] = arg
+            if m > 0:
+                keep_gap(cur, m)
+        nxt, cur = cur, nxt
+    value = float(nxt[j0, i0])
+    if not np.isfinite(value):
+        return None
+    rows, speeds = [i0], [j0]
+    i, j = i0, j0
+    for m in range(steps):
+        lo, _, jlo, _ = wins[m]
+        j += int(args[m][j - jlo, i - lo]) + lat.d_min  # type: ignore[index]
+        i += j
+        rows.append(i)
+        speeds.append(j)
+        if i >= lat.i_end:
+            return np.array(rows), np.array(speeds), value
+    for kk in range(k + steps, horizon):  # the table's own choices to the end
+        lo, _, jlo, _ = tab.windows[kk]
+        j += int(tab.choices[kk][j - jlo, i - lo]) + lat.d_min  # type: ignore[index]
+        i += j
+        rows.append(i)
+        speeds.append(j)
+        if i >= lat.i_end:
+            break
+    return np.array(rows), np.array(speeds), value
