@@ -4,11 +4,17 @@ Both run the same ``run_task`` and yield result rows as episodes finish; the row
 on the executor (tests compare them). On both, a task whose worker process dies is run again, at
 most ``RETRIES`` more times; a task that raises is not retried. A task that cannot be finished
 goes to ``on_failure`` (a ``bench.harness.pool.Failure``), or, without it, raises.
+
+The ``--executor``/``--address`` options live here (``add_options``), for every command that
+offers Ray. A task whose files must reach the driver returns them as data (``Files``: ``collect``
+on the worker, ``land`` on the driver), so no node needs the driver's disk.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
+import re
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -16,10 +22,67 @@ from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.bench.harness.cases import Case
-from ecodrive_bench.bench.harness.oracle import NAME as ORACLE
+from ecodrive_bench.bench.harness.planners import PLANNERS
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
+from ecodrive_bench.bench.io import atomic_bytes
 
 EXECUTORS = ("local", "ray")
+# a Ray head's GCS address (HOST:PORT, HOST a name, an IPv4 or a bracketed IPv6) or a Ray Client one
+ADDRESS = re.compile(r"(?:ray://)?(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]{1,5})")
+ADDRESSES = "auto, HOST:PORT or ray://HOST:PORT with PORT 1..65535"
+
+
+def address(value: str) -> str:
+    """``--address``: ``auto`` (the cluster this machine has joined), a head's ``HOST:PORT`` or a
+    Ray Client ``ray://HOST:PORT``; anything else is an argparse error naming the value."""
+    m = ADDRESS.fullmatch(value)
+    if value != "auto" and not (m and 1 <= int(m.group(1)) <= 65535):
+        raise argparse.ArgumentTypeError(f"{value!r} is not accepted; accepted: {ADDRESSES}")
+    return value
+
+
+def add_options(ap: argparse.ArgumentParser, ray: str = "") -> None:
+    """``--executor`` and ``--address``; ``ray`` adds to the help of ``--executor`` what a Ray run
+    does differently (e.g. where its checkpoints live). ``check_options`` after parsing."""
+    ap.add_argument("--executor", default="local", choices=list(EXECUTORS),
+                    help=f"local: a process pool on this machine; ray: Ray tasks over a cluster's nodes{ray}")
+    ap.add_argument("--address", type=address, default=None,
+                    help=f"Ray cluster to join, with --executor ray: {ADDRESSES} (default: start a local Ray)")
+
+
+def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """An ``--address`` is for ``--executor ray``: otherwise one line, exit 2."""
+    if args.address is not None and args.executor != "ray":
+        ap.error(f"--address {args.address} is for --executor ray (got --executor {args.executor}); "
+                 f"add --executor ray or drop --address")
+
+
+@dataclass(frozen=True)
+class Files:
+    """A task's result that carries files to the driver: ``value`` (its row) and ``files`` (plain
+    file name -> content), which the driver writes with ``land``."""
+
+    value: Any
+    files: dict[str, bytes]
+
+
+def collect(folder: Path) -> dict[str, bytes]:
+    """The regular files directly in ``folder`` (not links, not sub-folders), by name."""
+    return {p.name: p.read_bytes() for p in sorted(Path(folder).iterdir()) if p.is_file() and not p.is_symlink()}
+
+
+def land(files: dict[str, bytes], folder: Path, last: tuple[str, ...] = ()) -> None:
+    """Write ``files`` into ``folder`` (created), each atomically (``bench.io``), the names in
+    ``last`` after all others in that order: the file whose presence marks a finished result
+    (a job's ``job.json``, a policy's ``manifest.json``) is never there before the rest. A name
+    that is not a plain file name is a ValueError before anything is written."""
+    bad = [n for n in files if Path(n).name != n or n in ("", ".", "..")]
+    if bad:
+        raise ValueError(f"{folder}: refusing to write {bad[0]!r}, not a plain file name")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in sorted(files, key=lambda n: last.index(n) + 1 if n in last else 0):
+        atomic_bytes(files[name], folder / name)
 
 
 @dataclass(frozen=True)
@@ -57,11 +120,10 @@ def run_task(task: Task) -> dict[str, Any]:
 
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
         _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
-    if task.method == ORACLE and key not in _AGENTS:
-        from ecodrive_bench.bench.harness.oracle import OracleAgent
-
-        _ENVS[env_key] = env = make_env(OracleAgent, task.signals, scenario)  # type: ignore[arg-type]
-        _AGENTS[key] = (OracleAgent(env.cfg), "")
+    if task.method in PLANNERS and key not in _AGENTS:
+        planner = PLANNERS[task.method]
+        _ENVS[env_key] = env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
+        _AGENTS[key] = (planner(env.cfg), "")
     if env_key not in _ENVS:
         _ENVS[env_key] = make_env(task.method, task.signals, scenario)
     env = _ENVS[env_key]

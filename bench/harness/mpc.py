@@ -3,8 +3,8 @@
 At the first step of an episode it takes the case's energy-optimal plan (the ``oracle``'s, on the
 fine lattice) as the plan in force, and builds the cost-to-go table of the departure. At every
 step it reads the ego's state (speed from the observation, position from ``info["position"]``)
-and the vehicle ahead from the occupancy grid, and re-plans when an event says the plan in force
-no longer holds:
+and the vehicle ahead from the occupancy grid. It keeps the energy-optimal plan until the first
+event that says it no longer holds:
 
 - ``drift``: the ego left the plan's cell (speed off by more than ``TOL_V``, or the position out
   of ``[x_plan - one global row - TOL_X, x_plan + TOL_X]``); between re-plans the state therefore
@@ -13,8 +13,11 @@ no longer holds:
   than ``MIN_GAP + HEADWAY v``;
 - ``end``: the plan in force has ended before the corridor.
 
-A re-plan costs about a millisecond (``nox -s perf``), so the trigger only spares work; with no
-event the re-plan would return the rest of the plan in force anyway (tests/bench/oracle).
+From then on it re-plans at every step on the global lattice (``bench.oracle.mpc.replan``, about a
+millisecond: ``nox -s perf``). With no vehicle ahead such a re-plan from a state on the plan in
+force returns the rest of that plan (tests/bench/oracle/test_mpc.py), so re-planning every step is
+event triggering that also notices when a leader's constraint has gone slack. Between re-plans
+of the first plan, the state stays within the drift bounds above of the plan, by construction.
 
 The vehicle ahead: the first occupied cell ahead of the front bumper in the ego's lane column of
 the grid (its rear bumper, to the cell: the gap is rounded down). Its speed is the ego's speed
@@ -24,7 +27,8 @@ vehicle first seen this step is taken at the ego's speed. This is what the obser
 It drives the ``longitudinal`` action type through the same safety layer as ``oracle`` and
 DDPG+LC2013: Krauss clips the request, LC2013 changes lanes. It requests ``a = (v_plan[k+1] -
 v) / dt`` within [a_min, a_max]. The plans in force are kept (``plan_trace``: the first, and each
-re-plan with its step, event and wall time) for the step log, where the viewer draws them.
+re-plan with its time, event, wall time and its first ``LOGGED_STEPS`` steps) for the step log,
+where the viewer draws them.
 """
 from __future__ import annotations
 
@@ -40,7 +44,8 @@ from ecodrive_bench.envs.config import ScenarioConfig
 NAME = "mpc"
 TOL_V = 0.05  # [m/s] speed drift that triggers a re-plan
 TOL_X = 0.05  # [m] position drift (beyond the one-row rounding) that triggers a re-plan
-MAX_PLANS_LOGGED = 400  # re-plans kept for the step log per episode (the first ones)
+LOGGED_STEPS = planner.LOOKAHEAD  # [steps] of each re-plan kept in the step log (its look-ahead)
+LOG_DECIMALS = 3  # [-] rounding of the logged plans ([m], [m/s])
 
 
 class MPCAgent:
@@ -60,6 +65,7 @@ class MPCAgent:
         self.v = np.zeros(0)  # [m/s]
         self.gaps: list[float | None] = []  # last two gaps to the vehicle ahead [m]
         self.events: list[dict[str, Any]] = []
+        self.first = True  # the plan in force is the departure's energy-optimal plan (fine lattice)
         self.counts: dict[str, int] = {}
 
     def start(self, depart_time: float) -> None:
@@ -67,7 +73,7 @@ class MPCAgent:
         self.plan = bound(self.cfg, depart_time, "cost")
         self.table = planner.table(self.cor, self.cfg, depart_time, int(self.plan.grid["horizon"]))
         self.k0, self.x, self.v = 0, self.plan.x, self.plan.v
-        self.gaps, self.events = [], []
+        self.gaps, self.events, self.first = [], [], True
         self.counts = {"drift": 0, "leader": 0, "end": 0, "step": 0, "relaxed": 0, "lost": 0}
 
     def leader(self, obs: dict[str, np.ndarray], speed: float) -> planner.Leader | None:
@@ -113,8 +119,9 @@ class MPCAgent:
         speed = float(obs["logic"][cfg.observed_lanes + 1])
         x = float(info["position"])
         lead = self.leader(obs, speed)
-        event = self._event(k, x, speed, lead) if self.k0 == 0 and self.events == [] else "step"
+        event = self._event(k, x, speed, lead) if self.first else "step"
         if event is not None:
+            self.first = False
             self.counts[event] += 1
             started = time.perf_counter()
             new = planner.replan(self.table, k, x, speed, lead)
@@ -124,10 +131,11 @@ class MPCAgent:
             else:
                 self.counts["relaxed"] += new.leader == "relaxed"
                 self.k0, self.x, self.v = k, new.x, new.v
-                if len(self.events) < MAX_PLANS_LOGGED:
-                    self.events.append({"time": float(info["time"]), "event": event, "leader": new.leader,
-                                        "wall_s": time.perf_counter() - started, "x": new.x.tolist(),
-                                        "speed": new.v.tolist()})
+                head = slice(0, LOGGED_STEPS + 1)
+                self.events.append({"time": float(info["time"]), "event": event, "leader": new.leader,
+                                    "wall_ms": round((time.perf_counter() - started) * 1e3, LOG_DECIMALS),
+                                    "x": np.round(new.x[head], LOG_DECIMALS).tolist(),
+                                    "speed": np.round(new.v[head], LOG_DECIMALS).tolist()})
         idx = k - self.k0
         target = float(self.v[idx + 1]) if idx + 1 < len(self.v) else cfg.speed_limit
         accel = min(max((target - speed) / dt, cfg.a_min), cfg.a_max)

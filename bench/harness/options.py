@@ -15,7 +15,7 @@ from ecodrive_bench.bench.harness.errors import AgentError
 from ecodrive_bench.bench.harness.executors import EXECUTORS
 from ecodrive_bench.bench.harness.external import GROUP, registered
 from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FamilyError, Variant
-from ecodrive_bench.bench.harness.oracle import NAME as ORACLE
+from ecodrive_bench.bench.harness.planners import MPC, ORACLE, PLANNERS
 from ecodrive_bench.bench.harness.policies import MODELS
 from ecodrive_bench.bench.harness.sb3 import ALGOS as SB3_ALGOS
 from ecodrive_bench.envs.config import SIGNALS
@@ -86,15 +86,16 @@ def parser() -> Parser:
     ap.add_argument("--profile", default="paper", choices=list(PROFILES),
                     help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
                          "experiments (in `nox -s benchmark`); generalisation: every method with a policy, "
-                         f"{ORACLE} included, on each held-out corridor of the family (docs/generalisation.md), "
+                         f"{ORACLE} and {MPC} included, on each held-out corridor of the family (docs/generalisation.md), "
                          "its cases, with --transfer implied, one sub-folder per variant")
     ap.add_argument("--variants", nargs="+", default=None, metavar="NAME",
                     help="with --profile generalisation: only these variants of the family, by full or short name "
                          "(g1, g2, ...; default: all)")
     users = registered()
-    ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, ORACLE, *users],
-                    help=f"among {', '.join([*METHODS, ORACLE, *users])} (default: every method with a shipped "
-                         f"policy; {ORACLE} (the energy-optimal plan replayed, a DP solve per case) and installed "
+    ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, *PLANNERS, *users],
+                    help=f"among {', '.join([*METHODS, *PLANNERS, *users])} (default: every method with a shipped "
+                         f"policy; {ORACLE} (the energy-optimal plan replayed, a DP solve per case), {MPC} (re-plans "
+                         "on the DP in closed loop, a few s per case) and installed "
                          f"agents of the entry-point group {GROUP} run when named)")
     ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
                     help="also evaluate your own agent: factory(observation_space, action_space) -> ecodrive_bench.agents.base.Agent")
@@ -135,7 +136,7 @@ def parse(argv: list[str]) -> RunOptions:
         opts["agent"] = sb3_spec(ap, opts)
     if opts["agent"]:
         label = opts["name"] or (f"sb3-{opts['sb3_algo'].lower()}" if opts["sb3"] else opts["agent"].split(":")[-1])
-        if label in (*METHODS, ORACLE) or label in opts["factories"]:
+        if label in (*METHODS, *PLANNERS) or label in opts["factories"]:
             ap.error(f"--name {label!r} is taken by a built-in or installed method; choose another")
         opts["factories"][label] = opts["agent"]
         opts["agent_sha256"] = {label: opts.pop("sb3_sha256")} if "sb3_sha256" in opts else {}

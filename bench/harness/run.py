@@ -29,7 +29,7 @@ from ecodrive_bench.bench.harness.cases import Case, load
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError
 from ecodrive_bench.bench.harness.executors import Task, run_local, run_ray
 from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
-from ecodrive_bench.bench.harness.oracle import NAME as ORACLE
+from ecodrive_bench.bench.harness.planners import PLANNERS
 from ecodrive_bench.bench.harness.policies import check_policy, family_dir, policy_dir, shipped_seeds
 from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions
 from ecodrive_bench.bench.harness.scenarios import Evaluation
@@ -77,7 +77,7 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
     wanted = opts.train_seeds
     runs, skipped = [], []
     factories = opts.factories
-    default = [*METHODS, ORACLE] if opts.profile == "generalisation" else METHODS
+    default = [*METHODS, *PLANNERS] if opts.profile == "generalisation" else METHODS
     named = [m for m in (opts.methods if explicit else default) if m not in factories]
     for m in [*named, *factories]:
         for s in opts.signals:
