@@ -70,7 +70,7 @@ class MPCAgent:
 
     def start(self, depart_time: float) -> None:
         """A new episode departing at ``depart_time`` [s]."""
-        self.plan = bound(self.cfg, depart_time, "cost")
+        self.plan = bound(self.cfg, depart_time, "cost", krauss=True)
         self.table = planner.table(self.cor, self.cfg, depart_time, int(self.plan.grid["horizon"]))
         self.k0, self.x, self.v = 0, self.plan.x, self.plan.v
         self.gaps, self.events, self.first = [], [], True

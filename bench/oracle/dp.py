@@ -79,6 +79,7 @@ MAX_HORIZON = 86400.0  # [s] the "cost" horizon stops growing here
 VERSION = 1  # [-] of the plans and values ``bound`` returns: bump it with any change that alters one, so
 # the bounds shipped with the fixed cases (bench.harness.shipped_bounds) miss and are solved again
 
+KRAUSS_TAU = 1.0  # [s] SUMO's default tau: the ego's reaction time in Krauss' safe speed
 KERNELS = {"numba": backward_step, "numpy": backward_step_numpy}  # the inner loop, compiled or the reference
 Window = tuple[int, int, int, int]  # rows lo..hi, speeds jlo..jhi evaluated at one step
 
@@ -183,15 +184,19 @@ class Plan:
 
 
 def bound(cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
-          time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba") -> Plan:
+          time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba",
+          krauss: bool = False) -> Plan:
     """The optimal plan for ``cfg``'s corridor and signals, departing at ``depart_time`` [s]
     (the env's ``t_depart``). ``objective="energy"`` needs ``time_limit`` [s]. ``kernel``: the
-    inner loop, ``"numba"`` or the numpy reference ``"numpy"`` (``KERNELS``; the same plan)."""
-    return solve(Corridor.from_config(cfg), cfg, depart_time, objective, time_limit, grid, kernel)
+    inner loop, ``"numba"`` or the numpy reference ``"numpy"`` (``KERNELS``; the same plan).
+    ``krauss``: Krauss' stop-for-red cap is a constraint too (the best plan SUMO's driver model
+    lets the ego drive alone, for a controller; not the bound)."""
+    return solve(Corridor.from_config(cfg), cfg, depart_time, objective, time_limit, grid, kernel, krauss)
 
 
 def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
-          time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba") -> Plan:
+          time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba",
+          krauss: bool = False) -> Plan:
     """``bound`` on a given ``Corridor`` (tests drop or move its signals)."""
     if objective not in OBJECTIVES:
         raise ValueError(f"objective={objective!r} is not accepted; choose one of {', '.join(OBJECTIVES)}")
@@ -202,7 +207,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
     grid = grid or Grid()
     started = time.perf_counter()
     run = _Run(cor, cfg, depart_time, cfg.reward.phi if objective == "cost" else 0.0, kernel)
-    lat = _Lattice(cor, cfg, grid.n_v)
+    lat = _Lattice(cor, cfg, grid.n_v, krauss)
     if objective == "energy":
         horizon = int(math.floor(float(time_limit) / cfg.step_length + GRID_EPS))
         sol = run.backward(lat, lat.windows(horizon))
@@ -214,7 +219,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
     value = coarse = run.objective(speeds, lat)
     passes = 0
     for factor, tube_x, tube_v in grid.levels:  # local passes, each seeded with the plan in hand
-        fine = _Lattice(cor, cfg, grid.n_v * factor)
+        fine = _Lattice(cor, cfg, grid.n_v * factor, krauss)
         rows, speeds = rows * (fine.nv // lat.nv), speeds * (fine.nv // lat.nv)
         tube = (math.ceil(tube_x / fine.dx), math.ceil(tube_v / fine.dv))
         for _ in range(grid.passes):
@@ -238,7 +243,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
         t=t, x=x, v=v, a=np.diff(v) / dt, energy=energy, travel_time=n * dt,
         cost=energy + cfg.reward.phi * n * dt, objective=objective, crossings=crossings,
         grid={"n_v": grid.n_v, "fine": grid.fine, "dv": lat.dv, "dx": lat.dx, "da": lat.dv / dt,
-              "horizon": horizon, "passes": passes, "states": run.states, "coarse_objective": coarse,
+              "horizon": horizon, "krauss": krauss, "passes": passes, "states": run.states, "coarse_objective": coarse,
               "objective": value, "wall_s": time.perf_counter() - started},
     )
 
@@ -294,7 +299,7 @@ class _Solution:
 class _Lattice:
     """Index arithmetic of one (position, speed) grid and its per-step energy table."""
 
-    def __init__(self, cor: Corridor, cfg: ScenarioConfig, n_v: int) -> None:
+    def __init__(self, cor: Corridor, cfg: ScenarioConfig, n_v: int, krauss: bool = False) -> None:
         dt = cfg.step_length
         self.nv = n_v
         self.dv = cfg.speed_limit / n_v  # [m/s]
@@ -313,6 +318,12 @@ class _Lattice:
         q = (np.asarray(cor.stop_lines, dtype=float) - cor.x0) / self.dx
         self.cross_top = (np.ceil(q - GRID_EPS) - 1).astype(np.int64)
         self.cross_low = np.ceil(q[:, None] - j[None, :] - GRID_EPS).astype(np.int64).reshape(len(q), n_v + 1)
+        if krauss:  # while red, SUMO lets the ego take speed v' only if it can still stop at the line:
+            # gap >= v'^2 / (2 b) + tau v' (b = -a_min); so landings at v' closer than that are forbidden too
+            v = j * self.dv
+            gap = v ** 2 / (2.0 * -cfg.a_min) + KRAUSS_TAU * v  # [m]
+            first = np.floor(q[:, None] - gap[None, :] / self.dx + GRID_EPS).astype(np.int64) + 1
+            self.cross_low = np.minimum(self.cross_low, first.reshape(len(q), n_v + 1))
 
     def windows(self, horizon: int, tube: tuple[np.ndarray, np.ndarray, int, int] | None = None) -> list[Window]:
         """States worth evaluating at each step: rows forward-reachable from the start (full

@@ -90,7 +90,7 @@ def table(cor: Corridor, cfg: ScenarioConfig, depart_time: float, horizon: int, 
     started = time.perf_counter()
     grid = grid or Grid()
     run = _Run(cor, cfg, depart_time, cfg.reward.phi, "numba")
-    lat = _Lattice(cor, cfg, grid.n_v)
+    lat = _Lattice(cor, cfg, grid.n_v, krauss=True)
     windows = lat.windows(horizon + SLACK)
     sol = run.backward(lat, windows, keep=True)
     assert sol.values is not None
