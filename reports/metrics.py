@@ -133,6 +133,35 @@ def optimality_gaps(results: pd.DataFrame, phi: float) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def headroom(results: pd.DataFrame, phi: float, low: str = "baseline0", high: str = "mpc") -> pd.DataFrame:
+    """The share of the cost gap between ``low`` (steady driving, no information) and ``high``
+    (perfect signal information, in traffic) that each method closes, per (method, signals):
+    ``(C_low - C_method) / (C_low - C_high)`` on mean costs E + phi T over the cases all three
+    ran, with the stratified bootstrap CI over the method's training seeds (``results``: one row
+    per method, signals, train_seed, case). No row for a setting that lacks ``low`` or ``high``."""
+    df = results.assign(cost=results.energy + phi * results.travel_time)
+    rows = []
+    for signals, s in df.groupby("signals"):
+        ref = {m: s[s.method == m] for m in (low, high)}
+        if any(r.empty for r in ref.values()):
+            continue
+        common = set(ref[low].case) & set(ref[high].case)
+        for method, g in s.groupby("method"):
+            seeds = sorted(set(g.train_seed))
+            cases = common.intersection(*(set(g[g.train_seed == sd].case) for sd in seeds))
+            if not cases:
+                continue
+            c_low, c_high = (ref[m][ref[m].case.isin(cases)].cost.mean() for m in (low, high))
+            span = c_low - c_high
+            mat = g[g.case.isin(cases)].pivot_table(index="train_seed", columns="case", values="cost").to_numpy()
+            lo, hi = stratified_seed_bootstrap(mat)
+            share = [(c_low - c) / span if span != 0 else float("nan") for c in (mat.mean(), hi, lo)]
+            rows.append({"method": method, "signals": signals, "seeds": len(seeds), "cases": len(cases),
+                         "cost_low": float(c_low), "cost_high": float(c_high), "cost": float(mat.mean()),
+                         "share_closed": share[0], "ci_low": share[1], "ci_high": share[2]})
+    return pd.DataFrame(rows)
+
+
 def group_means(results: pd.DataFrame, groups: int = 10) -> pd.DataFrame:
     """Mean energy and travel time per seed group (case index mod ``groups``): the violin data."""
     df = results.assign(group=results["case"] % groups)

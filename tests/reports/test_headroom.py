@@ -1,0 +1,34 @@
+"""reports.metrics.headroom: the share of the baseline0-to-mpc cost gap a method closes."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ecodrive_bench.reports.metrics import headroom
+
+
+def _rows(method: str, seed: int, costs: list[float]) -> list[dict]:
+    return [{"method": method, "signals": "coordinated", "train_seed": seed, "case": c, "energy": cost - 200.0,
+             "travel_time": 200.0} for c, cost in enumerate(costs)]
+
+
+def test_share_of_the_gap_with_its_seed_ci():
+    rows = _rows("baseline0", -1, [100.0, 110.0]) + _rows("mpc", -1, [60.0, 70.0])
+    rows += _rows("prl", 0, [78.0, 88.0]) + _rows("prl", 1, [82.0, 92.0])  # mean 85 = halfway
+    out = headroom(pd.DataFrame(rows), phi=1.0).set_index("method")
+    assert out.loc["prl", "share_closed"] == pytest.approx(0.5)
+    assert out.loc["prl", "ci_low"] < 0.5 < out.loc["prl", "ci_high"] and out.loc["prl", "seeds"] == 2
+    assert out.loc["mpc", "share_closed"] == pytest.approx(1.0) and out.loc["baseline0", "share_closed"] == 0.0
+    assert np.isnan(out.loc["mpc", "ci_low"])  # one seed: no spread to sample
+
+
+def test_only_cases_every_reference_ran_count():
+    rows = _rows("baseline0", -1, [100.0, 110.0, 500.0]) + _rows("mpc", -1, [60.0, 70.0])
+    rows += _rows("prl", 0, [80.0, 90.0, 0.0])
+    out = headroom(pd.DataFrame(rows), phi=1.0).set_index("method")
+    assert out.loc["prl", "cases"] == 2 and out.loc["prl", "share_closed"] == pytest.approx(0.5)
+
+
+def test_no_row_without_the_references():
+    assert headroom(pd.DataFrame(_rows("prl", 0, [80.0])), phi=1.0).empty
