@@ -1,20 +1,31 @@
 """The paper's synthetic lateral scenarios (section 5.4), scripted through the same environment.
 
-A: the ego follows HDV1 in its lane; HDV1 brakes at -2 m/s^2 for three consecutive steps while
-   HDV2 drives in the adjacent (left) lane.
-B: the ego follows a platoon of HDVs that queues at the first intersection on red; the lane to
-   the left holds a shorter queue and the one to the right none.
+A: the ego follows HDV1, 25 m ahead in its lane (the rightmost); HDV1 brakes at -2 m/s^2 for three
+   consecutive steps while HDV2 drives 8 m ahead of the ego in the adjacent (left) lane, so that
+   the ego has to fall back behind HDV2 before it can change into that lane (the paper: it
+   decelerates, then changes lanes, then changes again to pass HDV2); the lanes beyond are empty.
+B: the ego follows a platoon of five HDVs, the first 40 m ahead in its lane, that queues at the
+   first intersection on red; two more queue in the lane to the left, none in the lanes beyond.
 Both run on an empty corridor (no random demand) with uncoordinated signals, so every method
-sees exactly the same situation. ``run_scenario`` returns the trajectories of the ego and the
-scripted vehicles; the lateral behaviour is judged from them. ``ecodrive lateral`` drives every
-shipped training seed of a learning method (``<method>-s<seed>.mcap``; one row per seed). A
-learning method named in ``--methods`` without a shipped uncoordinated policy is an error (exit
-2); of the default methods it is skipped with a note. Every policy is loaded into its agent
-before any episode runs: a file that cannot be is one error line, exit 2, nothing written.
+sees exactly the same situation. The paper gives no distances; the gaps here are bumper to bumper,
+from the ego's front to the HDV's back, when the HDVs enter (the step after the reset; each must,
+or the run is an error), and the HDVs of A drive at the ego's speed until HDV1 brakes, so that an
+ego that keeps its speed meets the braking at those gaps. ``run_scenario`` returns the
+trajectories of the ego and the scripted vehicles; the lateral behaviour is judged from them (A:
+over the event window, from the braking's onset to ``EVENT_AFTER`` after it; B: the ego's lane
+when it reaches the front of the queues).
+
+``ecodrive lateral`` drives every shipped training seed of a learning method
+(``<method>-s<seed>.mcap``; one row per seed). A learning method named in ``--methods`` without a
+shipped uncoordinated policy is an error (exit 2); of the default methods it is skipped with a
+note. Every policy is loaded into its agent before any episode runs: a file that cannot be is one
+error line, exit 2, nothing written.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import hashlib
+import json
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,11 +37,14 @@ from ecodrive_bench.bench.args import Parser, fail, int_in, name
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.episode import make_env, run_episode
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
+from ecodrive_bench.envs.config import ScenarioConfig
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0, "max_episode_time": 300.0}
 HDV1_BRAKE = -2.0  # [m/s^2] (paper)
 BRAKE_STEPS = 3  # (paper)
-BRAKE_AT = 5  # [steps after the ego enters]
+BRAKE_AT = 5  # [steps after the reset] HDV1's first braking step; the HDVs enter in step 0
+EVENT_AFTER = 10.0  # [s] A's event window ends this long after HDV1's last braking step
+VEHICLE_LENGTH = ScenarioConfig().vehicle_length  # [m] the ego and every HDV (no override in EMPTY)
 INSERT_A = 10.0  # [s] ego insertion, scenario A
 INSERT_B = 40.0  # [s] ego insertion, scenario B: J1 is red when the platoon arrives
 
@@ -39,16 +53,19 @@ INSERT_B = 40.0  # [s] ego insertion, scenario B: J1 is red when the platoon arr
 class Scripted:
     vid: str
     lane_offset: int  # relative to the ego's lane (+1 = left)
-    gap: float  # [m] ahead of the ego at insertion
-    speed: float  # [m/s]
-    hold: bool  # True: scripted speed (no Krauss); False: Krauss after insertion
+    gap: float  # [m] from the ego's front bumper to this vehicle's back bumper when it enters
+    speed: float | None  # [m/s] when it enters; None: the ego's speed at the reset
+    hold: bool  # True: scripted speed (no Krauss) until A's braking is over; False: Krauss after insertion
 
 
+# [m] front to front in B's queues as they enter (a 20 m gap, 1.5 s at 13 m/s): SUMO refuses to
+# insert a vehicle at 13 m/s 15 m behind another (its insertion check), and B's vehicles must all enter in step 0
+PLATOON_SPACING = 25.0
 SCENARIO_NAMES = ("A", "B")
 SCENARIOS: dict[str, list[Scripted]] = {
-    "A": [Scripted("hdv1", 0, 25.0, 13.0, True), Scripted("hdv2", 1, 8.0, 13.0, True)],
-    "B": [Scripted(f"platoon{i}", 0, 40.0 + 9.0 * i, 13.0, False) for i in range(5)]
-         + [Scripted(f"left{i}", 1, 70.0 + 9.0 * i, 13.0, False) for i in range(2)],
+    "A": [Scripted("hdv1", 0, 25.0, None, True), Scripted("hdv2", 1, 8.0, None, True)],
+    "B": [Scripted(f"platoon{i}", 0, 40.0 + PLATOON_SPACING * i, 13.0, False) for i in range(5)]
+         + [Scripted(f"left{i}", 1, 70.0 + PLATOON_SPACING * i, 13.0, False) for i in range(2)],
 }
 
 
@@ -60,13 +77,19 @@ class Script:
         self.name, self.vehicles, self.rows = name, SCENARIOS[name], []
 
     def start(self, env) -> None:
-        s = env.session
-        x, _, _, _, _, lane, _ = env.ego.kin
-        for v in self.vehicles:
-            target = min(max(lane + v.lane_offset, 0), env.cfg.lanes - 1)
-            s.add_scripted(v.vid, lane=target, pos=x + v.gap, speed=v.speed)
-            if not v.hold:
-                s.release_speed(v.vid)
+        """SUMO inserts the vehicles in the next step, after it has moved the ego: each goes ``gap``
+        m ahead of where the ego's front bumper is then at its present speed (an ego that changes
+        speed in that step shifts every gap by that change x one step). ``x`` is the front bumper,
+        and the arterial's first edge starts at x = 0, so it is also the lane position."""
+        s, cfg = env.session, env.cfg
+        x, _, _, v, _, lane, _ = env.ego.kin
+        front = x + v * cfg.step_length
+        for sv in self.vehicles:
+            target = min(max(lane + sv.lane_offset, 0), cfg.lanes - 1)
+            s.add_scripted(sv.vid, lane=target, pos=front + sv.gap + cfg.vehicle_length,
+                           speed=v if sv.speed is None else sv.speed)
+            if not sv.hold:
+                s.release_speed(sv.vid)
 
     def before(self, env, step: int) -> None:
         s = env.session
@@ -79,10 +102,15 @@ class Script:
                     s.release_speed(v.vid)
 
     def after(self, env, step: int) -> None:
+        """Records the step; a vehicle SUMO did not insert in step 0 is an error (the scenario
+        would not be the one judged)."""
         s = env.session
         t, ego = s.time(), env.ego.kin
         self.rows.append({"time": t, "vehicle": "ego", "x": ego[0], "lane": ego[5], "speed": ego[3]})
         present = set(s.vehicle_ids())
+        missing = [v.vid for v in self.vehicles if v.vid not in present]
+        if step == 0 and missing:
+            raise RuntimeError(f"scenario {self.name}: SUMO did not insert {', '.join(missing)} in the step after the reset")
         for v in self.vehicles:
             if v.vid in present:
                 k = s.kinematics(v.vid)
@@ -99,6 +127,15 @@ def scenario_env(method: str):
     return make_env(method, "uncoordinated", EMPTY)
 
 
+def script_hash(name: str) -> str:
+    """The digest of a scenario (corridor, case, vehicles, braking, placement rule), stored in its
+    step logs as ``eval_scenario_hash``: ``ecodrive lateral`` reruns a log written by another script."""
+    spec = {"env": EMPTY, "case": asdict(case_of(name)), "vehicles": [asdict(v) for v in SCENARIOS[name]],
+            "brake": [HDV1_BRAKE, BRAKE_STEPS, BRAKE_AT, EVENT_AFTER],
+            "placement": "gap: ego front bumper to HDV back bumper after the insertion step; speed None: the ego's"}
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
+
+
 def run_scenario(name: str, agent: Agent, method: str, log_path: Path | None = None,
                  agent_sha256: str = "", env=None) -> pd.DataFrame:
     """Trajectories (time, vehicle, x, lane, speed) of scenario ``name`` driven by ``agent``;
@@ -107,7 +144,8 @@ def run_scenario(name: str, agent: Agent, method: str, log_path: Path | None = N
     env = env or scenario_env(method)
     script = Script(name)
     try:
-        run_episode(env, agent, case_of(name), method, log_path=log_path, agent_sha256=agent_sha256, script=script)
+        run_episode(env, agent, case_of(name), method, log_path=log_path, agent_sha256=agent_sha256, script=script,
+                    log_meta={"eval_scenario_hash": script_hash(name)})
     finally:
         env.close()
     df = pd.DataFrame(script.rows)
@@ -115,13 +153,62 @@ def run_scenario(name: str, agent: Agent, method: str, log_path: Path | None = N
     return df
 
 
-def left_lane_of(df: pd.DataFrame, vid: str) -> bool:
-    """Whether the ego ever drove in a lane other than ``vid``'s while behind it."""
-    ego = df[df.vehicle == "ego"].set_index("time")
-    other = df[df.vehicle == vid].set_index("time")
-    both = ego.join(other, suffixes=("_ego", "_o"), how="inner")
-    behind = both[both.x_ego < both.x_o]
-    return bool((behind.lane_ego != behind.lane_o).any())
+def relative(df: pd.DataFrame, vid: str, length: float = VEHICLE_LENGTH) -> pd.DataFrame:
+    """Per time [s]: the ego and ``vid`` side by side (``x``, ``lane``, ``speed`` with suffixes
+    ``_ego`` and ``_o``), ``offset`` (vid's lane minus the ego's; +1 = left) and ``gap`` [m], ego's
+    front bumper to vid's back bumper (negative: beside or behind; ``x`` is the front bumper)."""
+    ego = df[df.vehicle == "ego"].set_index("time")[["x", "lane", "speed"]]
+    other = df[df.vehicle == vid].set_index("time")[["x", "lane", "speed"]]
+    both = ego.join(other, how="inner", suffixes=("_ego", "_o"))
+    return both.assign(offset=both.lane_o - both.lane_ego, gap=both.x_o - length - both.x_ego)
+
+
+def event_times(df: pd.DataFrame) -> tuple[float, float]:
+    """(onset, end) [s] of A's event window: onset is the step HDV1's braking starts from (it still
+    drives at its speed; the next step is its first braking step), the end ``EVENT_AFTER`` after its
+    last braking step. The trajectories hold one ego row per step from step 0."""
+    t = df[df.vehicle == "ego"].time.to_numpy()
+    return float(t[BRAKE_AT - 1]), float(t[BRAKE_AT + BRAKE_STEPS - 1] + EVENT_AFTER)
+
+
+def braking_window(df: pd.DataFrame) -> pd.DataFrame:
+    """``relative(df, "hdv1")`` from the onset to HDV1's last braking step, with HDV2's ``offset2``
+    and ``gap2`` and ``beside_left``: whether any scripted vehicle overlaps the ego in the lane to
+    its left."""
+    t = df[df.vehicle == "ego"].time.to_numpy()[BRAKE_AT - 1:BRAKE_AT + BRAKE_STEPS]
+    h1 = relative(df, "hdv1").loc[t]
+    h2 = relative(df, "hdv2").reindex(t)
+    others = [relative(df, v).reindex(t) for v in df.vehicle.unique() if v != "ego"]
+    beside = np.any([(o.offset == 1) & (o.gap < 0) & (o.gap > -2 * VEHICLE_LENGTH) for o in others], axis=0)
+    return h1.assign(offset2=h2.offset, gap2=h2.gap, beside_left=beside)
+
+
+def judge_a(df: pd.DataFrame) -> dict[str, Any]:
+    """A's verdict: ``left_hdv1_lane`` (the ego, behind HDV1 in its lane at the onset, is in another
+    lane at some step of the event window; None when HDV1 is not ahead in its lane at the onset),
+    ``left_at`` [s after the onset], ``brake_gap`` and ``hdv2_gap`` [m] at the onset (bumper to
+    bumper; HDV2's in its lane), and ``event_min_gap`` [m], the least gap to HDV1 while behind it in
+    its lane within the window."""
+    onset, end = event_times(df)
+    h1, h2 = relative(df, "hdv1"), relative(df, "hdv2")
+    at = h1.loc[onset]
+    ahead = bool(at.offset == 0 and at.gap > 0)
+    win = h1[(h1.index >= onset) & (h1.index <= end)]
+    away = win[win.offset != 0]
+    behind = win[(win.offset == 0) & (win.gap > -VEHICLE_LENGTH)]
+    return {"left_hdv1_lane": bool(len(away)) if ahead else None,
+            "left_at": float(away.index[0] - onset) if ahead and len(away) else np.nan,
+            "brake_gap": float(at.gap) if at.offset == 0 else np.nan,
+            "hdv2_gap": float(h2.gap.get(onset, np.nan)),
+            "event_min_gap": float(behind.gap.min()) if len(behind) else np.nan}
+
+
+def min_gap(df: pd.DataFrame) -> float:
+    """The least gap [m] from the ego to a scripted vehicle ahead of it in its lane, over the run."""
+    gaps = [r.gap[(r.offset == 0) & (r.gap > -VEHICLE_LENGTH)] for r in
+            (relative(df, v) for v in df.vehicle.unique() if v != "ego")]
+    gaps = [g for g in gaps if len(g)]
+    return float(min(g.min() for g in gaps)) if gaps else np.nan
 
 
 def queue_lengths(df: pd.DataFrame) -> dict[int, int]:
@@ -133,6 +220,19 @@ def queue_lengths(df: pd.DataFrame) -> dict[int, int]:
     return others[others.time == t].groupby("lane").size().to_dict()
 
 
+def queue_front_lane(df: pd.DataFrame) -> int | None:
+    """The ego's lane when its front bumper first reaches the front of B's longest queue (the
+    stopped vehicle furthest ahead at that moment): the lane it meets the queues in, before
+    whatever it does further on. None without a queue or when the ego never gets there."""
+    others = df[(df.vehicle != "ego") & (df.speed < 0.1)]
+    if others.empty:
+        return None
+    t = others.groupby("time").size().idxmax()
+    ego = df[df.vehicle == "ego"]
+    there = ego[ego.x >= others[others.time == t].x.max()]
+    return int(there.lane.iloc[0]) if len(there) else None
+
+
 def final_lane(df: pd.DataFrame) -> int:
     return int(df[df.vehicle == "ego"].lane.iloc[-1])
 
@@ -140,14 +240,17 @@ def final_lane(df: pd.DataFrame) -> int:
 def summary(df: pd.DataFrame, name: str, lanes: int = 5) -> dict[str, Any]:
     ego = df[df.vehicle == "ego"]
     out = {"scenario": name, "method": df.method.iloc[0], "lanes_visited": sorted(set(ego.lane)),
-           "lane_changes": int((np.diff(ego.lane.to_numpy()) != 0).sum()), "final_lane": final_lane(df)}
+           "lane_changes": int((np.diff(ego.lane.to_numpy()) != 0).sum()), "final_lane": final_lane(df),
+           "min_gap": min_gap(df)}
     if name == "A":
-        out["left_hdv1_lane"] = left_lane_of(df, "hdv1")
+        out.update(judge_a(df))
     else:
         q = queue_lengths(df)
         out["queues_by_lane"] = q
         fewest = min(q.get(ln, 0) for ln in range(lanes))
         out["ended_in_shortest_queue_lane"] = q.get(final_lane(df), 0) == fewest if q else None
+        out["queue_front_lane"] = lane = queue_front_lane(df)
+        out["at_queue_front_in_shortest_queue_lane"] = q.get(lane, 0) == fewest if q and lane is not None else None
     return out
 
 
@@ -192,9 +295,14 @@ def task_agent(task: LateralTask, env: Any) -> tuple[Agent, str]:
 
 
 def _row(df: pd.DataFrame, task: LateralTask) -> dict[str, Any]:
-    """The ``lateral.parquet`` row of a task's trajectories: its summary, flat, and its seed."""
+    """The ``lateral.parquet`` row of a task's trajectories: its summary, flat, the collisions
+    SUMO counted for the ego (its step log's /episode record) and its seed."""
+    from ecodrive_bench.bench.logs.mcaplog import episode_summary
+
     s = summary(df, task.scenario)
-    return {**{k: (str(v) if isinstance(v, (dict, list)) else v) for k, v in s.items()}, "train_seed": task.train_seed}
+    ep = episode_summary(task.path) or {}
+    return {**{k: (str(v) if isinstance(v, (dict, list)) else v) for k, v in s.items()},
+            "collisions": ep.get("collisions"), "train_seed": task.train_seed}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -240,8 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     rows, todo = [], []
     for t in tasks:
         traj = Path(t.path).with_suffix(".parquet")
-        sha = sha256(Path(t.policy_dir) / "policy.pt") if t.policy_dir else ""  # another policy's log is rerun
-        if episode_summary(t.path, agent_sha256=sha) is not None and traj.is_file():
+        sha = sha256(Path(t.policy_dir) / "policy.pt") if t.policy_dir else ""  # another policy's or script's log is rerun
+        if episode_summary(t.path, agent_sha256=sha, eval_scenario=script_hash(t.scenario)) is not None and traj.is_file():
             rows.append(_row(pd.read_parquet(traj), t))
         else:
             todo.append(t)
@@ -250,8 +358,10 @@ def main(argv: list[str] | None = None) -> int:
         rows += list(it)
     except CheckpointError as e:  # checked above; a file replaced since is refused by its worker
         return fail(ap.prog, str(e))
-    out = pd.DataFrame(rows).astype({"train_seed": "Int64"}).sort_values(["scenario", "method", "train_seed"],
-                                                                        ignore_index=True)
+    out = pd.DataFrame(rows).astype({"train_seed": "Int64", "collisions": "Int64"})
+    if "queue_front_lane" in out:
+        out["queue_front_lane"] = out.queue_front_lane.astype("Int64")
+    out = out.sort_values(["scenario", "method", "train_seed"], ignore_index=True)
     atomic_parquet(out, root / "lateral.parquet")
     print(out.to_string(index=False))
     return 0

@@ -1,20 +1,21 @@
-"""Why lateral scenario A fails: an analysis, no training.
+"""Scenario A read step by step: what the learned policies see, may do and value; no training.
 
     python -m ecodrive_bench.bench.experiments.lateral_why [--out /tmp/lateral-why] [--episodes 20]
 
-1. Scenario A as shipped (``lateral.Script``), with the scripted vehicles placed where the
-   scenario means them (``AheadScript``) and, as a control, so without HDV1's braking
-   (``NoBrakeScript``), for every shipped uncoordinated PRL and MP-DQN seed:
-   each run is logged to MCAP, read back with ``read_log``, and the critic's ``heads()`` scores
-   every logged observation (grid + logic). Per run: the steps with HDV1 ahead in the ego's lane,
-   the event's steps (HDV1 ahead in the ego's lane from its first braking step to 10 s after
-   the braking), the changes the mask allowed then, and max(Q_change - Q_stay) over them.
+1. Scenario A (``lateral.Script``) and two controls, for every shipped uncoordinated seed of the
+   methods that choose their lane (``METHODS``): ``nobrake`` (HDV1 does not brake: what the policy
+   does anyway) and ``free`` (no HDV2: the left lane is free from the start). Each run is logged
+   to MCAP, read back with ``read_log``, and the critic scores every logged observation (grid +
+   logic; ``lateral_q``). Per run: the verdict of ``lateral.judge_a``, and over the event window
+   (``lateral.event_times``) the free distance the grid shows in the left lane, the steps the
+   mask allows "left", the changes requested, and Q_left - Q_stay.
 2. Training-like traffic (``EcoDrive-v0``, the policy's training scenario, random cases drawn
    like training's): the steps where the ego's leader within ``LEADER_RANGE`` decelerates harder
    than ``HARD_BRAKE`` while an adjacent lane's grid column is free for ``FREE_AHEAD`` ahead.
 
-Outputs: the MCAP logs and ``runs.parquet`` / ``traffic.parquet`` under ``--out``; a summary on
-stdout. docs/experiments.md ("Why scenario A fails") has the numbers.
+Outputs: the MCAP logs, their step tables and trajectories, ``runs.parquet`` and
+``traffic.parquet`` under ``--out``; a summary on stdout. docs/experiments.md ("Scenario A, step
+by step") has the numbers.
 """
 from __future__ import annotations
 
@@ -29,31 +30,13 @@ from ecodrive_bench.bench.experiments import lateral as L
 LEADER_RANGE = 30.0  # [m] ego front bumper to the leader's back
 HARD_BRAKE = -2.0  # [m/s^2] the leader's acceleration below this counts as hard braking
 FREE_AHEAD = 30.0  # [m] an adjacent grid column free this far ahead of the ego's front bumper
-EVENT_AFTER = 10  # [steps] the event lasts this long after HDV1's braking ends
-METHODS = ("prl", "mpdqn")
+METHODS = ("prl", "mpdqn", "dqn")  # the learning methods whose policy chooses the lane (DDPG's is LC2013)
 HEAD_NAMES = ("left", "stay", "right")  # k index 0, 1, 2 (mask order too)
+TRAFFIC_POLICIES = (("prl", 0), ("mpdqn", 0), ("dqn", 0), ("baseline", None))
 
 
-class AheadScript(L.Script):
-    """Scenario A with its gaps as meant: ``lateral.Script`` places the HDVs ``gap`` m ahead of
-    the ego's position at the reset, but they appear one step later, when the ego has moved on by
-    its speed (about 14 m); HDV2 (+8 m) is then behind it, and HDV1 (+25 m, about 6 m clear of
-    the ego's bumper) is refused by SUMO's insertion check until the ego has passed it. Here each
-    HDV's back bumper is ``gap`` m ahead of the ego's front bumper after that step."""
-
-    def start(self, env) -> None:
-        s = env.session
-        x, _, _, v, _, lane, _ = env.ego.kin
-        ahead = x + v * env.cfg.step_length + env.cfg.vehicle_length
-        for sv in self.vehicles:
-            target = min(max(lane + sv.lane_offset, 0), env.cfg.lanes - 1)
-            s.add_scripted(sv.vid, lane=target, pos=ahead + sv.gap, speed=sv.speed)
-            if not sv.hold:
-                s.release_speed(sv.vid)
-
-
-class NoBrakeScript(AheadScript):
-    """``AheadScript`` without HDV1's braking (the control: what the policy does anyway)."""
+class NoBrakeScript(L.Script):
+    """Scenario A without HDV1's braking (the control: what the policy does anyway)."""
 
     def before(self, env, step: int) -> None:
         if step == L.BRAKE_AT + L.BRAKE_STEPS:
@@ -62,7 +45,15 @@ class NoBrakeScript(AheadScript):
                     env.session.release_speed(v.vid)
 
 
-VARIANTS = {"shipped": L.Script, "ahead": AheadScript, "nobrake": NoBrakeScript}
+class FreeScript(L.Script):
+    """Scenario A without HDV2: the left lane is free beside and ahead of the ego throughout."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.vehicles = [v for v in self.vehicles if v.vid != "hdv2"]
+
+
+VARIANTS = {"scripted": L.Script, "nobrake": NoBrakeScript, "free": FreeScript}
 
 
 def free_ahead(grid: np.ndarray, col: int, behind: float, cell: float) -> float:
@@ -73,6 +64,14 @@ def free_ahead(grid: np.ndarray, col: int, behind: float, cell: float) -> float:
     front = int(round(behind / cell))
     occ = np.flatnonzero(grid[front:, col] == 0)
     return float((occ[0] if occ.size else grid.shape[0] - front) * cell)
+
+
+def free_beside(grid: np.ndarray, col: int, behind: float, cell: float) -> bool:
+    """Whether grid column ``col`` is free from the grid's back edge to the ego's front bumper
+    (where the ego would be after a change; False when the column does not exist)."""
+    if not 0 <= col < grid.shape[1]:
+        return False
+    return bool((grid[:int(round(behind / cell)), col] != 0).all())
 
 
 def column(grid: np.ndarray, col: int, behind: float, cell: float) -> str:
@@ -87,6 +86,23 @@ def policy_agent(method: str, seed: int, env) -> Any:
 
     task = L.LateralTask("A", method, str(policy_dir(method, "uncoordinated", seed=seed)), "", seed)
     return L.task_agent(task, env)[0]
+
+
+def lateral_q(agent, grids: np.ndarray, logics: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Q of each lateral choice, its acceleration [m/s^2]), each (B, 3) in ``HEAD_NAMES`` order:
+    a P-DQN agent's heads (Q_k, x_k); for DQN the best of the 9 accelerations of each lateral
+    choice (action = lon * 3 + lat) and NaN accelerations."""
+    if hasattr(agent, "heads"):
+        return agent.heads(grids, logics)
+    import torch
+
+    from ecodrive_bench.agents.device import host
+    from ecodrive_bench.agents.dqn import N_LAT
+
+    with torch.no_grad():
+        q = host(agent.q(agent.tensor(grids, dtype=torch.float32), agent.tensor(agent.scaler.logic(logics))))
+    q = q.reshape(len(q), -1, N_LAT).max(axis=1)
+    return q, np.full_like(q, np.nan)
 
 
 def run_a(method: str, seed: int, log: Path, variant: str) -> pd.DataFrame:
@@ -105,14 +121,15 @@ def run_a(method: str, seed: int, log: Path, variant: str) -> pd.DataFrame:
 
 def step_table(log: Path, traj: pd.DataFrame, agent, cfg) -> pd.DataFrame:
     """One row per logged step (the observation the next action was chosen from): the ego, HDV1
-    relative to it, the free distance ahead in the ego's lane and its neighbours (grid), the mask,
-    Q_k and x_k of every head, and the lane decision requested from this observation."""
+    relative to it, the free distance ahead in the ego's lane and its neighbours and whether the
+    left one is free beside it (grid), the mask, Q_k and x_k of every lateral choice, and the
+    lane decision requested from this observation (-1 = left, the paper's k)."""
     from ecodrive_bench.bench.logs.mcaplog import read_log
 
     d = read_log(log)
     grids = np.stack([d.grid(i) for i in range(len(d.steps))]).astype(np.float32)
     logics = np.stack([np.asarray(s.logic, dtype=np.float32) for s in d.steps])
-    q, x = agent.heads(grids, logics)
+    q, x = lateral_q(agent, grids, logics)
     hdv = traj[traj.vehicle == "hdv1"].set_index("time")
     rows = []
     for i, s in enumerate(d.steps):
@@ -120,10 +137,12 @@ def step_table(log: Path, traj: pd.DataFrame, agent, cfg) -> pd.DataFrame:
         h = hdv.loc[s.time] if s.time in hdv.index else None
         rows.append({
             "time": s.time, "lane": s.lane, "x": s.x, "speed": s.speed,
-            "hdv1_gap": np.nan if h is None else float(h.x - s.x), "hdv1_lane": -1 if h is None else int(h.lane),
+            "hdv1_gap": np.nan if h is None else float(h.x - cfg.vehicle_length - s.x),
+            "hdv1_lane": -1 if h is None else int(h.lane),
             "hdv1_speed": np.nan if h is None else float(h.speed),
             **{f"free_{n}": free_ahead(g, s.lane + o, cfg.grid_behind, cfg.cell_length)
                for n, o in (("own", 0), ("left", 1), ("right", -1))},
+            "beside_left_free": free_beside(g, s.lane + 1, cfg.grid_behind, cfg.cell_length),
             **{f"mask_{n}": int(m) for n, m in zip(HEAD_NAMES, s.action_mask)},
             **{f"q_{n}": float(v) for n, v in zip(HEAD_NAMES, q[i])},
             **{f"x_{n}": float(v) for n, v in zip(HEAD_NAMES, x[i])},
@@ -133,54 +152,49 @@ def step_table(log: Path, traj: pd.DataFrame, agent, cfg) -> pd.DataFrame:
 
 
 def run_summary(t: pd.DataFrame, traj: pd.DataFrame) -> dict[str, Any]:
-    """The numbers of one run: HDV1 ahead, the event's steps, allowed changes, the critic's margin."""
+    """The event window's numbers of one run (the steps with HDV1 ahead in the ego's lane, from the
+    braking's onset to ``lateral.EVENT_AFTER`` after it): what the grid shows of the left lane, the
+    mask, the requests and the critic's Q_left - Q_stay, and the same margin before the onset."""
+    onset, end = L.event_times(traj)
     behind = (t.hdv1_gap > 0) & (t.hdv1_lane == t.lane)
-    # the steps of the scripted braking (the control, without it: the steps it would have braked)
-    braking = traj[traj.vehicle == "ego"].time.iloc[L.BRAKE_AT:L.BRAKE_AT + L.BRAKE_STEPS]
-    out: dict[str, Any] = {"steps": len(t), "hdv1_ahead_steps": int(behind.sum())}
-    allowed = (t.mask_left == 1) | (t.mask_right == 1)
-    dq = np.maximum(np.where(t.mask_left == 1, t.q_left, -np.inf), np.where(t.mask_right == 1, t.q_right, -np.inf)) - t.q_stay
-    out["allowed_steps"] = int(allowed.sum())
-    out["max_dq_allowed"] = float(dq[allowed].max()) if allowed.any() else np.nan
-    event = behind & (t.time >= braking.min()) & (t.time <= braking.max() + EVENT_AFTER)
-    ev = t[event]
-    pre = t[behind & (t.time < braking.min())]
-    # does the critic respond to the braking? Q_left - Q_stay (mask aside) before it and during it
-    out["dq_left_before"] = float((pre.q_left - pre.q_stay).mean()) if len(pre) else np.nan
-    out["dq_left_event"] = float((ev.q_left - ev.q_stay).mean()) if len(ev) else np.nan
-    out.update({"event_steps": len(ev), "event_allowed": int(allowed[event].sum()),
-                "event_allowed_free30": int((((ev.mask_left == 1) & (ev.free_left >= FREE_AHEAD))
-                                             | ((ev.mask_right == 1) & (ev.free_right >= FREE_AHEAD))).sum()),
-                "event_max_dq": float(dq[event & allowed].max()) if (event & allowed).any() else np.nan,
-                "event_min_free_own": float(ev.free_own.min()) if len(ev) else np.nan,
-                "event_max_free_left": float(ev.free_left.max()) if len(ev) else np.nan,
-                "event_min_speed": float(ev.speed.min()) if len(ev) else np.nan,
-                "event_changes_requested": int((ev.next_k != 0).sum()),
-                "event_changes_allowed": int((((ev.next_k == -1) & (ev.mask_left == 1))
-                                              | ((ev.next_k == 1) & (ev.mask_right == 1))).sum())})
-    left = t[(t.hdv1_gap > 0) & (t.hdv1_lane >= 0) & (t.lane != t.hdv1_lane)]
-    out["left_hdv1_lane_at"] = float(left.time.iloc[0] - braking.min()) if len(left) else np.nan
-    return out
+    event = behind & (t.time >= onset) & (t.time <= end)
+    ev, pre = t[event], t[behind & (t.time < onset)]
+    left_ok = ev.mask_left == 1
+    dq = ev.q_left - ev.q_stay
+
+    def top(s: pd.Series) -> float:
+        return float(s.max()) if len(s) else np.nan
+
+    return {"hdv1_ahead_steps": int(behind.sum()), "event_steps": len(ev),
+            "event_max_free_left": top(ev.free_left), "event_beside_left_free": int(ev.beside_left_free.sum()),
+            "event_left_allowed": int(left_ok.sum()),
+            "event_left_allowed_free30": int((left_ok & (ev.free_left >= FREE_AHEAD)).sum()),
+            "event_left_requested": int((ev.next_k == -1).sum()),
+            "event_max_dq_left": top(dq), "event_max_dq_left_allowed": top(dq[left_ok]),
+            "dq_left_before": float((pre.q_left - pre.q_stay).mean()) if len(pre) else np.nan,
+            "dq_left_event": float(dq.mean()) if len(ev) else np.nan,
+            "event_min_speed": float(ev.speed.min()) if len(ev) else np.nan}
 
 
-def scenario_a(out: Path, seeds: dict[str, list[int]]) -> pd.DataFrame:
-    """Both variants of A for every seed: one summary row each (the step tables as parquet)."""
+def scenario_a(out: Path, seeds: dict[str, list[int]], variants: tuple[str, ...] = tuple(VARIANTS)) -> pd.DataFrame:
+    """Every variant of A for every seed: one row each (``lateral.judge_a`` and ``run_summary``);
+    the step tables and trajectories go next to the logs as parquet."""
     rows = []
     for method, sds in seeds.items():
         for seed in sds:
-            for variant in VARIANTS:
+            for variant in variants:
                 log = out / variant / f"{method}-s{seed}.mcap"
-                traj = run_a(method, seed, log, variant)
+                traj = run_a(method, seed, log, variant).assign(method=method)
                 env = L.scenario_env(method)
                 try:
                     t = step_table(log, traj, policy_agent(method, seed, env), env.cfg)
                 finally:
                     env.close()
                 t.to_parquet(log.with_suffix(".steps.parquet"))
-                traj.assign(method=method).to_parquet(log.with_suffix(".parquet"))
-                s = L.summary(traj.assign(method=method), "A")
-                rows.append({"variant": variant, "method": method, "seed": seed,
-                             "left_hdv1_lane": s["left_hdv1_lane"], "lane_changes": s["lane_changes"],
+                traj.to_parquet(log.with_suffix(".parquet"))
+                s = L.summary(traj, "A")
+                rows.append({"variant": variant, "method": method, "seed": seed, "lane_changes": s["lane_changes"],
+                             **{k: s[k] for k in ("left_hdv1_lane", "left_at", "brake_gap", "event_min_gap")},
                              **run_summary(t, traj)})
     return pd.DataFrame(rows)
 
@@ -190,7 +204,7 @@ def traffic_events(method: str, seed: int | None, episodes: int, rng_seed: int =
     the policy's training scenario, cases drawn like training's (``env.reset(seed=...)``: random
     SUMO seed and insertion time). One row per step with a leader within ``LEADER_RANGE``: its
     gap and acceleration, the free distance of the adjacent columns, the mask, the signal's red
-    flag, and (for a P-DQN policy) Q_change - Q_stay over the free, allowed sides."""
+    flag, and (for a learning policy) Q_change - Q_stay over the free, allowed sides."""
     import torch
 
     from ecodrive_bench.bench.harness.episode import make_env
@@ -223,7 +237,7 @@ def traffic_events(method: str, seed: int | None, episodes: int, rng_seed: int =
                            "free_left": free["left"], "free_right": free["right"], "mask_left": int(mask[0]),
                            "mask_right": int(mask[2]), "red": float(obs["logic"][-2]), "speed": env.ego.kin.speed}
                     if learning:
-                        q = agent.heads(obs["grid"][None], obs["logic"][None])[0][0]
+                        q = lateral_q(agent, obs["grid"][None].astype(np.float32), obs["logic"][None])[0][0]
                         sides = [q[i] - q[1] for i, n in ((0, "left"), (2, "right"))
                                  if mask[i] and free[n] >= FREE_AHEAD]
                         row["dq_free_allowed"] = max(sides) if sides else np.nan
@@ -259,18 +273,19 @@ def main(argv: list[str] | None = None) -> int:
     from ecodrive_bench.bench.args import Parser, int_in
     from ecodrive_bench.bench.harness.policies import shipped_seeds
 
-    ap = Parser(description="Why lateral scenario A fails: the scripted event, the mask, the critic, training traffic.")
+    ap = Parser(description="Scenario A step by step: the observation, the mask, the critic, training traffic.")
     ap.add_argument("--out", type=Path, default=Path("/tmp/lateral-why"), help="output folder")
     ap.add_argument("--episodes", type=int_in(0), default=20, help="training-like episodes per policy (0: skip)")
     args = ap.parse_args(argv)
     pd.set_option("display.width", 250)
+    pd.set_option("display.max_columns", 40)
     seeds = {m: shipped_seeds(m, "uncoordinated") for m in METHODS}
     runs = scenario_a(args.out, seeds)
     runs.to_parquet(args.out / "runs.parquet")
-    print(runs.round(3).to_string(index=False))
+    print(runs.round(2).to_string(index=False))
     if args.episodes:
         rows = []
-        for method, seed in (("prl", 0), ("mpdqn", 0), ("baseline", None)):
+        for method, seed in TRAFFIC_POLICIES:
             df = traffic_events(method, seed, args.episodes)
             rows.append({"policy": method if seed is None else f"{method}-s{seed}", **traffic_summary(df)})
             df.to_parquet(args.out / f"traffic-{rows[-1]['policy']}.parquet")

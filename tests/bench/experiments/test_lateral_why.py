@@ -1,13 +1,15 @@
-"""The scenario-A analysis (bench/experiments/lateral_why.py): its grid reading, its corrected
-placement of the scripted vehicles, and its per-step table with the critic's values."""
+"""The scenario-A analysis (bench/experiments/lateral_why.py): its grid reading, its controls, and
+its per-step table with the critic's values."""
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from ecodrive_bench.bench.experiments.lateral_why import (
     column,
     free_ahead,
+    free_beside,
     run_a,
     run_summary,
     step_table,
@@ -22,24 +24,32 @@ def test_free_ahead_reads_the_column_from_the_front_bumper():
     assert free_ahead(g, 1, 10.0, 1.0) == 15.0 and free_ahead(g, 0, 10.0, 1.0) == 50.0
     assert free_ahead(g, 3, 10.0, 1.0) == -1.0 and free_ahead(g, -1, 10.0, 1.0) == -1.0
     assert column(g, 1, 10.0, 1.0) == "1" * 15 + "0" * 6 + "1" * 29 and column(g, 5, 10.0, 1.0) == "-"
+    assert free_beside(g, 1, 10.0, 1.0) and not free_beside(g, 0, 10.0, 1.0) and not free_beside(g, 3, 10.0, 1.0)
 
 
-def test_ahead_script_puts_hdv1_ahead_of_a_fast_ego_and_the_table_scores_every_step(tmp_path):
+@pytest.mark.parametrize("method", ["prl", "dqn"])
+def test_the_table_scores_every_step_and_sees_hdv1_and_hdv2(method, tmp_path):
+    """Seed 0 of each keeps its lane through the event: HDV1 ahead in the grid's own column, HDV2
+    ahead in the left one, a finite Q for every lateral choice at every step."""
     from ecodrive_bench.bench.experiments.lateral import scenario_env
     from ecodrive_bench.bench.experiments.lateral_why import policy_agent
 
     log = tmp_path / "a.mcap"
-    traj = run_a("prl", 0, log, "ahead")  # seed 0 enters at the speed limit
-    first = traj[traj.vehicle == "hdv1"].time.min()
-    assert first == traj.time.min(), "HDV1 appears at the first step"
-    env = scenario_env("prl")
+    traj = run_a(method, 0, log, "scripted")
+    env = scenario_env(method)
     try:
-        t = step_table(log, traj, policy_agent("prl", 0, env), env.cfg)
+        t = step_table(log, traj, policy_agent(method, 0, env), env.cfg)
     finally:
         env.close()
     assert np.isfinite(t[["q_left", "q_stay", "q_right"]].to_numpy()).all()
     s = run_summary(t, traj)
-    assert s["hdv1_ahead_steps"] > 0 and s["event_steps"] > 0 and s["event_min_free_own"] < 50
+    assert s["event_steps"] > 5 and s["event_max_free_left"] < 30 and s["event_left_allowed_free30"] == 0
+    assert t[t.hdv1_gap > 0].time.min() == traj.time.min(), "HDV1 is ahead from the first step after the reset"
+
+
+def test_free_control_has_no_hdv2():
+    traj = run_a("prl", 0, None, "free")
+    assert set(traj.vehicle) == {"ego", "hdv1"}
 
 
 def test_traffic_summary_counts_hard_braking_leaders_beside_a_free_allowed_lane():
