@@ -364,13 +364,13 @@ def generalisation_summary(per_variant: pd.DataFrame, in_distribution: pd.DataFr
     return out
 
 
-LATERAL_CLAIM = {"A": "left_hdv1_lane", "B": "ended_in_shortest_queue_lane"}  # the paper's behaviour in each scenario
+LATERAL_CLAIM = {"A": "left_hdv1_lane", "B": "at_queue_front_in_shortest_queue_lane"}  # the paper's behaviour in each scenario
 
 
 def lateral_behaviour(summary: pd.DataFrame) -> pd.DataFrame:
     """Per scenario and method: how many runs (training seeds) there are, how many change lanes at
-    all and how many show the paper's behaviour (A: leave HDV1's lane; B: end in the lane with the
-    fewest queued vehicles)."""
+    all and how many show the paper's behaviour (A: leave HDV1's lane while it brakes; B: reach the
+    front of the queues in the lane with the fewest queued vehicles)."""
     rows = []
     for (scenario, method), g in summary.groupby(["scenario", "method"], sort=False):
         col = LATERAL_CLAIM.get(scenario)
