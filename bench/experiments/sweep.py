@@ -22,6 +22,15 @@ Every finished job's small results (its summary row, evaluation rows, training m
 manifest; ``bench.experiments.store``) are also saved under ``--store``, which the repository keeps
 in git: a job found there is restored into the run folder instead of trained, so a sweep far longer
 than one session accumulates job by job, on any machine.
+
+With ``--executor ray`` every job is a Ray task of one CPU on a node of the cluster at
+``--address`` (``bench.experiments.sweep_ray``). It trains and evaluates in a temporary folder of
+that node and sends its log folder back as data (``job.json``, ``episodes.parquet``,
+``metrics.parquet``, the policy manifest, ``train.mcap``, the case MCAPs); this machine writes them
+into ``<logs>`` and ``--store`` as a local job does. No node needs this machine's disk. A job whose
+node dies is run again by Ray (at most twice more) from episode 0, in a fresh folder, never
+resumed: its checkpoints were on the lost node. Training is seeded, so the rerun gives the same
+results. A Ray job does not resume a checkpoint that a local sweep left under ``$ECODRIVE_RUNS``.
 """
 from __future__ import annotations
 
@@ -40,7 +49,7 @@ from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
 from ecodrive_bench.bench.experiments import store
-from ecodrive_bench.bench.harness.executors import EXECUTORS, run_local, run_ray
+from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local
 from ecodrive_bench.bench.harness.policies import CheckpointError
 from ecodrive_bench.bench.io import atomic_json, atomic_parquet
 from ecodrive_bench.bench.logs.mcaplog import episode_summary
@@ -73,8 +82,10 @@ class Job:
         return f"{self.name}-s{self.seed}"
 
 
-def run_job(job: Job) -> dict[str, Any]:
-    """Train (or resume), copy the training log, evaluate greedily on the test cases."""
+def run_job(job: Job, work: Path | None = None) -> dict[str, Any]:
+    """Train (or resume), copy the training log, evaluate greedily on the test cases. ``work``
+    given, the job writes only there (``work/run``: its run folder; ``work/log``: its log folder)
+    while its rows name its own log folder, where the driver lands them (``sweep_ray``)."""
     import torch
 
     from ecodrive_bench.agents.registry import make_agent
@@ -84,7 +95,8 @@ def run_job(job: Job) -> dict[str, Any]:
     from ecodrive_bench.bench.training.train import train
 
     torch.set_num_threads(1)
-    run_dir, log_dir = Path(job.run_dir), Path(job.log_dir)
+    named = Path(job.log_dir)
+    run_dir, log_dir = (Path(job.run_dir), named) if work is None else (work / "run", work / "log")
     scenario: dict[str, Any] = {"reward": job.reward}
     if job.max_episode_time is not None:
         scenario["max_episode_time"] = job.max_episode_time
@@ -126,7 +138,7 @@ def run_job(job: Job) -> dict[str, Any]:
         row = episode_summary(path, agent_sha256=manifest["sha256"])  # a log of an earlier policy is rerun
         if row is None:
             row = run_episode(env, agent, case, "prl", log_path=path, agent_sha256=manifest["sha256"])
-        rows.append({**row, "config": job.name, "seed": job.seed, "case": case.index, "mcap": str(path)})
+        rows.append({**row, "config": job.name, "seed": job.seed, "case": case.index, "mcap": str(named / path.name)})
     env.close()
     ep = pd.DataFrame(rows)
     atomic_parquet(ep, log_dir / "episodes.parquet")
@@ -138,7 +150,7 @@ def run_job(job: Job) -> dict[str, Any]:
            "finished": float(ep.terminated.mean()),  # share of test trips that reached the corridor's end
            "collisions": int(ep.collisions.sum()), "lane_changes": ep.lane_changes_applied.mean(),
            "policy_from": "" if shipped is None else f"models/{shipped.parent.name}/{shipped.name}",
-           "job_wall_s": time.perf_counter() - t0, "log_dir": str(log_dir)}
+           "job_wall_s": time.perf_counter() - t0, "log_dir": str(named)}
     atomic_json({"job": _identity(job), "row": row}, log_dir / "job.json", default=float)  # last: present = finished
     return row
 
@@ -210,12 +222,14 @@ def write_tables(root: Path, rows: dict[str, dict[str, Any]]) -> pd.DataFrame:
     episodes = {d: store.read_parquet(Path(d) / "episodes.parquet") for d in rows if (Path(d) / "episodes.parquet").is_file()}
     # a job finished before rows recorded ``finished``: its share of trips that reached the end, from its episodes
     df = pd.DataFrame([{**row, "finished": float(episodes[d].terminated.mean())}
-                       if "finished" not in row and d in episodes else row for d, row in rows.items()])
+                       if "finished" not in row and d in episodes else row for d, row in rows.items()], index=list(rows))
     if not df.empty:
-        df = df.sort_values(["config", "seed"], ignore_index=True)
+        df = df.sort_values(["config", "seed"])
+    order = list(df.index)  # both tables by configuration and seed, whatever order the jobs finished in
+    df = df.reset_index(drop=True)
     atomic_parquet(df, root / "sweep.parquet")
     if episodes:
-        atomic_parquet(pd.concat(episodes.values(), ignore_index=True), root / "episodes.parquet")
+        atomic_parquet(pd.concat([episodes[d] for d in order if d in episodes], ignore_index=True), root / "episodes.parquet")
     return df
 
 
@@ -305,19 +319,19 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--validation-cases", type=int_in(1, 100), default=VALIDATION_CASES, help="validation cases per training checkpoint (1-100)")
     ap.add_argument("--max-episode-time", type=float_in(*accepted_range(ScenarioConfig, "max_episode_time")),
                     default=None, help="episode truncation [s] (default: the scenario's)")
-    ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
-    ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
-    ap.add_argument("--workers", type=int_in(1), default=2, help="parallel jobs (>= 1)")
+    add_options(ap, ray=" (a job killed with its node restarts from episode 0 elsewhere: see above)")
+    ap.add_argument("--workers", type=int_in(1), default=2,
+                    help="parallel jobs (>= 1; with --executor ray and --address, the cluster's CPUs)")
     ap.add_argument("--run-id", type=name, default="paper", help="run folder under --logs")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
     ap.add_argument("--store", type=Path, default=store.STORE,
                     help="finished jobs' small results, kept in git: found ones are restored, not trained; "
                          "new ones are added (default: the repository's results/sweeps)")
     args = ap.parse_args(argv)
-    for flag, value, accepted in (("study", args.study, STUDIES), ("--signals", args.signals, SIGNALS),
-                                  ("--executor", args.executor, EXECUTORS)):
+    for flag, value, accepted in (("study", args.study, STUDIES), ("--signals", args.signals, SIGNALS)):
         if value not in accepted:
             ap.error(f"{flag} {value!r} is not accepted; choose one of {', '.join(accepted)}")
+    check_options(ap, args)
     if args.seeds is None:
         args.seeds = [0, 1, 2] if args.study == "reward" else [0]
     return args
@@ -356,8 +370,12 @@ def _sweep(args: argparse.Namespace, todo: list[Job], root: Path) -> int:
     by_dir = {job.log_dir: job for job in todo}
     rows = finished(root)  # every finished job of the study, not only this command's
     write_tables(root, rows)
-    it = (run_local(todo, args.workers, run_job) if args.executor == "local"
-          else run_ray(todo, args.address, args.workers, run_job))
+    if args.executor == "local":
+        it = run_local(todo, args.workers, run_job)
+    else:
+        from ecodrive_bench.bench.experiments.sweep_ray import run_jobs
+
+        it = run_jobs(todo, args.address, args.workers)
     for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
         rows.update(finished(root))  # and what a sweep running beside this one finished meanwhile
         rows[row["log_dir"]] = row

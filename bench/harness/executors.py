@@ -45,7 +45,7 @@ def add_options(ap: argparse.ArgumentParser, ray: str = "") -> None:
     """``--executor`` and ``--address``; ``ray`` adds to the help of ``--executor`` what a Ray run
     does differently (e.g. where its checkpoints live). ``check_options`` after parsing."""
     ap.add_argument("--executor", default="local", choices=list(EXECUTORS),
-                    help=f"local: a process pool on this machine; ray: Ray tasks over a cluster's nodes{ray}")
+                    help=f"local: processes on this machine; ray: Ray tasks on the nodes of a cluster{ray}")
     ap.add_argument("--address", type=address, default=None,
                     help=f"Ray cluster to join, with --executor ray: {ADDRESSES} (default: start a local Ray)")
 
