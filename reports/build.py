@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail
 from ecodrive_bench.bench.io import atomic_csv, atomic_text, refuse_links
@@ -36,7 +37,11 @@ TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
 
 
-def build(run_dir: Path, out: Path, gen_dir: Path | None = None) -> Path:
+def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool = True) -> tuple[Path, list[str]]:
+    """Write the report of ``run_dir`` into ``out``: the path of ``index.md`` and the warnings.
+    The parts whose time grows with the run, reading every step log for the return split and
+    drawing the figures, show bars with an ETA on stderr where it is a terminal (``progress=False``:
+    never; a CI log gets none either way)."""
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: not a run folder (a directory written by `ecodrive run`)")
     if gen_dir is not None and not gen_dir.is_dir():
@@ -54,7 +59,7 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
-        md, warnings = _single_vehicle(run_dir, out, page)
+        md, warnings = _single_vehicle(run_dir, out, page, progress)
     else:
         md, warnings = [f"# Report: {run_dir.name}", ""], []
         page.manifest = _manifest(run_dir)
@@ -122,7 +127,7 @@ def _mixed_claims(run_dir: Path) -> pd.DataFrame | None:
     return claims.mixed_claims(effect, SPEED_LOSS_TOL, HDV_TOL, FLEET_SAVING)
 
 
-def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], list[str]]:
+def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True) -> tuple[list[str], list[str]]:
     """Table 4, statistics, violins and trajectories of a ``bench.harness.run`` folder: the markdown
     lines and warnings; what the HTML page shows goes into ``page``."""
     results, manifest, dropped = load_run(run_dir)
@@ -169,7 +174,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
     page.experiments_md = _gaps(results, manifest, out)
     md += page.experiments_md
     warnings = dropped + unfinished_warnings(results)
-    parts, partial = _return_parts(results, run_dir, warnings)
+    parts, partial = _return_parts(results, run_dir, warnings, progress)
     if partial:
         md += [f"**{partial} step log(s) are partial** (cut short after the results were written); they are left "
                "out of the return split and the trajectories, and listed under Warnings.", ""]
@@ -189,44 +194,66 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page) -> tuple[list[str], li
     page.claims, page.parts, page.partial_logs = claims.paper_claims(results), parts, partial
     page.bootstrap = (f"Per-episode bootstrap (BCa, {stats.BOOTSTRAP_RESAMPLES} resamples) "
                       f"{int(stats.CI_LEVEL * 100)}% confidence intervals of the mean and of the IQM.")
-    for signals in sorted(set(results.signals)):
-        p = figures.violins(groups, methods, signals, out / "figures")
-        page.violins.append(Figure(p[0], _violin_caption(groups, results, methods, signals), f"violin, {signals}"))
-        md += [f"![violin {signals}](figures/{p[0].name})", ""]
+    settings = sorted(set(results.signals))
     compare = next((m for m in ("prl", "mpdqn", "ddpg", "glosa") if m in methods), None)
     page.compare = compare
-    if compare is not None and "baseline" in methods:
-        md += [f"## Trajectories: baseline against {compare} (fig:compare1/2)", ""]
-        if compare != "prl":
-            md += [f"PRL is not in this run; {compare} is shown instead.", ""]
-        for signals in sorted(set(results.signals)):
-            sub = results[results.signals == signals]
-            for case in sorted(set(sub[sub.method == compare].case) & set(sub[sub.method == "baseline"].case))[
-                    :TRAJECTORY_CASES]:
-                trajs, bands, longest = {}, None, 0
-                for method in ("baseline", compare):
-                    path = resolve_log(run_dir, sub[(sub.method == method) & (sub.case == case)].mcap.iloc[0])
-                    try:
-                        steps, warn = load_steps(path)
-                    except LogError as e:
-                        warnings.append(str(e))
-                        continue
-                    if warn:  # a partial log is never drawn as a whole drive
-                        warnings.append(f"{warn} (not drawn)")
-                        continue
-                    trajs[method] = metrics.trajectory(steps)
-                    if len(steps) > longest:  # bands over the longer drive
-                        longest, bands = len(steps), metrics.signal_bands(steps, *stop_lines(steps))
-                plan = _bound_plan(run_dir, sub, case, warnings) if trajs else None
-                if plan is not None:
-                    trajs[BOUND_LABEL] = plan
-                if trajs and bands is not None:
-                    name = f"compare-{signals}-case{case:03d}"
-                    p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
-                    page.trajectories.append(Figure(p[0], _trajectory_caption(list(trajs), signals, case),
-                                                    f"{signals} case {case}"))
-                    md += [f"![{name}](figures/{p[0].name})", ""]
+    drawn = compare is not None and "baseline" in methods
+    shown = _trajectory_cases(results, compare) if drawn else []
+    with tqdm(total=len(settings) + len(shown), desc="figures", unit="fig",
+              disable=None if progress else True) as bar:  # None: off where stderr is no terminal
+        for signals in settings:
+            p = figures.violins(groups, methods, signals, out / "figures")
+            page.violins.append(Figure(p[0], _violin_caption(groups, results, methods, signals), f"violin, {signals}"))
+            md += [f"![violin {signals}](figures/{p[0].name})", ""]
+            bar.update(1)
+        if drawn:
+            md += [f"## Trajectories: baseline against {compare} (fig:compare1/2)", ""]
+            if compare != "prl":
+                md += [f"PRL is not in this run; {compare} is shown instead.", ""]
+        for signals, case in shown:
+            md += _trajectory(run_dir, out, results[results.signals == signals], compare, signals, case, page, warnings)
+            bar.update(1)
     return md, warnings
+
+
+def _trajectory_cases(results: pd.DataFrame, compare: str) -> list[tuple[str, int]]:
+    """(signals, case) of the trajectory figures: the first ``TRAJECTORY_CASES`` cases per setting
+    that both the baseline and ``compare`` drove."""
+    out = []
+    for signals in sorted(set(results.signals)):
+        sub = results[results.signals == signals]
+        both = sorted(set(sub[sub.method == compare].case) & set(sub[sub.method == "baseline"].case))
+        out += [(signals, int(case)) for case in both[:TRAJECTORY_CASES]]
+    return out
+
+
+def _trajectory(run_dir: Path, out: Path, sub: pd.DataFrame, compare: str, signals: str, case: int, page: Page,
+                warnings: list[str]) -> list[str]:
+    """The baseline-against-``compare`` figure of one case (with the oracle's plan when the run has
+    it) into ``page``, and its markdown lines; none when neither drive can be drawn."""
+    trajs, bands, longest = {}, None, 0
+    for method in ("baseline", compare):
+        path = resolve_log(run_dir, sub[(sub.method == method) & (sub.case == case)].mcap.iloc[0])
+        try:
+            steps, warn = load_steps(path)
+        except LogError as e:
+            warnings.append(str(e))
+            continue
+        if warn:  # a partial log is never drawn as a whole drive
+            warnings.append(f"{warn} (not drawn)")
+            continue
+        trajs[method] = metrics.trajectory(steps)
+        if len(steps) > longest:  # bands over the longer drive
+            longest, bands = len(steps), metrics.signal_bands(steps, *stop_lines(steps))
+    plan = _bound_plan(run_dir, sub, case, warnings) if trajs else None
+    if plan is not None:
+        trajs[BOUND_LABEL] = plan
+    if not trajs or bands is None:
+        return []
+    name = f"compare-{signals}-case{case:03d}"
+    p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
+    page.trajectories.append(Figure(p[0], _trajectory_caption(list(trajs), signals, case), f"{signals} case {case}"))
+    return [f"![{name}](figures/{p[0].name})", ""]
 
 
 def unfinished_warnings(results: pd.DataFrame) -> list[str]:
@@ -276,11 +303,14 @@ def _trajectory_caption(drawn: list[str], signals: str, case: int) -> str:
             + plan)
 
 
-def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str]) -> tuple[pd.DataFrame | None, int]:
+def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str],
+                  progress: bool = True) -> tuple[pd.DataFrame | None, int]:
     """Per method and setting, the mean episode sum of each reward component (from the logs),
-    and the number of partial logs left out (a partial log never counts as an episode)."""
+    and the number of partial logs left out (a partial log never counts as an episode). Reading
+    every step log is most of a paper run's report (about 20 s for its 4000 logs)."""
     rows, partial = [], 0
-    for r in results.itertuples(index=False):
+    for r in tqdm(results.itertuples(index=False), total=len(results), desc="return split", unit="log",
+                  disable=None if progress else True):
         try:
             sums, warn = component_sums(resolve_log(run_dir, r.mcap))
         except (LogError, OSError) as e:

@@ -267,7 +267,8 @@ def main(argv: list[str] | None = None) -> int:
     it = (run_local(todo, args.workers, run_cell) if args.executor == "local"
           else run_ray(todo, args.address, args.workers, run_cell))
     try:
-        for row in tqdm(it, total=len(todo), desc="cells", unit="cell"):
+        for row in tqdm(it, total=len(cells), initial=len(cells) - len(todo), desc="cells", unit="cell",
+                        disable=None):  # None: off where stderr is no terminal (CI logs)
             rows[row["mcap"]] = row
             write_table(rows, table)  # a killed sweep leaves the table of its finished cells
     except CheckpointError as e:

@@ -25,7 +25,7 @@ from ecodrive_bench.bench.args import Parser, fail
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.policies import CheckpointError
-from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.bench.harness.run import preflight, run
 from ecodrive_bench.bench.io import atomic_csv
 from ecodrive_bench.bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
 from ecodrive_bench.bench.paper import TABLE4 as PAPER_TABLE4
@@ -173,11 +173,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--logs", default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
     args = ap.parse_args(argv)
     import ecodrive_bench.bench.harness.options as br
+    from ecodrive_bench.bench.experiments.mixed import CellMismatch
+    from ecodrive_bench.bench.regression import mixed as regression_mixed
 
     logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
     br.PROFILES["regression"] = CI_CASES  # for this run only: `ecodrive run` offers no such profile
     try:
-        df = run(parse(["--profile", "regression", "--logs", logs]))  # progress bars on stderr
+        opts = parse(["--profile", "regression", "--logs", logs])
+        checks = preflight(opts)  # a refused command prints its one error line only
+        if not args.logs:  # every episode and cell is written there as it finishes: a kill keeps them
+            print(f"regression: logs in {logs} (after a kill, --logs {logs} reuses what finished)", file=sys.stderr)
+        df = run(opts, checks=checks)  # progress bars on stderr where it is a terminal
     except (UsageError, CheckpointError, AgentError) as e:  # a shipped policy that cannot drive included
         if not args.logs:
             _drop_if_empty(Path(logs))
@@ -188,10 +194,11 @@ def main(argv: list[str] | None = None) -> int:
         REFERENCE.parent.mkdir(exist_ok=True)
         atomic_csv(df[REF_COLUMNS], REFERENCE, float_format="%.10g")
         print(f"wrote {REFERENCE} ({len(df)} episodes)")
-    from ecodrive_bench.bench.regression import mixed as regression_mixed
-
-    mixed = (regression_mixed.claims(None, "--no-mixed given") if args.no_mixed
-             else regression_mixed.claims(regression_mixed.run_cells()))
+    try:
+        mixed = (regression_mixed.claims(None, "--no-mixed given") if args.no_mixed
+                 else regression_mixed.claims(regression_mixed.run_cells(logs=opts.run_dir / "mixed")))
+    except CellMismatch as e:  # a cell left in --logs by other settings: never silently reused
+        return fail(ap.prog, str(e))
     paper = claims(df)
     if args.write_reference:
         earlier = pd.read_csv(CLAIMS_RECORD) if CLAIMS_RECORD.is_file() else None

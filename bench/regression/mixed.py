@@ -14,8 +14,9 @@ import tempfile
 from pathlib import Path
 
 import pandas as pd
+from tqdm import tqdm
 
-from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, CI_MPRS, Cell, run_cell
+from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, CI_MPRS, Cell, _done, run_cell
 from ecodrive_bench.bench.harness.executors import run_local
 from ecodrive_bench.bench.harness.policies import MODELS, policy_dir
 from ecodrive_bench.bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
@@ -23,16 +24,27 @@ from ecodrive_bench.bench.paper import HDV_TOL, SPEED_LOSS_TOL
 from ecodrive_bench.envs.config import SIGNALS
 
 
-def run_cells(workers: int = 2, logs: Path | None = None) -> pd.DataFrame | None:
-    """The CI cells, or None when a PRL policy is missing for a setting."""
+def run_cells(workers: int = 2, logs: Path | None = None, progress: bool = True) -> pd.DataFrame | None:
+    """The CI cells, in cell order, or None when a PRL policy is missing for a setting. Each cell
+    writes its file under ``logs`` as it finishes; a cell already finished there (a killed check
+    run again on the same folder) is read back, not rerun, and one made with other settings raises
+    ``CellMismatch`` (``bench.experiments.mixed``). A bar with an ETA shows the cells on a
+    terminal (stderr; ``progress=False``: never)."""
     if not all((policy_dir("prl", s) / "manifest.json").is_file() for s in SIGNALS):
         return None
     root = Path(logs or tempfile.mkdtemp(prefix="ecodrive-mixed-"))
     cells = [Cell(s, m, CI_DEMAND, 0, CI_DURATION, str(root / s / f"mpr{m:.1f}.mcap"), str(policy_dir("prl", s, MODELS)))
              for s in SIGNALS for m in CI_MPRS]
-    for c in cells:
+    rows = {c.path: row for c in cells if (row := _done(c)) is not None and row["demand"] == c.demand}
+    todo = [c for c in cells if c.path not in rows]
+    for c in todo:
         Path(c.path).parent.mkdir(parents=True, exist_ok=True)
-    return pd.DataFrame(list(run_local(cells, workers, run_cell)))
+    with tqdm(total=len(cells), initial=len(rows), desc="mixed cells", unit="cell",
+              disable=None if progress else True) as bar:  # None: off where stderr is no terminal
+        for row in run_local(todo, workers, run_cell):
+            rows[row["mcap"]] = row
+            bar.update(1)
+    return pd.DataFrame([rows[c.path] for c in cells])
 
 
 def claims(cells: pd.DataFrame | None, skipped: str = "no shipped PRL policy for both settings") -> list[tuple[str, str, str]]:

@@ -248,7 +248,8 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         except CheckpointError:
             env.close()
             raise
-    bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", disable=not progress)
+    bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep",
+               disable=None if progress else True)  # None: off where stderr is no terminal
     done_here = 0
     t_call = time.perf_counter()
     for ep in range(start, episodes):
@@ -277,7 +278,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         last = ep + 1 == episodes
         if (ep + 1) % checkpoint_every == 0 or last or (stop_after is not None and done_here >= stop_after):
             if validation_cases:
-                score = validate(env, agent, validation_cases)
+                score = validate(env, agent, validation_cases, progress)
                 score["objective"] = round(score["energy"] + env.cfg.reward.phi * score["travel_time"], 4)
                 rows[-1].update({f"val_{k}": v for k, v in score.items()})
                 policy = None
@@ -329,9 +330,12 @@ def validation_cases(cfg, n: int) -> list[Case]:
             for i, (sd, t) in enumerate(zip(seeds, times))]
 
 
-def validate(env, agent, n: int) -> dict[str, float]:
-    """Mean greedy energy, travel time and return on ``n`` validation cases."""
-    rows = [run_episode(env, agent, case, "validation") for case in validation_cases(env.cfg, n)]
+def validate(env, agent, n: int, progress: bool = False) -> dict[str, float]:
+    """Mean greedy energy, travel time and return on ``n`` validation cases; ``progress``: a bar
+    under training's on a terminal, which stands still while a checkpoint's ``n`` episodes run."""
+    cases = tqdm(validation_cases(env.cfg, n), desc="validation", unit="ep", leave=False,
+                 disable=None if progress else True)
+    rows = [run_episode(env, agent, case, "validation") for case in cases]
     return {k: round(float(np.mean([r[col] for r in rows])), 4)
             for k, col in (("energy", "energy"), ("travel_time", "travel_time"), ("return", "return_"))}
 
