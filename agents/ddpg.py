@@ -23,7 +23,8 @@ from gymnasium import spaces
 from ecodrive_bench.envs.validation import param
 
 from .base import check_config
-from .device import OnDevice, host
+from .device import CPU, OnDevice, host
+from .inference import NumpyNets, ddpg_greedy
 from .nets import (
     ConvPass,
     Dense,
@@ -86,6 +87,7 @@ class DDPGAgent(OnDevice):
     env_overrides: dict[str, Any] = {"reward": {"lane_change_penalty": 0.0}}
     NETS = ("actor", "critic", "actor_target", "critic_target")
     OPTS = ("opt_actor", "opt_critic")
+    numpy_greedy = True  # greedy ``act`` on the CPU runs ``inference.NumpyNets``; False: torch's forward
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, cfg: DDPGConfig | None = None):
         self.cfg = cfg = cfg or DDPGConfig()
@@ -104,6 +106,7 @@ class DDPGAgent(OnDevice):
         self.opt_critic = adam(self.critic.parameters(), lr=cfg.lr_critic)
         zero_grads(self.actor, self.critic)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
+        self._numpy = NumpyNets([self.actor], grid_shape)
         self._views()
         self._soft = [([*t.parameters()], [*s.parameters()], tau) for t, s, tau in (
             (self.critic_target, self.critic, cfg.tau_critic), (self.actor_target, self.actor, cfg.tau_actor))]
@@ -118,6 +121,7 @@ class DDPGAgent(OnDevice):
         nfl = self._nf + self._nl
         self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in self.NETS}
         self._ws = Workspace(self.device)  # buffers of the target pass, then of the online pass (done after it)
+        self._numpy.stale()
 
     def begin_episode(self, episode: int) -> None:
         self.noise.reset()
@@ -127,10 +131,13 @@ class DDPGAgent(OnDevice):
         return torch.tanh(out) if self.cfg.bound == "tanh" else out.clamp(-1.0, 1.0)
 
     def act(self, obs, info, explore: bool = False) -> np.ndarray:
-        with torch.no_grad():
-            g = self.tensor(obs["grid"], dtype=torch.float32)[None]
-            l = self.tensor(self.scaler.logic(obs["logic"]))[None]
-            x = host(self._bounded(self.actor(g, l))[0])
+        if not explore and self.numpy_greedy and self.device == CPU:
+            x = ddpg_greedy(self._numpy.current(), obs["grid"], self.scaler.logic(obs["logic"]), self.cfg.bound)
+        else:
+            with torch.no_grad():
+                g = self.tensor(obs["grid"], dtype=torch.float32)[None]
+                l = self.tensor(self.scaler.logic(obs["logic"]))[None]
+                x = host(self._bounded(self.actor(g, l))[0])
         if explore:
             x = np.clip(x + self.noise.sample(), -1.0, 1.0)
         self._last = x.astype(np.float32)
@@ -161,6 +168,7 @@ class DDPGAgent(OnDevice):
         clipped_adam_step(self.opt_actor, self._actor_params, c.grad_clip)
         for targets, sources, tau in self._soft:
             soft_update_(targets, sources, tau)
+        self._numpy.stale()  # the fused Adam step writes the parameters without bumping their versions
         self.updates += 1
         return {"loss_q": loss_c, "loss_param": -q_mean}  # -Q(s, actor(s)), as eq. 8
 
@@ -227,6 +235,7 @@ class DDPGAgent(OnDevice):
         if state.get("name") != self.name:
             raise ValueError(f"checkpoint is for method {state.get('name')!r}, not {self.name!r}")
         self.actor.load_state_dict(state["actor"])
+        self._numpy.stale()
         self.critic.load_state_dict(state["critic"])
         self.actor_target.load_state_dict(state.get("actor_target", state["actor"]))
         self.critic_target.load_state_dict(state.get("critic_target", state["critic"]))

@@ -16,7 +16,8 @@ from gymnasium import spaces
 from ecodrive_bench.envs.validation import param
 
 from .base import check_config
-from .device import OnDevice, host
+from .device import CPU, OnDevice, host
+from .inference import NumpyNets, dqn_greedy
 from .nets import (
     ConvPass,
     Dense,
@@ -77,6 +78,7 @@ class DQNAgent(OnDevice):
     env_overrides: dict[str, Any] = {}
     NETS = ("q", "q_target")
     OPTS = ("opt",)
+    numpy_greedy = True  # greedy ``act`` on the CPU runs ``inference.NumpyNets``; False: torch's forward
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Discrete, cfg: DQNConfig | None = None):
         self.cfg = cfg = cfg or DQNConfig()
@@ -92,6 +94,7 @@ class DQNAgent(OnDevice):
         zero_grads(self.q)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
         self._params, self._target_params = [*self.q.parameters()], [*self.q_target.parameters()]
+        self._numpy = NumpyNets([self.q], grid_shape)
         self._views()
         self.rng = np.random.default_rng(cfg.seed)
         self.replay = Replay(cfg.replay_size, grid_shape, logic.shape[0], 1)
@@ -103,6 +106,7 @@ class DQNAgent(OnDevice):
         self._dense = Dense(self.q, self._nf, self._nf + self._nl)
         self._dense_target = Dense(self.q_target, self._nf, self._nf + self._nl)
         self._ws = Workspace(self.device)  # buffers of the target pass, then of the online pass (done after it)
+        self._numpy.stale()
 
     def action_mask(self, lateral_mask: np.ndarray) -> np.ndarray:
         """The 27-action mask from the mask over k."""
@@ -116,6 +120,8 @@ class DQNAgent(OnDevice):
         mask = self.action_mask(info["action_mask"])
         if explore and self.rng.random() < self.epsilon:
             return int(self.rng.choice(np.flatnonzero(mask)))
+        if not explore and self.numpy_greedy and self.device == CPU:
+            return dqn_greedy(self._numpy.current(), obs["grid"], self.scaler.logic(obs["logic"]), mask)
         with torch.no_grad():
             g = self.tensor(obs["grid"], dtype=torch.float32)[None]
             l = self.tensor(self.scaler.logic(obs["logic"]))[None]
@@ -143,6 +149,7 @@ class DQNAgent(OnDevice):
         loss = self._gradients(self.batch(self.replay.sample_torch(self.rng, c.batch_size)))
         clipped_adam_step(self.opt, [self._params], c.grad_clip)
         soft_update_(self._target_params, self._params, c.tau)
+        self._numpy.stale()  # the fused Adam step writes the parameters without bumping their versions
         self.updates += 1
         return {"loss_q": loss}
 
@@ -185,6 +192,7 @@ class DQNAgent(OnDevice):
         if state.get("name") != self.name:
             raise ValueError(f"checkpoint is for method {state.get('name')!r}, not {self.name!r}")
         self.q.load_state_dict(state["q"])
+        self._numpy.stale()
         self.q_target.load_state_dict(state.get("q_target", state["q"]))
         if "opt" in state:
             load_adam_state(self.opt, state["opt"])

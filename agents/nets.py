@@ -117,7 +117,8 @@ def linear_epsilon(episode: int, eps_init: float, eps_end: float, decay_episodes
 # that per-op overhead, the 1-channel first convolution (~20x slower in oneDNN than its FLOPs) and
 # layout conversions, not arithmetic, decided an update's time. The math is the one the agents'
 # autograd formulation states (tests/agents/test_update_equivalence.py holds each update against
-# it); acting keeps ``trunks`` and ``Head.forward``, so greedy actions are unchanged bit for bit.
+# it); exploring acts keep ``trunks`` and ``Head.forward`` (greedy ones on the CPU run the same
+# networks in numpy, agents/inference.py).
 # ---------------------------------------------------------------------------------------------
 
 def _pairs(n: int, pad: int) -> tuple[int, int]:

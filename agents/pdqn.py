@@ -22,7 +22,8 @@ from torch.func import functional_call
 from ecodrive_bench.envs.validation import param
 
 from .base import check_config
-from .device import OnDevice, host
+from .device import CPU, OnDevice, host
+from .inference import NumpyNets, pdqn_greedy
 from .nets import (
     ConvPass,
     Dense,
@@ -98,6 +99,7 @@ class PDQNAgent(OnDevice):
     env_overrides: dict[str, Any] = {}
     NETS = ("q", "param", "q_target", "param_target", "q2", "q2_target")
     OPTS = ("opt_q", "opt_param")
+    numpy_greedy = True  # greedy ``act`` on the CPU runs ``inference.NumpyNets``; False: torch's forward
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Tuple, cfg: PDQNConfig | None = None):
         self.cfg = cfg = cfg or PDQNConfig()
@@ -125,6 +127,7 @@ class PDQNAgent(OnDevice):
         self.opt_param = adam(self.param.parameters(), lr=cfg.lr_param)
         zero_grads(*critics, self.param)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
+        self._numpy = NumpyNets([self.q, self.param], grid_shape)
         self._views()
         pairs = [(self.q_target, self.q), (self.param_target, self.param)] + (
             [(self.q2_target, self.q2)] if cfg.twin_q else [])
@@ -146,6 +149,7 @@ class PDQNAgent(OnDevice):
         nfl = self._nf + self._nl
         self._dense = {name: Dense(getattr(self, name), self._nf, nfl) for name in self.NETS
                        if getattr(self, name) is not None}
+        self._numpy.stale()
 
     # ------------------------------------------------------------------ acting
     def _tensors(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
@@ -182,6 +186,11 @@ class PDQNAgent(OnDevice):
 
     def act(self, obs, info, explore: bool = False):
         mask = np.asarray(info["action_mask"], dtype=bool)
+        if not explore and self.numpy_greedy and self.device == CPU:
+            k, xn = pdqn_greedy(self._numpy.current(), obs["grid"], self.scaler.logic(obs["logic"]), mask,
+                                self.cfg.multipass)
+            self._last = (k, xn)
+            return k, self._to_accel(xn)
         with torch.no_grad():
             g, l = self._tensors(obs)
             fq, fp = features(g, l, [self.q, self.param])
@@ -277,6 +286,7 @@ class PDQNAgent(OnDevice):
         clipped_adam_step(self.opt_param, self._p_lists, c.grad_clip)
         for targets, sources, tau in self._soft:
             soft_update_(targets, sources, tau)
+        self._numpy.stale()  # the fused Adam step writes the parameters without bumping their versions
         self.updates += 1
         return {"loss_q": loss_q, "loss_param": loss_p}
 
@@ -402,6 +412,7 @@ class PDQNAgent(OnDevice):
             raise ValueError(f"checkpoint is for method {state.get('name')!r}, not {self.name!r}")
         self.q.load_state_dict(state["q"])
         self.param.load_state_dict(state["param"])
+        self._numpy.stale()
         if "q_target" in state:
             self.q_target.load_state_dict(state["q_target"])
             self.param_target.load_state_dict(state["param_target"])

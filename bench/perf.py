@@ -1,6 +1,7 @@
 """Ratios from one pytest-benchmark JSON file (all numbers from the same run): env step against
-raw SUMO, logging overhead, the projected training run, and each learner's update against its
-FLOP floor (the update's counted FLOPs at this core's measured matmul rate).
+raw SUMO, logging overhead, the projected training run, each learner's update against its FLOP
+floor (the update's counted FLOPs at this core's measured matmul rate), and each learned method's
+greedy act against a raw SUMO step.
 
     ecodrive perf .benchmarks/perf.json
 """
@@ -18,6 +19,7 @@ CONV_PARTS = ("forward", "backward")  # test_prl_conv_pass[...]: the conv blocks
 KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind: a PRL update's op time by kind
 COMPILED = "test_prl_update_compiled"  # the autograd formulation under torch.compile: the alternative
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
+ACT_LIMIT_S = 0.3e-3  # [s] a greedy batch-1 act (test_greedy_act[...], one thread)
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
     "env_step_over_sim_in_run": ("", "", 2.0, "env.step / its own simulationStep"),
@@ -50,6 +52,24 @@ def ratios(path: Path) -> dict[str, float]:
     if "control_over_sim" in extra.get("test_fleet_step_200_cvs", {}):
         out["fleet_control_over_sim"] = extra["test_fleet_step_200_cvs"]["control_over_sim"]
         out["fleet_cvs"] = extra["test_fleet_step_200_cvs"]["cvs_mean"]
+    sumo_steps = extra.get("test_raw_sumo_step", {}).get("steps")  # a round's simulationStep calls
+    if "test_raw_sumo_step" in med and sumo_steps:
+        out["sumo_step_us"] = med["test_raw_sumo_step"] / sumo_steps * 1e6
+    for m in LEARNERS:
+        name = f"test_greedy_act[{m}]"
+        if name not in med:
+            continue
+        out[f"act_us_{m}"] = med[name] * 1e6
+        if "sumo_step_us" in out:
+            out[f"act_over_sumo_step_{m}"] = out[f"act_us_{m}"] / out["sumo_step_us"]
+        if f"test_greedy_act_torch[{m}]" in med:
+            out[f"act_torch_us_{m}"] = med[f"test_greedy_act_torch[{m}]"] * 1e6
+            if extra[f"test_greedy_act_torch[{m}]"].get("episode_act_s"):
+                out[f"act_torch_in_episode_us_{m}"] = extra[f"test_greedy_act_torch[{m}]"]["episode_act_s"] * 1e6
+        e = extra[name]
+        if e.get("episode_step_s"):  # the same act inside a greedy episode, beside its env.step
+            out[f"act_in_episode_us_{m}"] = e["episode_act_s"] * 1e6
+            out[f"act_over_env_step_in_episode_{m}"] = e["episode_act_s"] / e["episode_step_s"]
     if "test_env_reset" in med:
         out["reset_ms"] = med["test_env_reset"] * 1e3
     if "test_learner_update[prl]" in med and "test_training_env_step" in med:
@@ -133,6 +153,23 @@ def main(argv: list[str] | None = None) -> int:
         ok &= good
         print(f"{'mixed traffic: control / sim step':40s} {r['fleet_control_over_sim']:6.2f}x "
               f"({r['fleet_cvs']:.0f} CVs; target <= 3x) {'ok' if good else 'MISSED'}")
+    if "sumo_step_us" in r:
+        print(f"{'raw SUMO step':40s} {r['sumo_step_us']:6.0f} us")
+    for m in LEARNERS:
+        if f"act_us_{m}" in r:
+            good = r[f"act_us_{m}"] <= ACT_LIMIT_S * 1e6
+            ok &= good
+            ratio = (f"{r[f'act_over_sumo_step_{m}']:6.3f}x a SUMO step" if f"act_over_sumo_step_{m}" in r
+                     else "(no raw SUMO step in this run)")
+            notes = [f"{r[f'act_us_{m}']:.0f} us, target <= {ACT_LIMIT_S * 1e6:.0f} us"]
+            if f"act_torch_us_{m}" in r:
+                notes.append(f"torch forward {r[f'act_torch_us_{m}']:.0f} us")
+            if f"act_in_episode_us_{m}" in r:
+                torch_ep = r.get(f"act_torch_in_episode_us_{m}")
+                notes.append(f"in an episode {r[f'act_in_episode_us_{m}']:.0f} us"
+                             + (f" (torch {torch_ep:.0f} us)" if torch_ep else "")
+                             + f" = {r[f'act_over_env_step_in_episode_{m}']:.2f}x its env.step")
+            print(f"{m.upper() + ' greedy act (batch 1)':40s} {ratio} ({'; '.join(notes)}) {'ok' if good else 'MISSED'}")
     if "prl_1000_episodes_min" in r:
         good = r["prl_1000_episodes_min"] <= 30
         ok &= good

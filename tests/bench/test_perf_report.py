@@ -117,3 +117,31 @@ def test_a_benchmark_file_without_the_suites_benchmarks_is_refused(tmp_path, cap
     assert main([str(other)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "other.json" in err[0]
+
+
+def test_greedy_act_against_a_sumo_step(tmp_path, capsys):
+    """One SUMO step is a raw-step round over its steps; each method's act is judged by its median
+    against ``ACT_LIMIT_S`` and shown beside the torch forward and its share of an episode's step."""
+    data = {"benchmarks": [
+        _bench("test_raw_sumo_step", 0.150, steps=150),  # 1 ms a step
+        _bench("test_greedy_act[prl]", 75e-6, episode_act_s=150e-6, episode_step_s=600e-6),
+        _bench("test_greedy_act_torch[prl]", 300e-6, episode_act_s=450e-6, episode_step_s=650e-6),
+        _bench("test_greedy_act[dqn]", 400e-6),  # too slow
+    ]}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    r = ratios(path)
+    assert r["sumo_step_us"] == pytest.approx(1000.0)
+    assert r["act_over_sumo_step_prl"] == pytest.approx(0.075)
+    assert r["act_torch_us_prl"] == pytest.approx(300.0) and r["act_torch_in_episode_us_prl"] == pytest.approx(450.0)
+    assert r["act_over_env_step_in_episode_prl"] == pytest.approx(0.25)
+    assert "act_torch_us_dqn" not in r and "act_in_episode_us_dqn" not in r
+    assert main([str(path)]) == 1  # DQN's act misses the target
+    out = capsys.readouterr().out.splitlines()
+    prl = next(line for line in out if line.startswith("PRL greedy act"))
+    assert "0.075x a SUMO step" in prl and "torch forward 300 us" in prl
+    assert "in an episode 150 us (torch 450 us) = 0.25x its env.step" in prl
+    assert prl.endswith(" ok") and next(line for line in out if line.startswith("DQN greedy act")).endswith("MISSED")
+    data["benchmarks"] = data["benchmarks"][1:2]  # no SUMO step in the run: the act alone
+    path.write_text(json.dumps(data))
+    assert "act_over_sumo_step_prl" not in ratios(path) and main([str(path)]) == 0

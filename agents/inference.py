@@ -1,0 +1,179 @@
+"""Greedy acting in numpy: the acting networks' forward pass for one observation, from a numpy
+copy of their weights.
+
+At batch 1 the networks are a few hundred thousand multiply-adds; torch spends several times that
+in per-op dispatch, module calls and oneDNN's setup of two tiny convolutions. Here the conv block
+is two matmuls over patches gathered with precomputed indices, the pools are maxima over gathered
+windows, and the dense layers are matrix-vector products: about twenty numpy calls per network.
+
+The arithmetic is float32, as torch's, but not in torch's order (oneDNN and MKL accumulate
+differently from OpenBLAS), so outputs agree to float32 rounding, not bit for bit
+(tests/agents/test_inference.py). Exploration and the learners' updates keep the torch path.
+
+The copy follows the torch weights: before each forward ``NumpyNets.current`` compares the
+parameters' version counters (bumped by in-place ops: ``load_state_dict``, ``copy_`` or ``add_``
+under ``no_grad``) with those it copied, and copies again when any moved. Two writes leave the
+counters as they were: the fused Adam kernel (``torch._fused_adam_``, the learners' optimizer
+step) and writes through ``.data``; so each agent's ``step`` (every update), ``load_state_dict``
+and device move (``_views``) also mark the copy stale (``NumpyNets.stale``).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from .nets import Head, _pairs
+
+
+def _pool_windows(n: int, pad: int) -> list[tuple[int, int]]:
+    """(first, second) position of each 2-wide window of a stride-2 max pool over ``n`` positions
+    whose first window starts at ``-pad``; a window that keeps one position names it twice (the
+    same windows as ``nets._pool_dim``, i.e. ``max_pool2d``'s with ceil mode or padding 1)."""
+    pairs, tail = _pairs(n, pad)
+    out = [(0, 0)] if pad else []
+    out += [(pad + 2 * i, pad + 2 * i + 1) for i in range(pairs)]
+    if tail:
+        out.append((n - 1, n - 1))
+    return out
+
+
+def _pool_index(h: int, w: int, pad: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """(index (4, H' W') into a flattened (h, w) map of each pooled position's 2x2 window,
+    (H', W'))."""
+    rows, cols = _pool_windows(h, pad), _pool_windows(w, pad)
+    idx = np.array([[r[a] * w + c[b] for r in rows for c in cols] for a in (0, 1) for b in (0, 1)], dtype=np.intp)
+    return idx, (len(rows), len(cols))
+
+
+class ConvPlan:
+    """Gather indices of the conv block on a (cells, lanes) grid: the layout of ``nets.trunks``
+    (the transposed grid: lanes are the rows, cells the columns), for ``n`` blocks of ``c1``
+    first-layer channels."""
+
+    def __init__(self, grid_shape: tuple[int, int], n: int, c1: int) -> None:
+        cells, lanes = grid_shape
+        h1, w1 = lanes - 2, cells - 2
+        # conv1 patches (9, h1 w1): row 3i + j holds grid[w + j, h + i] for output (h, w)
+        self.conv1 = np.array([[(w + j) * lanes + (h + i) for h in range(h1) for w in range(w1)]
+                               for i in range(3) for j in range(3)], dtype=np.intp)
+        self.pool1, (hp, wp) = _pool_index(h1, w1, 0)
+        # conv2 patches (N, c1 9, hp wp) into the pooled maps, flattened, with one zero appended for
+        # the padding: row 9 c + 3 i + j of block b holds map (b, c) at (h + i - 1, w + j - 1)
+        size, zero = hp * wp, n * c1 * hp * wp
+        y = np.arange(3)[:, None, None, None] + np.arange(hp)[None, None, :, None] - 1  # (i, 1, h, 1)
+        x = np.arange(3)[None, :, None, None] + np.arange(wp)[None, None, None, :] - 1  # (1, j, 1, w)
+        inside = (0 <= y) & (y < hp) & (0 <= x) & (x < wp)
+        maps = np.arange(n * c1).reshape(n, c1, 1, 1, 1, 1) * size
+        idx = np.where(inside, maps + y * wp + x, zero)  # (n, c1, 3, 3, hp, wp)
+        self.conv2 = idx.reshape(n, c1 * 9, size).astype(np.intp)
+        self.pooled = zero  # pooled first-layer values, before the appended zero
+        self.pool2, self.out_hw = _pool_index(hp, wp, 1)
+
+
+class NumpyNets:
+    """Float32 numpy copies of some ``Head``s' weights and their forward pass for one observation.
+
+    ``features`` runs the nets' conv blocks together (as ``nets.features`` does); ``mlp`` runs one
+    net's dense layers on a vector or on rows."""
+
+    def __init__(self, nets: Sequence[Head], grid_shape: tuple[int, int]) -> None:
+        self.nets = list(nets)
+        self.params = [p for net in self.nets for p in net.parameters()]
+        c1 = self.nets[0].conv.conv1.out_channels
+        self.plan = ConvPlan(grid_shape, len(self.nets), c1)
+        self.buf = np.zeros(self.plan.pooled + 1, dtype=np.float32)  # pooled maps, then the padding's zero
+        self.versions: list[int] | None = None
+
+    def current(self) -> NumpyNets:
+        """Self, its copy of the weights made current (copied again when any parameter changed)."""
+        versions = [p._version for p in self.params]
+        if versions != self.versions:
+            self._copy()
+            self.versions = versions
+        return self
+
+    def stale(self) -> None:
+        """Copy the weights again before the next forward (for writes the version counters miss)."""
+        self.versions = None
+
+    def _copy(self) -> None:
+        def a(t: torch.Tensor) -> np.ndarray:
+            return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float32).copy()
+
+        convs = [net.conv for net in self.nets]
+        self.w1 = a(torch.cat([c.conv1.weight.flatten(1) for c in convs]))  # (N c1, 9)
+        self.b1 = a(torch.cat([c.conv1.bias for c in convs]))[:, None]
+        self.w2 = np.stack([a(c.conv2.weight.flatten(1)) for c in convs])  # (N, c2, c1 9)
+        self.b2 = np.stack([a(c.conv2.bias) for c in convs])[:, :, None]
+        self.dense = [[(a(lin.weight), a(lin.bias)) for lin in (net.mlp[0], net.mlp[2], net.mlp[4])]
+                      for net in self.nets]
+
+    def features(self, grid: np.ndarray, logic: np.ndarray) -> list[np.ndarray]:
+        """[conv features, logic] of each net for one grid (cells, lanes) and scaled logic vector."""
+        p = self.plan
+        n = len(self.nets)
+        y1 = self.w1 @ grid.take(p.conv1).astype(np.float32, copy=False)  # (N c1, h1 w1)
+        y1 += self.b1
+        pooled = self.buf[:-1].reshape(y1.shape[0], -1)
+        np.max(y1[:, p.pool1], axis=1, out=pooled)  # ReLU after the pool: the two commute
+        np.maximum(pooled, 0.0, out=pooled)
+        y2 = np.matmul(self.w2, self.buf[p.conv2])  # (N, c2, hp wp)
+        y2 += self.b2
+        f = y2[:, :, p.pool2].max(axis=2)  # (N, c2, H' W')
+        np.maximum(f, 0.0, out=f)
+        logic = np.asarray(logic, dtype=np.float32)
+        return [np.concatenate([f[i].ravel(), logic]) for i in range(n)]
+
+    def mlp(self, i: int, z: np.ndarray) -> np.ndarray:
+        """Net ``i``'s dense layers on ``z``: one input vector, or rows of inputs (R, in)."""
+        (w1, b1), (w2, b2), (w3, b3) = self.dense[i]
+        if z.ndim == 1:
+            h = w1 @ z
+            h += b1
+            np.maximum(h, 0.0, out=h)
+            h2 = w2 @ h
+            h2 += b2
+            np.maximum(h2, 0.0, out=h2)
+            out = w3 @ h2
+            out += b3
+            return out
+        h = z @ w1.T
+        h += b1
+        np.maximum(h, 0.0, out=h)
+        h2 = h @ w2.T
+        h2 += b2
+        np.maximum(h2, 0.0, out=h2)
+        out = h2 @ w3.T
+        out += b3
+        return out
+
+
+def pdqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.ndarray,
+                multipass: bool) -> tuple[int, np.ndarray]:
+    """(k, normalised parameters x) of ``PDQNAgent``'s greedy choice; ``nets`` are [Q, parameter
+    network], ``logic`` is scaled. Multi-pass: Q_k from the pass whose input keeps only x_k."""
+    fq, fp = nets.features(grid, logic)
+    x = np.tanh(nets.mlp(1, fp))
+    k = x.shape[0]
+    if multipass:
+        z = np.zeros((k, fq.shape[0] + k), dtype=np.float32)
+        z[:, :fq.shape[0]] = fq
+        z[:, fq.shape[0]:] = np.diag(x)
+        q = nets.mlp(0, z).diagonal()
+    else:
+        q = nets.mlp(0, np.concatenate([fq, x]))
+    return int(np.argmax(np.where(mask, q, -np.inf))), x
+
+
+def dqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.ndarray) -> int:
+    """``DQNAgent``'s greedy action index over the allowed actions ``mask``; ``logic`` is scaled."""
+    q = nets.mlp(0, nets.features(grid, logic)[0])
+    return int(np.argmax(np.where(mask, q, -np.inf)))
+
+
+def ddpg_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, bound: str) -> np.ndarray:
+    """``DDPGAgent``'s normalised acceleration in [-1, 1], shape (1,); ``logic`` is scaled."""
+    out = nets.mlp(0, nets.features(grid, logic)[0])
+    return np.tanh(out) if bound == "tanh" else np.clip(out, -1.0, 1.0)
