@@ -375,7 +375,7 @@ def _sweep(args: argparse.Namespace, todo: list[Job], root: Path) -> int:
     else:
         from ecodrive_bench.bench.experiments.sweep_ray import run_jobs
 
-        it = run_jobs(todo, args.address, args.workers)
+        it = run_jobs(todo, args.address, args.workers, run_job)
     for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
         rows.update(finished(root))  # and what a sweep running beside this one finished meanwhile
         rows[row["log_dir"]] = row
