@@ -33,15 +33,18 @@ where the viewer draws them.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from ecodrive_bench.bench.oracle import mpc as planner
-from ecodrive_bench.bench.oracle.dp import Corridor, Plan, bound
+from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan, solve
 from ecodrive_bench.envs.config import ScenarioConfig
 
 NAME = "mpc"
+GREEN_MARGINS = (0.0, 0.0)  # [s] planned crossings keep off the first / last seconds of each green
+PLAN_HEADWAY = 0.0  # [s] time gap the plan keeps to the vehicle ahead, beyond MIN_GAP (validation: docs/mpc.md)
 TOL_V = 0.05  # [m/s] speed drift that triggers a re-plan
 TOL_X = 0.05  # [m] position drift (beyond the one-row rounding) that triggers a re-plan
 LOGGED_STEPS = planner.LOOKAHEAD  # [steps] of each re-plan kept in the step log (its look-ahead)
@@ -55,9 +58,17 @@ class MPCAgent:
     action_interface = "longitudinal"
     env_overrides: dict[str, Any] = {}
 
-    def __init__(self, cfg: ScenarioConfig) -> None:
+    def __init__(self, cfg: ScenarioConfig, margins: tuple[float, float] = GREEN_MARGINS,
+                 time_weight: float | None = None, follow: bool = True, headway: float = PLAN_HEADWAY,
+                 leader_accel: float = planner.LEADER_ACCEL) -> None:
+        self.headway, self.leader_accel = headway, leader_accel
         self.cfg = cfg
-        self.cor = Corridor.from_config(cfg)
+        self.follow = follow  # keep the gap to the vehicle ahead in the plan (else: the safety layer alone)
+        self.plan_cfg = cfg if time_weight is None else replace(cfg, reward=replace(cfg.reward, phi=time_weight))
+        start, end = (int(round(m * MS)) for m in margins)
+        cor = Corridor.from_config(cfg)
+        self.cor = replace(cor, offsets_ms=tuple(o + start for o in cor.offsets_ms),
+                           greens_ms=tuple(g - start - end for g in cor.greens_ms))
         self.plan: Plan | None = None
         self.table: planner.Table | None = None
         self.k0 = 0  # [steps] the step the plan in force starts at
@@ -70,8 +81,8 @@ class MPCAgent:
 
     def start(self, depart_time: float) -> None:
         """A new episode departing at ``depart_time`` [s]."""
-        self.plan = bound(self.cfg, depart_time, "cost", krauss=True)
-        self.table = planner.table(self.cor, self.cfg, depart_time, int(self.plan.grid["horizon"]))
+        self.plan = solve(self.cor, self.plan_cfg, depart_time, "cost", krauss=True)
+        self.table = planner.table(self.cor, self.plan_cfg, depart_time, int(self.plan.grid["horizon"]))
         self.k0, self.x, self.v = 0, self.plan.x, self.plan.v
         self.gaps, self.events, self.first = [], [], True
         self.counts = {"drift": 0, "leader": 0, "end": 0, "step": 0, "relaxed": 0, "lost": 0}
@@ -105,8 +116,9 @@ class MPCAgent:
             return "drift"
         if lead is not None:
             m = np.arange(1, min(planner.LOOKAHEAD, len(self.v) - 1 - idx) + 1)
-            limit = x + lead.gap + lead.speed * m * self.cfg.step_length - planner.MIN_GAP
-            if np.any(self.x[idx + m] > limit - planner.HEADWAY * self.v[idx + m]):
+            travel = np.array([planner.leader_travel(lead.speed, int(q), self.cfg, self.leader_accel) for q in m])
+            limit = x + lead.gap + travel - planner.MIN_GAP
+            if np.any(self.x[idx + m] > limit - self.headway * self.v[idx + m]):
                 return "leader"
         return None
 
@@ -118,13 +130,13 @@ class MPCAgent:
         k = int(round((float(info["time"]) - self.plan.t[0]) / dt))
         speed = float(obs["logic"][cfg.observed_lanes + 1])
         x = float(info["position"])
-        lead = self.leader(obs, speed)
+        lead = self.leader(obs, speed) if self.follow else None
         event = self._event(k, x, speed, lead) if self.first else "step"
         if event is not None:
             self.first = False
             self.counts[event] += 1
             started = time.perf_counter()
-            new = planner.replan(self.table, k, x, speed, lead)
+            new = planner.replan(self.table, k, x, speed, lead, headway=self.headway, leader_accel=self.leader_accel)
             if new is None:  # no plan arrives within the table: hold the speed limit (Krauss governs)
                 self.counts["lost"] += 1
                 self.k0, self.x, self.v = k, np.array([x, x]), np.array([speed, cfg.speed_limit])

@@ -41,6 +41,7 @@ LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
 SLACK = 150  # [steps] the table reaches this far past the bound's certified horizon
 MIN_GAP = 2.5  # [m] SUMO's default minGap: bumper-to-bumper gap kept at standstill
 HEADWAY = 1.0  # [s] SUMO's default tau (Krauss): time gap kept at speed
+LEADER_ACCEL = 1.5  # [m/s^2] the vehicle ahead's predicted acceleration, up to the speed limit
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,15 @@ def table(cor: Corridor, cfg: ScenarioConfig, depart_time: float, horizon: int, 
                  wall_s=time.perf_counter() - started)
 
 
+def leader_travel(speed: float, m: int, cfg: ScenarioConfig, accel: float | None = None) -> float:
+    """[m] the vehicle ahead covers in ``m`` steps by the prediction model: from ``speed`` [m/s]
+    at ``accel`` (``LEADER_ACCEL``) up to the speed limit, SUMO's Euler update ``x' = x + v' dt``."""
+    dt = cfg.step_length
+    a = LEADER_ACCEL if accel is None else accel
+    v = np.minimum(speed + a * dt * np.arange(1, m + 1), cfg.speed_limit)
+    return float(v.sum() * dt)
+
+
 def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
     """(row, speed cell) of a real state: position rounded up, speed to the nearest cell."""
     lat = tab.lat
@@ -113,7 +123,7 @@ def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
 
 
 def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
-           lookahead: int = LOOKAHEAD) -> Replan | None:
+           lookahead: int = LOOKAHEAD, headway: float = HEADWAY, leader_accel: float = LEADER_ACCEL) -> Replan | None:
     """The least-cost plan from the ego's state (``x`` [m], ``v`` [m/s]) at step ``k`` after the
     departure, keeping the gap to ``leader`` over the look-ahead; None when no plan arrives within
     the table's horizon."""
@@ -121,12 +131,12 @@ def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
     i0, j0 = snap(tab, x, v)
     mode = "none"
     if leader is not None:
-        plan = _solve(tab, k, i0, j0, lookahead, x + leader.gap, leader.speed)
+        plan = _solve(tab, k, i0, j0, lookahead, x + leader.gap, leader.speed, headway, leader_accel)
         mode = "kept"
         if plan is None:
             mode = "relaxed"
     if leader is None or plan is None:
-        plan = _solve(tab, k, i0, j0, lookahead, None, 0.0)
+        plan = _solve(tab, k, i0, j0, lookahead, None, 0.0, headway, leader_accel)
     if plan is None:
         return None
     rows, speeds, value = plan
@@ -136,8 +146,8 @@ def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
 
 
 def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: float | None,
-           leader_speed: float) -> tuple[np.ndarray, np.ndarray, float] | None:
-    lat, nv, dt = tab.lat, tab.lat.nv, tab.cfg.step_length
+           leader_speed: float, headway: float, leader_accel: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+    lat, nv = tab.lat, tab.lat.nv
     if i0 >= lat.i_end:
         return np.array([i0]), np.array([j0]), 0.0
     horizon = tab.horizon
@@ -165,7 +175,7 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
     def keep_gap(buf: np.ndarray, m: int) -> None:  # states at look-ahead step m that come too close
         if leader_rear is None:
             return
-        limit = leader_rear + leader_speed * m * dt - MIN_GAP - HEADWAY * speeds_ms  # [m] per speed
+        limit = leader_rear + leader_travel(leader_speed, m, tab.cfg, leader_accel) - MIN_GAP - headway * speeds_ms  # [m] per speed
         top = np.floor((limit - tab.cor.x0) / lat.dx + GRID_EPS).astype(np.int64)
         for j in range(nv + 1):
             first = max(int(top[j]) + 1, 0)

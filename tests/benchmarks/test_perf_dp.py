@@ -21,17 +21,17 @@ QUANTILES = {"median": 0.5, "p99": 0.99}
 
 @pytest.fixture(scope="module")
 def driven(cases):
-    """(agent, the re-plan inputs (k, x, v, leader) of one episode in traffic)."""
+    """(agent, the re-plan inputs (k, x, v, leader, headway) of one episode in traffic)."""
     import gymnasium as gym
 
     env = gym.make("EcoDrive-v0", signals="uncoordinated", action="longitudinal").unwrapped
     agent = MPCAgent(env.cfg)
-    inputs: list[tuple[int, float, float, mpc.Leader | None]] = []
+    inputs: list[tuple[int, float, float, mpc.Leader | None, float]] = []
     plan = mpc.replan
 
-    def record(tab, k, x, v, leader=None, lookahead=mpc.LOOKAHEAD):
-        inputs.append((k, x, v, leader))
-        return plan(tab, k, x, v, leader, lookahead)
+    def record(tab, k, x, v, leader=None, lookahead=mpc.LOOKAHEAD, headway=mpc.HEADWAY):
+        inputs.append((k, x, v, leader, headway))
+        return plan(tab, k, x, v, leader, lookahead, headway)
 
     mpc.replan = record  # the agent calls it through the module
     try:
@@ -68,9 +68,9 @@ def test_dp_replan(benchmark, driven):
     times: list[float] = []
 
     def run():
-        for k, x, v, leader in inputs:
+        for k, x, v, leader, headway in inputs:
             t0 = time.perf_counter()
-            mpc.replan(tab, k, x, v, leader)
+            mpc.replan(tab, k, x, v, leader, headway=headway)
             times.append(time.perf_counter() - t0)
 
     benchmark.pedantic(run, rounds=ROUNDS, iterations=1)

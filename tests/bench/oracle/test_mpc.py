@@ -41,7 +41,9 @@ def test_replan_keeps_the_gap_to_a_slow_vehicle_ahead(table):
     plan = mpc.replan(table, 0, table.cor.x0, table.cor.v0, lead)
     assert plan.leader == "kept" and not np.array_equal(plan.v[:5], free.v[:5])
     m = np.arange(1, mpc.LOOKAHEAD + 1)
-    room = table.cor.x0 + lead.gap + lead.speed * m * CFG.step_length - mpc.MIN_GAP - mpc.HEADWAY * plan.v[m]
+    travel = np.array([mpc.leader_travel(lead.speed, int(q), CFG) for q in m])  # the prediction model
+    assert travel[0] == pytest.approx((lead.speed + mpc.LEADER_ACCEL * CFG.step_length) * CFG.step_length)
+    room = table.cor.x0 + lead.gap + travel - mpc.MIN_GAP - mpc.HEADWAY * plan.v[m]
     assert np.all(plan.x[m] <= room + 1e-9)
     far = mpc.replan(table, 0, table.cor.x0, table.cor.v0, mpc.Leader(gap=1000.0, speed=13.0))
     assert np.array_equal(far.x, free.x)  # a constraint that does not bind changes nothing
