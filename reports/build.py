@@ -31,7 +31,7 @@ from .html_markdown import experiment_caption
 from .html_parts import Figure, Page, esc, label
 from .load import RunError, component_sums, load_plan, load_run, load_steps, stop_lines
 
-METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle")
+METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle", "mpc")
 LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
@@ -73,7 +73,7 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
         md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
     atomic_text("\n".join(md), out / "index.md")
     page.experiments_md = page.experiments_md + emd
-    page.experiment_figures = [Figure(p, experiment_caption(t), t) for t, p in eimages]
+    page.experiment_figures = page.experiment_figures + [Figure(p, experiment_caption(t), t) for t, p in eimages]
     page.mixed_claims = _mixed_claims(run_dir)
     page.warnings = warnings
     atomic_text(render(page), out / "index.html")
@@ -105,6 +105,31 @@ def _gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
         lines += [f"{s}: the best learned method, {best.method}, closes {100 * best.share_closed:.0f}% of the gap "
                   f"between SUMO's driver and the bound and stays {100 * best.cost_gap:.0f}% above the bound.", ""]
     lines += [tables.frame_markdown(gaps.set_index(["method", "signals"]), digits=3), ""]
+    return lines
+
+
+def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page) -> list[str]:
+    """What information can buy (``metrics.headroom``), when the run has ``baseline0`` and ``mpc``."""
+    phis = _phis(results, manifest)
+    shares = pd.concat([metrics.headroom(results[results.signals == s], phi) for s, phi in phis.items()],
+                       ignore_index=True)
+    if shares.empty:
+        return []
+    atomic_csv(shares, out / "headroom.csv")
+    p = figures.headroom(shares, out / "figures")
+    caption = ("Share of the cost gap between baseline0 (steady driving, no information) and mpc (perfect signal "
+               "information, in traffic) that each method closes; bars: 95% CI over training seeds.")
+    page.experiment_figures.append(Figure(p[0], caption, "headroom"))
+    lines = ["## Headroom: how much of what information can buy a method buys", "",
+             "share_closed = (C_baseline0 - C_method) / (C_baseline0 - C_mpc) on mean costs E + phi T over the "
+             "cases all three ran, with a stratified bootstrap CI over the method's training seeds. Above 100%: "
+             "the method beats the closed-loop controller that knows the signal plans.", ""]
+    for s, g in shares[shares.method.isin(LEARNED)].groupby("signals"):
+        best = g.loc[g.share_closed.idxmax()]
+        lines += [f"{s}: the best learned method, {best.method}, closes {100 * best.share_closed:.0f}% "
+                  f"[{100 * best.ci_low:.0f}, {100 * best.ci_high:.0f}] of the gap between baseline0 and mpc.", ""]
+    lines += [f"![headroom](figures/{p[0].name})", "",
+              tables.frame_markdown(shares.set_index(["method", "signals"]), digits=3), ""]
     return lines
 
 
@@ -171,7 +196,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
            f"cases with a {int(stats.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
            "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed has no CI.",
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
-    page.experiments_md = _gaps(results, manifest, out)
+    page.experiments_md = _gaps(results, manifest, out) + _headroom(results, manifest, out, page)
     md += page.experiments_md
     warnings = dropped + unfinished_warnings(results)
     parts, partial = _return_parts(results, run_dir, warnings, progress)

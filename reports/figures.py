@@ -171,3 +171,22 @@ def generalisation(per_variant: pd.DataFrame, methods: list[str], signals: str, 
         ax.set_title(f"{title} vs baseline [%], {signals}")
         fig.colorbar(im, ax=ax)
     return save(fig, out, f"generalisation-{signals}")
+
+
+def headroom(shares: pd.DataFrame, out: Path) -> list[Path]:
+    """The share of the baseline0-to-mpc cost gap each method closes, per setting, with its CI
+    over training seeds (``reports.metrics.headroom``'s rows)."""
+    settings = sorted(set(shares.signals))
+    fig, axes = plt.subplots(1, len(settings), figsize=(5 * len(settings), 3.6), squeeze=False)
+    for ax, s in zip(axes[0], settings):
+        g = shares[shares.signals == s].sort_values("share_closed")
+        y = np.arange(len(g))
+        err = np.vstack([g.share_closed - g.ci_low, g.ci_high - g.share_closed])
+        ax.barh(y, 100 * g.share_closed, xerr=100 * np.nan_to_num(err), color="tab:blue", alpha=0.7, capsize=3)
+        ax.set_yticks(y, g.method)
+        ax.axvline(0, color="k", lw=0.8)
+        ax.axvline(100, color="k", lw=0.8, ls="--")
+        ax.set_xlabel("share of the baseline0-to-mpc cost gap closed [%]")
+        ax.set_title(s)
+        ax.grid(alpha=0.3, axis="x")
+    return save(fig, out, "headroom")

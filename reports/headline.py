@@ -21,9 +21,10 @@ from ecodrive_bench.bench.paper import TABLE4, improvement
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
 SETTINGS = (("coordinated", "coord."), ("uncoordinated", "non-coord."))
-ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle")
+ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle", "mpc")
 LABELS = {"baseline": "baseline (SUMO's driver)", "baseline0": "baseline0 (SUMO, sigma 0)", "glosa": "glosa (SUMO device)",
-          "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013", "dqn": "DQN-27", "oracle": "oracle (energy-optimal plan replayed)"}
+          "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013", "dqn": "DQN-27", "oracle": "oracle (energy-optimal plan replayed)",
+          "mpc": "mpc (re-plans with the signal plans, closed loop)"}
 
 
 def _pct(x: float) -> str:

@@ -14,7 +14,8 @@ STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT CHECKED": "absent",
                 "KNOWN FAIL": "fail", "OUTSIDE BAND": "fail"}
 METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
                  "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",
-                 "dqn": "DQN", "oracle": "Oracle (energy-optimal plan replayed in traffic)"}
+                 "dqn": "DQN", "oracle": "Oracle (energy-optimal plan replayed in traffic)",
+                 "mpc": "MPC (closed-loop re-planning with the signal plans)"}
 METRIC_UNITS = {"energy": ("Energy", "Wh"), "travel_time": ("Travel time", "s")}
 
 
