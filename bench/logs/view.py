@@ -14,7 +14,8 @@ Entities (timeline ``sim_time``, simulation seconds):
                                      red and yellow bands at each stop line the ego reached
   /world/signals                     signal heads coloured by the ego's phase
   /world/ego, /world/neighbours      vehicles as boxes; /world/trail the ego's last 60 s
-  /world/plan                        where the plan puts the ego (logs with a plan: the oracle)
+  /world/plan                        where the plan puts the ego (logs with a plan: oracle, mpc until it re-plans)
+  /world/plan_ahead                  mpc: the plan in force over its look-ahead, from each re-plan
   /series/<name>                     speed (and planned speed), requested vs applied acceleration,
                                      energy, reward parts
   /grid                              the occupancy grid as an image
@@ -67,6 +68,8 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
     times = np.array([s.time for s in steps])
     plan = data.plan
     plan_x = dict(zip(np.round(plan["time"], 6), plan["x"])) if plan else {}
+    replans = {round(r["time"], 6): r for r in (plan or {}).get("replans", [])}  # mpc: the plan in force
+    first_replan = min(replans, default=float("inf"))
     trail: list[tuple[float, float]] = []
     for s in steps:
         rec.set_time("sim_time", duration=s.time)
@@ -75,7 +78,12 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
         rec.log("/world/ego", rr.Boxes2D(centers=[[s.x - 2.5, s.y]], sizes=[[5.0, 1.8]], colors=(30, 120, 255),
                                          labels=["ego"]))
         rec.log("/world/trail", rr.LineStrips2D([trail], colors=(30, 120, 255)))
-        if round(s.time, 6) in plan_x:
+        now = round(s.time, 6)
+        if now in replans:  # the re-planned look-ahead, in force from this step
+            ahead = replans[now]["x"]
+            rec.log("/world/plan_ahead", rr.Points2D([[x - 2.5, s.y] for x in ahead], colors=(255, 160, 0),
+                                                     radii=0.6, labels=[f"re-plan ({replans[now]['event']})"] + [""] * (len(ahead) - 1)))
+        if now in plan_x and now < first_replan:
             rec.log("/world/plan", rr.Boxes2D(centers=[[plan_x[round(s.time, 6)] - 2.5, s.y]], sizes=[[5.0, 1.8]],
                                               colors=(255, 160, 0, 120), labels=["plan"]))
         n = len(s.neighbour_x)

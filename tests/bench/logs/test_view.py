@@ -409,3 +409,25 @@ def test_the_recording_draws_the_drive_in_the_web_viewer(baseline_rrd_path, tmp_
     moved = (np.abs(shot[:SIZE[1] // 2, x0:x1] - shot2[:SIZE[1] // 2, x0:x1]).sum(axis=-1) > 30).sum()
     assert moved > 1000  # playback went on: the neighbours and lanes moved under the ego
     assert abs(first["ego_front"] - later["ego_front"]) * (x1 - x0) <= 2  # [px] while the ego stayed put
+
+
+def test_mpc_draws_the_plan_in_force_from_each_replan(cases, tmp_path):
+    """An mpc episode in traffic: each re-plan's look-ahead is drawn at its step, and the first
+    plan's ghost stops where the re-planning starts."""
+    from ecodrive_bench.bench.harness.mpc import MPCAgent
+    from ecodrive_bench.bench.logs.mcaplog import read_log
+
+    env = make_env(MPCAgent, "uncoordinated", None)
+    try:
+        run_episode(env, MPCAgent(env.cfg), cases[0], "mpc", log_path=tmp_path / "m.mcap")
+    finally:
+        env.close()
+    replans = read_log(tmp_path / "m.mcap").plan["replans"]
+    assert replans, "no re-plan in traffic"
+    done = _view(tmp_path / "m.mcap", "--save", tmp_path / "m.rrd")
+    assert done.returncode == 0, done.stderr
+    df = _read_rrd(tmp_path / "m.rrd")
+    drawn = df[df["/world/plan_ahead:Points2D:positions"].notna()].sim_time.dt.total_seconds().round(6)
+    assert sorted(drawn) == sorted(round(r["time"], 6) for r in replans)
+    ghost = df[df["/world/plan:Boxes2D:centers"].notna()].sim_time.dt.total_seconds()
+    assert ghost.max() < replans[0]["time"]
