@@ -80,16 +80,11 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
     return out / "index.md", warnings
 
 
-def _phis(results: pd.DataFrame, manifest: dict) -> dict[str, float]:
-    """The reward's phi [Wh/s] of each setting in the run (its manifest's scenario; 1 if absent)."""
-    return {s: manifest.get("scenario", {}).get(s, {}).get("reward", {}).get("phi", 1.0) for s in set(results.signals)}
-
-
 def _gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
     """The distance to the energy-optimal bound, when the run has it (``ecodrive run --bounds``)."""
     if "cost_bound" not in results.columns or results.cost_bound.isna().all():
         return []
-    phis = _phis(results, manifest)
+    phis = headline.phis(results, manifest)
     gaps = pd.concat([metrics.optimality_gaps(results[results.signals == s], phi) for s, phi in phis.items()],
                      ignore_index=True)
     atomic_csv(gaps, out / "optimality_gaps.csv")
@@ -110,7 +105,7 @@ def _gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
 
 def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page) -> list[str]:
     """What information can buy (``metrics.headroom``), when the run has ``baseline0`` and ``mpc``."""
-    phis = _phis(results, manifest)
+    phis = headline.phis(results, manifest)
     shares = pd.concat([metrics.headroom(results[results.signals == s], phi) for s, phi in phis.items()],
                        ignore_index=True)
     if shares.empty:
@@ -178,7 +173,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
                "rows, of which method and setting, and why) or converted is listed under Warnings.", ""]
     if manifest.get("skipped_methods"):
         md += [f"Not in this run (no shipped policy): {', '.join(manifest['skipped_methods'])}.", ""]
-    phis = _phis(results, manifest)
+    phis = headline.phis(results, manifest)
     costs = metrics.paper_costs(t4, phis)
     md += ["## Table 4", "", tables.table4_markdown(t4)]
     if not costs.empty:

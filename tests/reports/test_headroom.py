@@ -32,3 +32,13 @@ def test_only_cases_every_reference_ran_count():
 
 def test_no_row_without_the_references():
     assert headroom(pd.DataFrame(_rows("prl", 0, [80.0])), phi=1.0).empty
+
+
+def test_the_readme_line_names_the_best_learned_method():
+    from ecodrive_bench.reports.headline import headroom_line
+
+    rows = _rows("baseline0", -1, [100.0, 110.0]) + _rows("mpc", -1, [60.0, 70.0])
+    rows += _rows("prl", 0, [78.0, 88.0]) + _rows("prl", 1, [82.0, 92.0]) + _rows("dqn", 0, [95.0, 105.0])
+    line = headroom_line(pd.DataFrame(rows), {})
+    assert "PRL 50% [" in line and "coord." in line and "DQN" not in line
+    assert headroom_line(pd.DataFrame(_rows("prl", 0, [80.0])), {}) == ""
