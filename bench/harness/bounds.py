@@ -5,7 +5,11 @@ solved: ``cost_bound``, the least E + phi T through the signals (phi of the scen
 and ``energy_bound``, the least energy that arrives no later than SUMO's driver (``baseline``)
 did on that case, an equal-time comparison. Solutions are kept in ``<run>/bounds.parquet``,
 rewritten as each case finishes (a killed run loses only the cases in flight), and reused by a
-rerun (the DP takes a second or two per case); a progress bar with an ETA shows the phase.
+rerun (the DP takes a few seconds per case); a progress bar with an ETA shows the phase. A case
+whose problem the bounds shipped with the fixed cases answer (``bench.harness.shipped_bounds``:
+same scenario, DP version and grid, departure and time limit) is read from there, not solved;
+its row says so in ``bound_source`` ("shipped", else "solved") and keeps in ``bound_wall_s`` the
+DP's seconds where it was solved.
 """
 from __future__ import annotations
 
@@ -24,7 +28,8 @@ from ecodrive_bench.bench.io import atomic_parquet
 NO_LIMIT = -1.0  # no baseline row, or it did not finish: no equal-time bound
 KEY = ["signals", "case", "depart_time", "time_limit"]
 COLUMNS = KEY + ["cost_bound", "bound_energy", "bound_travel_time", "energy_bound", "energy_bound_travel_time",
-                 "bound_wall_s"]
+                 "bound_wall_s", "bound_source"]
+SOLVED, SHIPPED = "solved", "shipped"  # bound_source: solved by this run, or read from the shipped bounds
 
 
 @dataclass(frozen=True)
@@ -36,22 +41,51 @@ class BoundTask:
     scenario: str = ""  # JSON of the run's scenario overrides (bench.harness.scenarios), "" none
 
 
-def solve(task: BoundTask) -> dict[str, Any]:
-    """Both bounds of one case (runs in a worker)."""
+def _solve(task: BoundTask) -> tuple[Any, Any, Any, float]:
+    """(scenario config, "cost" plan, "energy" plan or None, seconds) of one case."""
     from ecodrive_bench.bench.harness.scenarios import setting
     from ecodrive_bench.bench.oracle.dp import bound
 
     cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
     t0 = time.perf_counter()
     cost = bound(cfg, task.depart_time, "cost")
-    row = {"signals": task.signals, "case": task.case, "depart_time": task.depart_time, "time_limit": task.time_limit,
-           "cost_bound": cost.cost, "bound_energy": cost.energy, "bound_travel_time": cost.travel_time,
-           "energy_bound": np.nan, "energy_bound_travel_time": np.nan}
-    if task.time_limit != NO_LIMIT:
-        eq = bound(cfg, task.depart_time, "energy", time_limit=task.time_limit)
-        row.update(energy_bound=eq.energy, energy_bound_travel_time=eq.travel_time)
-    row["bound_wall_s"] = time.perf_counter() - t0
-    return row
+    eq = bound(cfg, task.depart_time, "energy", time_limit=task.time_limit) if task.time_limit != NO_LIMIT else None
+    return cfg, cost, eq, time.perf_counter() - t0
+
+
+def solve(task: BoundTask) -> dict[str, Any]:
+    """Both bounds of one case (runs in a worker)."""
+    _, cost, eq, wall = _solve(task)
+    return {"signals": task.signals, "case": task.case, "depart_time": task.depart_time, "time_limit": task.time_limit,
+            "cost_bound": cost.cost, "bound_energy": cost.energy, "bound_travel_time": cost.travel_time,
+            "energy_bound": eq.energy if eq is not None else np.nan,
+            "energy_bound_travel_time": eq.travel_time if eq is not None else np.nan,
+            "bound_wall_s": wall, "bound_source": SOLVED}
+
+
+def solve_entry(task: BoundTask) -> dict[str, Any]:
+    """Both bounds of one case as a row of the shipped bounds, with the cost plan (runs in a
+    worker; ``ecodrive cases --write --bounds``)."""
+    from ecodrive_bench.bench.harness.shipped_bounds import entry
+
+    cfg, cost, eq, wall = _solve(task)
+    return entry(task.signals, task.case, cfg, task.depart_time, task.time_limit, cost, eq, wall)
+
+
+def shipped_row(table: Any, task: BoundTask) -> dict[str, Any] | None:
+    """The row ``solve(task)`` would give (its time aside), read from the shipped bounds
+    (``bench.harness.shipped_bounds.Table``); None when they do not answer both of its bounds."""
+    from ecodrive_bench.bench.harness.scenarios import setting
+
+    cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
+    plan = table.plan(cfg, task.depart_time)
+    eq = table.energy(cfg, task.depart_time, task.time_limit) if task.time_limit != NO_LIMIT else (np.nan, np.nan)
+    if plan is None or eq is None:
+        return None
+    return {"signals": task.signals, "case": task.case, "depart_time": task.depart_time, "time_limit": task.time_limit,
+            "cost_bound": plan.cost, "bound_energy": plan.energy, "bound_travel_time": plan.travel_time,
+            "energy_bound": eq[0], "energy_bound_travel_time": eq[1], "bound_wall_s": plan.grid["wall_s"],
+            "bound_source": SHIPPED}
 
 
 def tasks_for(results: pd.DataFrame, scenario: str = "") -> list[BoundTask]:
@@ -66,21 +100,36 @@ def tasks_for(results: pd.DataFrame, scenario: str = "") -> list[BoundTask]:
 
 
 def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
-           scenario: dict[str, Any] | None = None, progress: bool = True) -> pd.DataFrame:
-    """``results`` with the bound columns of its case, solving (with ``runner(tasks, workers,
-    fn)``, an executor of ``bench.harness.executors``) only what ``bounds.parquet`` lacks, on the
-    run's ``scenario`` (overrides; one per run folder)."""
+           scenario: dict[str, Any] | None = None, progress: bool = True,
+           shipped: Path | None = None) -> pd.DataFrame:
+    """``results`` with the bound columns of its case, reading what the shipped bounds answer
+    (``shipped``: their file, default ``bench.harness.shipped_bounds.FILE``) and solving (with
+    ``runner(tasks, workers, fn)``, an executor of ``bench.harness.executors``) the rest of what
+    ``bounds.parquet`` lacks, on the run's ``scenario`` (overrides; one per run folder)."""
+    from ecodrive_bench.bench.harness import shipped_bounds
+
     path = run_dir / "bounds.parquet"
     done = pd.read_parquet(path) if path.is_file() else pd.DataFrame(columns=COLUMNS)
     have = set(map(tuple, done[KEY].astype(object).values)) if len(done) else set()
     todo = [t for t in tasks_for(results, json.dumps(scenario, sort_keys=True) if scenario else "") if (t.signals, t.case, t.depart_time, t.time_limit) not in have]
     if todo:
-        rows: list[dict[str, Any]] = []
-        for row in tqdm(runner(todo, workers, solve), total=len(todo), desc="bounds", unit="case",
-                        disable=None if progress else True):  # None: off where stderr is no terminal
-            rows.append(row)
+        table = shipped_bounds.table(shipped or shipped_bounds.FILE)
+        rows = [r for r in (shipped_row(table, t) for t in todo) if r is not None] if table is not None else []
+        read = {(r["signals"], r["case"]) for r in rows}
+        todo = [t for t in todo if (t.signals, t.case) not in read]
+
+        def save() -> None:
             new = pd.DataFrame(rows, columns=COLUMNS)
             atomic_parquet(pd.concat([done, new], ignore_index=True) if len(done) else new, path)
+
+        if rows:
+            save()
+        with tqdm(total=len(rows) + len(todo), initial=len(rows), desc="bounds", unit="case",
+                  disable=None if progress else True) as bar:  # None: off where stderr is no terminal
+            for row in runner(todo, workers, solve) if todo else ():
+                rows.append(row)
+                save()
+                bar.update(1)
         done = pd.read_parquet(path)
     cols = ["signals", "case", "cost_bound", "energy_bound"]
     latest = done.drop_duplicates(["signals", "case"], keep="last")[cols]

@@ -1,32 +1,52 @@
 """``ecodrive cases``: write or check the versioned case files against their generators.
 
-    ecodrive cases --write|--check [--generalisation]
+    ecodrive cases --write|--check [--generalisation | --bounds] [--workers N]
 
-The fixed test cases (``bench/harness/cases.json``, ``bench.harness.cases``) and, with
+The fixed test cases (``bench/harness/cases.json``, ``bench.harness.cases``); with
 ``--generalisation``, the family of held-out corridors (``bench/harness/generalisation.json``,
-``bench.harness.generalisation``). This command sits above both modules, so neither imports
-the other back.
+``bench.harness.generalisation``); with ``--bounds``, the DP's bounds and the oracle's plans for
+the fixed cases (``bench/harness/shipped_bounds.parquet``, ``bench.harness.shipped_bounds``).
+``--check`` alone checks cases.json and the shipped bounds: the DP re-solves a fixed sample of
+2 cases per setting (under a minute) and each stored value or plan that differs is one line.
+``--write --bounds`` runs the baseline over every fixed case, then the DP (about 20 minutes
+on 2 busy cores); ``--write`` alone rewrites cases.json only. This command sits above these
+modules, so none of them imports it back. Exit codes: 0 as generated; 1 cases.json or the family differs
+from its generator; 2 the shipped bounds differ from the DP, cannot be read, or were not written.
 """
 from __future__ import annotations
 
 import json
+import os
 import sys
+import tempfile
+from pathlib import Path
 
-from ecodrive_bench.bench.args import Parser
+from ecodrive_bench.bench.args import InputError, Parser, fail, int_in
 from ecodrive_bench.bench.harness import cases, generalisation
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
+    """The command; ``bounds_file``: the shipped bounds' file (default
+    ``bench.harness.shipped_bounds.FILE``)."""
     ap = Parser(description=__doc__)
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--write", action="store_true", help="regenerate bench/harness/cases.json")
-    g.add_argument("--check", action="store_true", help="check bench/harness/cases.json against the generator")
-    ap.add_argument("--generalisation", action="store_true",
-                    help="write or check the generalisation family instead (bench/harness/generalisation.json, "
-                         "bench.harness.generalisation)")
+    g.add_argument("--check", action="store_true",
+                   help="check bench/harness/cases.json against the generator and the shipped bounds against the DP")
+    which = ap.add_mutually_exclusive_group()
+    which.add_argument("--generalisation", action="store_true",
+                       help="write or check the generalisation family instead (bench/harness/generalisation.json, "
+                            "bench.harness.generalisation)")
+    which.add_argument("--bounds", action="store_true",
+                       help="write or check the shipped bounds only (bench/harness/shipped_bounds.parquet, "
+                            "bench.harness.shipped_bounds)")
+    ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, metavar="N",
+                    help="parallel episodes and DP solves of --write --bounds (>= 1)")
     args = ap.parse_args(argv)
     if args.generalisation:
         return generalisation.main(args.write)
+    if args.bounds:
+        return bounds(ap.prog, args.write, args.workers, bounds_file)
     data = cases.generate()
     text = json.dumps(data, indent=1) + "\n"
     if args.write:
@@ -35,7 +55,53 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     ok = cases.CASES_FILE.exists() and cases.CASES_FILE.read_text() == text
     print("cases.json matches the generator" if ok else "cases.json differs from the generator")
-    return 0 if ok else 1
+    return bounds(ap.prog, False, args.workers, bounds_file) or (0 if ok else 1)
+
+
+def bounds(prog: str, write: bool, workers: int, path: Path | None) -> int:
+    """Write or check the shipped bounds: 0, or 2 after one line per problem."""
+    from ecodrive_bench.bench.harness import shipped_bounds
+    from ecodrive_bench.bench.harness.errors import UsageError
+
+    path = path or shipped_bounds.FILE
+    try:
+        lines = write_bounds(path, workers) if write else shipped_bounds.check(path)
+    except (UsageError, InputError, OSError) as e:  # a run folder or case list refused, a write that failed
+        lines = [f"{path}: not written ({e})"]
+    for line in lines:
+        fail(prog, line)
+    if not lines:
+        n = shipped_bounds.CHECK_PER_SETTING
+        print(f"wrote {path}" if write else f"{path.name} matches the DP on the sample ({n} cases per setting)")
+    return 2 if lines else 0
+
+
+def write_bounds(path: Path, workers: int, progress: bool = True) -> list[str]:
+    """Rebuild the shipped bounds: the baseline over every fixed case of each setting, in a
+    temporary run folder (the departures, and the travel times that limit the energy bounds,
+    exactly as a run measures them), then both bounds of each case with its plan. Returns error
+    lines ([]: written); after an error nothing is written."""
+    import pandas as pd
+    from tqdm import tqdm
+
+    from ecodrive_bench.bench.harness.bounds import solve_entry, tasks_for
+    from ecodrive_bench.bench.harness.executors import run_local
+    from ecodrive_bench.bench.harness.options import RunOptions
+    from ecodrive_bench.bench.harness.run import run
+    from ecodrive_bench.bench.harness.shipped_bounds import REBUILD, save
+    from ecodrive_bench.envs.config import SIGNALS
+
+    with tempfile.TemporaryDirectory(prefix="ecodrive-shipped-bounds-") as tmp:
+        opts = RunOptions(profile="paper", methods=["baseline"], signals=list(SIGNALS), workers=workers,
+                          run_id="baseline", logs=Path(tmp), argv=["--methods", "baseline"])
+        results = run(opts, progress)
+    if opts.failures:
+        return [f"{path}: not written: {len(opts.failures)} baseline episode(s) failed (above); rerun: {REBUILD}"]
+    tasks = tasks_for(results)
+    rows = list(tqdm(run_local(tasks, workers, solve_entry), total=len(tasks), desc="bounds", unit="case",
+                     disable=None if progress else True))  # None: off where stderr is no terminal
+    save(pd.DataFrame(rows), path)
+    return []
 
 
 if __name__ == "__main__":

@@ -1,0 +1,271 @@
+"""The DP's answers for the fixed cases, shipped beside them: ``bench/harness/shipped_bounds.parquet``.
+
+The bounds of ``bench.harness.bounds`` and the plans of the ``oracle`` method
+(``bench.harness.oracle``) are fixed by the case list (``cases.json``), the scenario and the DP
+(``bench.oracle.dp``). They are solved once for every fixed case on the paper's scenario of each
+signal setting and kept here, so a run reads them instead of spending a DP solve (2-8 s) per case
+and bound; every profile on the fixed cases (smoke, paper, full) reads the same rows. One row per
+(signal setting, case): the ``"cost"`` bound with its plan (speed and position per step, float64,
+the DP's arrays bit for bit) and the ``"energy"`` bound under the baseline's travel time.
+
+A row answers a problem only if every part of its key is the problem's:
+
+- ``scenario_digest`` (``problem_digest``): the scenario config and the corridor the DP reads
+  of its built network (positions, signal timing), so a ``--scenario``/``--set`` override or a
+  SUMO that builds another network misses;
+- ``dp_version`` (``bench.oracle.dp.VERSION``) and ``grid`` (the ``Grid``'s repr: the resolution);
+- ``depart_time`` [s], the ego's departure in the run, and for the energy bound ``time_limit``
+  [s], the travel time of that run's baseline: a changed baseline misses.
+
+Anything else (the generalisation profile's corridors, another DP) misses and is solved as
+before, never answered from a row of another problem. The table's content digest (in the parquet
+schema metadata) is checked on reading: an edited or damaged file is one line on stderr and every
+bound is solved.
+
+Parquet, not JSON: float64 columns keep every value exactly, list columns hold the plans, zstd
+keeps the file small (65 kB for 200 rows: many cases share a departure, and so a plan).
+
+``ecodrive cases --write --bounds`` rebuilds it (the baseline over every fixed case for the
+departures and time limits, then the DP: about 20 minutes on 2 busy cores);
+``ecodrive cases --check`` re-solves a deterministic sample and compares (``check``).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.io import atomic_file
+from ecodrive_bench.bench.oracle import dp
+from ecodrive_bench.envs.config import SIGNALS, ScenarioConfig
+
+FILE = Path(__file__).with_name("shipped_bounds.parquet")
+FORMAT = 1  # [-] of the table's columns; another format is refused on reading
+META_KEY = b"ecodrive_shipped_bounds"  # parquet schema metadata: {"format", "sha256", "rows"}
+MAX_BYTES = 16 << 20  # [bytes] a larger file is refused before it is read
+REBUILD = "ecodrive cases --write --bounds"
+CHECK_PER_SETTING = 2  # [cases] re-solved per signal setting by `ecodrive cases --check` (two DP solves each)
+CHECK_SEED = 20240501  # [-] the sample's seed: the same cases on every check
+SCALARS = {"signals": str, "case": int, "scenario_digest": str, "dp_version": int, "grid": str,
+           "depart_time": float, "time_limit": float, "cost_bound": float, "bound_energy": float,
+           "bound_travel_time": float, "energy_bound": float, "energy_bound_travel_time": float, "wall_s": float}
+ARRAYS = ("crossings", "speed", "x")  # [s] stop-line crossing steps, [m/s] and [m] per step of the cost plan
+COLUMNS = (*SCALARS, *ARRAYS)
+
+
+class ShippedError(ValueError):
+    """A shipped-bounds file that cannot be used; one line naming the file and how to rebuild it."""
+
+
+def grid_key(grid: dp.Grid | None = None) -> str:
+    """The DP resolution part of the key."""
+    return repr(grid or dp.Grid())
+
+
+_DIGESTS: dict[str, str] = {}  # ScenarioConfig.digest() -> problem_digest, per process
+
+
+def problem_digest(cfg: ScenarioConfig) -> str:
+    """The digest of the problem ``cfg`` poses the DP: its config (``ScenarioConfig.digest``'s
+    fields) and the ``Corridor`` read from its built network. 16 hex digits."""
+    have = _DIGESTS.get(cfg.digest())
+    if have is None:
+        text = json.dumps({"scenario": cfg.to_dict(), "corridor": asdict(dp.Corridor.from_config(cfg))}, sort_keys=True)
+        have = _DIGESTS[cfg.digest()] = hashlib.sha256(text.encode()).hexdigest()[:16]
+    return have
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, (np.ndarray, list, tuple)):
+        return [float(v) for v in value]
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def content_sha256(frame: pd.DataFrame) -> str:
+    """The digest of the rows' values (floats by their shortest exact repr)."""
+    rows = [[_plain(v) for v in r] for r in frame[list(COLUMNS)].itertuples(index=False)]
+    return hashlib.sha256(json.dumps(rows, allow_nan=True).encode()).hexdigest()
+
+
+@dataclass
+class Table:
+    """The rows of a shipped-bounds file and their lookups."""
+
+    path: Path
+    frame: pd.DataFrame
+    cost_rows: dict[tuple, int] = field(init=False)  # (digest, dp version, grid, departure) -> row
+    energy_rows: dict[tuple, int] = field(init=False)  # ... and the time limit -> row
+
+    def __post_init__(self) -> None:
+        f = self.frame
+        keys = list(zip(f.scenario_digest, f.dp_version.astype(int), f.grid, f.depart_time.astype(float)))
+        self.cost_rows = {k: i for i, k in enumerate(keys)}
+        self.energy_rows = {(*k, float(t)): i for i, (k, t, e) in enumerate(zip(keys, f.time_limit, f.energy_bound))
+                            if not math.isnan(e)}  # NaN: the baseline did not finish, no energy bound
+
+    def plan(self, cfg: ScenarioConfig, depart_time: float, grid: dp.Grid | None = None) -> dp.Plan | None:
+        """The ``"cost"`` plan of ``bound(cfg, depart_time, "cost", grid=grid)``; None: not shipped."""
+        i = self.cost_rows.get(_key(cfg, depart_time, grid))
+        return None if i is None else row_plan(self.frame.iloc[i], cfg, self.path)
+
+    def energy(self, cfg: ScenarioConfig, depart_time: float, time_limit: float,
+               grid: dp.Grid | None = None) -> tuple[float, float] | None:
+        """(energy [Wh], travel time [s]) of ``bound(cfg, depart_time, "energy", time_limit)``; None: not shipped."""
+        i = self.energy_rows.get((*_key(cfg, depart_time, grid), float(time_limit)))
+        if i is None:
+            return None
+        r = self.frame.iloc[i]
+        return float(r.energy_bound), float(r.energy_bound_travel_time)
+
+
+def _key(cfg: ScenarioConfig, depart_time: float, grid: dp.Grid | None) -> tuple[str, int, str, float]:
+    return problem_digest(cfg), dp.VERSION, grid_key(grid), float(depart_time)
+
+
+def row_plan(r: Any, cfg: ScenarioConfig, path: Path) -> dp.Plan:
+    """A row's cost plan as the DP's ``Plan`` (times and accelerations as ``bound`` derives them)."""
+    dt, v = cfg.step_length, np.asarray(r.speed, dtype=np.float64)
+    return dp.Plan(t=float(r.depart_time) + np.arange(len(v)) * dt, x=np.asarray(r.x, dtype=np.float64), v=v,
+                   a=np.diff(v) / dt, energy=float(r.bound_energy), travel_time=float(r.bound_travel_time),
+                   cost=float(r.cost_bound), objective="cost", crossings=np.asarray(r.crossings, dtype=np.float64),
+                   grid={"source": "shipped", "file": str(path), "wall_s": float(r.wall_s)})
+
+
+def read(path: Path = FILE) -> Table:
+    """The table of ``path``, its format, columns and content digest checked; a ``ShippedError``
+    of one line otherwise."""
+    import pyarrow.parquet as pq
+
+    rebuild = f"rebuild it: {REBUILD}"
+    if not path.exists():
+        raise ShippedError(f"{path}: no shipped bounds; {rebuild}")
+    if not path.is_file() or path.stat().st_size > MAX_BYTES:
+        raise ShippedError(f"{path}: not a regular file of at most {MAX_BYTES >> 20} MiB; {rebuild}")
+    try:
+        table = pq.read_table(path)
+        meta = json.loads((table.schema.metadata or {}).get(META_KEY, b"null"))
+        frame = table.to_pandas()
+    except Exception as e:  # pyarrow's and json's errors for a damaged file have no common base
+        raise ShippedError(f"{path}: not a readable shipped-bounds table ({type(e).__name__}); {rebuild}") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else None
+        raise ShippedError(f"{path}: shipped-bounds format {got!r} is not the supported {FORMAT}; {rebuild}")
+    if list(frame.columns) != list(COLUMNS):
+        raise ShippedError(f"{path}: columns {', '.join(map(str, frame.columns))} are not the format's; {rebuild}")
+    if meta.get("sha256") != content_sha256(frame):
+        raise ShippedError(f"{path}: its rows do not match its content digest (edited or damaged); {rebuild}")
+    return Table(path, frame)
+
+
+_TABLES: dict[Path, Table | None] = {}  # per process: read once, a bad file reported once
+
+
+def table(path: Path = FILE) -> Table | None:
+    """The shipped table for a run's lookups; None (every bound solved) after one line on
+    stderr when the file cannot be used."""
+    if path not in _TABLES:
+        try:
+            _TABLES[path] = read(path)
+        except ShippedError as e:
+            print(f"note: {e}; every bound is solved", file=sys.stderr)
+            _TABLES[path] = None
+    return _TABLES[path]
+
+
+def save(frame: pd.DataFrame, path: Path = FILE) -> None:
+    """Write the rows (atomically, ``bench.io``) with their format and content digest."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    frame = frame[list(COLUMNS)].sort_values(["signals", "case"], ignore_index=True)
+    types = {str: pa.string(), int: pa.int64(), float: pa.float64()}
+    schema = pa.schema([(c, types[t]) for c, t in SCALARS.items()] + [(c, pa.list_(pa.float64())) for c in ARRAYS])
+    meta = {"format": FORMAT, "sha256": content_sha256(frame), "rows": len(frame)}
+    tab = pa.Table.from_pandas(frame, schema=schema, preserve_index=False).replace_schema_metadata(
+        {META_KEY: json.dumps(meta).encode()})
+    with atomic_file(path) as f:
+        pq.write_table(tab, f, compression="zstd", compression_level=19)
+
+
+def entry(signals: str, case: int, cfg: ScenarioConfig, depart_time: float, time_limit: float, plan: dp.Plan,
+          energy: dp.Plan | None, wall_s: float) -> dict[str, Any]:
+    """A row: the ``"cost"`` plan of a case and its ``"energy"`` bound under ``time_limit`` [s]
+    (``energy`` None: the baseline did not finish, no energy bound), solved in ``wall_s`` [s]."""
+    return {"signals": signals, "case": case, "scenario_digest": problem_digest(cfg), "dp_version": dp.VERSION,
+            "grid": grid_key(), "depart_time": float(depart_time), "time_limit": float(time_limit),
+            "cost_bound": plan.cost, "bound_energy": plan.energy, "bound_travel_time": plan.travel_time,
+            "energy_bound": energy.energy if energy is not None else math.nan,
+            "energy_bound_travel_time": energy.travel_time if energy is not None else math.nan, "wall_s": float(wall_s),
+            "crossings": plan.crossings.tolist(), "speed": plan.v.tolist(), "x": plan.x.tolist()}
+
+
+def sample(rows: pd.DataFrame, n: int = CHECK_PER_SETTING) -> pd.DataFrame:
+    """The rows ``check`` re-solves: ``n`` of ``rows`` (one setting's), the same on every call."""
+    rows = rows.sort_values("case", ignore_index=True)
+    pick = np.random.default_rng(CHECK_SEED).choice(len(rows), size=min(n, len(rows)), replace=False)
+    return rows.iloc[np.sort(pick)]
+
+
+def check(path: Path = FILE, per_setting: int = CHECK_PER_SETTING, signals: tuple[str, ...] = SIGNALS,
+          progress: bool = True) -> list[str]:
+    """One line per drift ([]: none): a file that cannot be read; a setting whose rows are for
+    another problem (scenario, DP version, grid) or that lacks fixed cases; and, on ``sample``'s
+    rows of each setting, a stored bound or plan that is not exactly what the DP solves now."""
+    from tqdm import tqdm
+
+    from ecodrive_bench.bench.harness.cases import load
+
+    try:
+        tab = read(path)
+    except ShippedError as e:
+        return [str(e)]
+    lines, todo, fixed = [], [], {c.index for c in load()}
+    for s in signals:
+        cfg = setting(s, None)
+        now = (problem_digest(cfg), dp.VERSION, grid_key())
+        rows = tab.frame[tab.frame.signals == s]
+        other = rows[(rows.scenario_digest != now[0]) | (rows.dp_version != now[1]) | (rows.grid != now[2])]
+        if len(other):
+            r = other.iloc[0]
+            lines.append(f"{path}: {len(other)} of the {s} rows are for another problem (scenario {r.scenario_digest}, "
+                         f"DP version {int(r.dp_version)}, {r.grid}; now {now[0]}, {now[1]}, {now[2]}); they would miss "
+                         f"and be solved; rebuild: {REBUILD}")
+            continue
+        missing = sorted(fixed - set(rows.case))
+        if missing:
+            lines.append(f"{path}: no {s} rows for {len(missing)} of the {len(fixed)} fixed cases (first: case "
+                         f"{missing[0]}); rebuild: {REBUILD}")
+        todo += [(s, cfg, r) for r in sample(rows, per_setting).itertuples(index=False)]
+    for s, cfg, r in tqdm(todo, desc="check bounds", unit="case", disable=None if progress else True):
+        lines += compare(path, s, cfg, r)
+    return lines
+
+
+def compare(path: Path, signals: str, cfg: ScenarioConfig, r: Any) -> list[str]:
+    """A row's bounds solved again: one line per bound that differs from the stored one."""
+    at = f"{path}: {signals} case {int(r.case)} (depart {float(r.depart_time):g} s)"
+    stored, solved = row_plan(r, cfg, path), dp.bound(cfg, float(r.depart_time), "cost")
+    diffs = [f"{k} {getattr(stored, k)!r} stored, {getattr(solved, k)!r} solved"
+             for k in ("cost", "energy", "travel_time") if getattr(stored, k) != getattr(solved, k)]
+    for k in ("t", "x", "v", "a", "crossings"):
+        a, b = getattr(stored, k), getattr(solved, k)
+        if a.shape != b.shape:
+            diffs.append(f"{k} has {a.size} entries stored, {b.size} solved")
+        elif not np.array_equal(a, b):
+            diffs.append(f"{k} differs at {int((a != b).sum())} of {a.size} entries")
+    out = [f"{at}: the stored cost plan is not the DP's: {'; '.join(diffs)}; rebuild: {REBUILD}"] if diffs else []
+    if not math.isnan(r.energy_bound):
+        eq = dp.bound(cfg, float(r.depart_time), "energy", time_limit=float(r.time_limit))
+        have = (float(r.energy_bound), float(r.energy_bound_travel_time))
+        if have != (eq.energy, eq.travel_time):
+            out.append(f"{at}: the stored energy bound under {float(r.time_limit):g} s is not the DP's: energy, travel time "
+                       f"{have[0]!r}, {have[1]!r} stored, {eq.energy!r}, {eq.travel_time!r} solved; rebuild: {REBUILD}")
+    return out

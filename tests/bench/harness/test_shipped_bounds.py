@@ -1,0 +1,163 @@
+"""The bounds shipped with the fixed cases (bench.harness.shipped_bounds): a lookup answers only
+its own problem, with the DP's values and plan exactly; anything else is solved; drift, edits
+and damage are one line each, exit code 2."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from ecodrive_bench.bench.harness import case_files, cases, shipped_bounds
+from ecodrive_bench.bench.harness.bounds import NO_LIMIT, SHIPPED, SOLVED, attach
+from ecodrive_bench.bench.harness.oracle import OracleAgent
+from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.oracle import dp
+
+SIGNALS = "coordinated"
+DEPART = 247.0  # [s] case 0's departure on the paper's coordinated corridor
+LIMIT = 168.0  # [s] the baseline's travel time there
+PLAN_ARRAYS = ("t", "x", "v", "a", "crossings")
+
+
+@pytest.fixture(scope="module")
+def solved(tmp_path_factory):
+    """Both bounds of one case, solved, and a shipped-bounds file holding that case alone."""
+    cfg = setting(SIGNALS, None)
+    plan = dp.bound(cfg, DEPART, "cost")
+    eq = dp.bound(cfg, DEPART, "energy", time_limit=LIMIT)
+    path = tmp_path_factory.mktemp("shipped") / "shipped_bounds.parquet"
+    shipped_bounds.save(pd.DataFrame([shipped_bounds.entry(SIGNALS, 0, cfg, DEPART, LIMIT, plan, eq, 1.5)]), path)
+    return cfg, plan, eq, path
+
+
+def results(travel_time: float = LIMIT, terminated: bool = True) -> pd.DataFrame:
+    """A results table of one baseline episode on case 0."""
+    return pd.DataFrame({"method": ["baseline"], "signals": [SIGNALS], "case": [0], "depart_time": [DEPART],
+                         "travel_time": [travel_time], "terminated": [terminated]})
+
+
+def same_plan(a: dp.Plan, b: dp.Plan) -> None:
+    for k in PLAN_ARRAYS:
+        assert np.array_equal(getattr(a, k), getattr(b, k)), k
+    assert (a.cost, a.energy, a.travel_time, a.objective) == (b.cost, b.energy, b.travel_time, b.objective)
+
+
+def oracle_plan(cfg, path) -> dp.Plan:
+    agent = OracleAgent(cfg, shipped=path)
+    agent.act({"logic": np.zeros(cfg.observed_lanes + 2, dtype=np.float32)}, {"travel_time": 0.0, "time": DEPART})
+    return agent.plan
+
+
+def test_a_hit_gives_the_solved_values_and_plan(solved, tmp_path):
+    cfg, plan, eq, path = solved
+    table = shipped_bounds.read(path)
+    same_plan(table.plan(cfg, DEPART), plan)
+    assert table.energy(cfg, DEPART, LIMIT) == (eq.energy, eq.travel_time)
+    got = oracle_plan(cfg, path)
+    assert got.grid["source"] == "shipped"
+    same_plan(got, plan)
+    asked: list = []  # the tasks handed to the solver: none
+
+    def runner(tasks, workers, fn):
+        asked.extend(tasks)
+        return map(fn, tasks)
+
+    out = attach(tmp_path, results(), 1, runner, progress=False, shipped=path)
+    assert asked == [] and out.cost_bound.tolist() == [plan.cost] and out.energy_bound.tolist() == [eq.energy]
+    b = pd.read_parquet(tmp_path / "bounds.parquet")
+    assert b.bound_source.tolist() == [SHIPPED] and b.bound_wall_s.tolist() == [1.5]
+    assert (b.bound_energy.iloc[0], b.bound_travel_time.iloc[0]) == (plan.energy, plan.travel_time)
+
+
+def test_a_changed_key_part_misses_and_solves(solved, tmp_path, monkeypatch):
+    cfg, plan, eq, path = solved
+    table = shipped_bounds.read(path)
+    assert table.plan(setting(SIGNALS, {"reward": {"phi": 0.5}}), DEPART) is None  # a scenario override
+    assert table.plan(cfg, DEPART + 1.0) is None  # another departure
+    assert table.plan(cfg, DEPART, grid=dp.Grid(n_v=20)) is None  # another resolution
+    assert table.energy(cfg, DEPART, LIMIT + 1.0) is None  # another baseline
+    # a changed baseline: the run solves both bounds, the cost bound as shipped
+    out = attach(tmp_path, results(LIMIT + 1.0), 1, lambda tasks, w, fn: map(fn, tasks), progress=False, shipped=path)
+    b = pd.read_parquet(tmp_path / "bounds.parquet")
+    assert b.bound_source.tolist() == [SOLVED] and out.cost_bound.tolist() == [plan.cost]
+    assert out.energy_bound.iloc[0] == dp.bound(cfg, DEPART, "energy", time_limit=LIMIT + 1.0).energy
+    # another DP version: the oracle solves, and gets the plan shipped
+    monkeypatch.setattr(dp, "VERSION", dp.VERSION + 1)
+    assert table.plan(cfg, DEPART) is None
+    got = oracle_plan(cfg, path)
+    assert "source" not in got.grid
+    same_plan(got, plan)
+
+
+def tampered(src, dst, sha_of_edit: bool, case: int | None = None) -> int:
+    """Copy ``src`` to ``dst`` with one cost bound raised by 1e-6 Wh (``case``'s, else the first
+    row's); ``sha_of_edit``: with the content digest of the edited rows (an edit that passes the
+    digest), else the original one. Returns the edited case."""
+    frame = shipped_bounds.read(src).frame.copy()
+    i = 0 if case is None else int(np.flatnonzero((frame.case == case) & (frame.signals == SIGNALS))[0])
+    frame.loc[i, "cost_bound"] += 1e-6
+    if sha_of_edit:
+        shipped_bounds.save(frame, dst)
+    else:
+        table = pq.read_table(src)
+        pq.write_table(table.set_column(table.schema.get_field_index("cost_bound"), "cost_bound",
+                                        [frame.cost_bound.to_numpy()]), dst)
+    return int(frame.case.iloc[i])
+
+
+def test_an_edit_is_one_line_and_exit_2(solved, tmp_path, capsys):
+    _, _, _, path = solved
+    bad = tmp_path / "edited.parquet"
+    tampered(path, bad, sha_of_edit=False)
+    assert case_files.main(["--check", "--bounds"], bounds_file=bad) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "content digest" in err[0] and "ecodrive cases --write --bounds" in err[0]
+    assert shipped_bounds.table(bad) is None  # a run solves every bound, after one note line
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+@pytest.mark.skipif(not shipped_bounds.FILE.is_file(), reason="no shipped bounds in this checkout")
+def test_a_value_edited_with_its_digest_is_caught_by_the_check(tmp_path):
+    """An edit that passes the digest is still caught: the DP solves the sampled case again."""
+    rows = shipped_bounds.read(shipped_bounds.FILE).frame
+    case = int(shipped_bounds.sample(rows[rows.signals == SIGNALS], 1).case.iloc[0])
+    bad = tmp_path / "edited.parquet"
+    assert tampered(shipped_bounds.FILE, bad, sha_of_edit=True, case=case) == case
+    lines = shipped_bounds.check(bad, per_setting=1, signals=(SIGNALS,), progress=False)
+    assert len(lines) == 1 and f"{SIGNALS} case {case} " in lines[0] and "cost " in lines[0]
+
+
+@pytest.mark.skipif(not shipped_bounds.FILE.is_file(), reason="no shipped bounds in this checkout")
+def test_the_shipped_file_covers_every_fixed_case_of_the_current_problem():
+    """Every fixed case of both settings, on the paper's scenario, this DP and grid: the smoke,
+    paper and full profiles read every bound and plan (`ecodrive cases --check` re-solves a sample)."""
+    rows = shipped_bounds.read(shipped_bounds.FILE).frame
+    for s in ("coordinated", "uncoordinated"):
+        mine = rows[rows.signals == s]
+        assert sorted(mine.case) == [c.index for c in cases.load()]
+        assert set(mine.scenario_digest) == {shipped_bounds.problem_digest(setting(s, None))}
+        assert set(mine.dp_version) == {dp.VERSION} and set(mine.grid) == {shipped_bounds.grid_key()}
+        assert (mine.time_limit != NO_LIMIT).all() and mine.energy_bound.notna().all()
+    assert shipped_bounds.FILE.stat().st_size < 2 << 20
+
+
+def test_a_damaged_file_is_one_line_and_nothing_is_overwritten(tmp_path, capsys):
+    bad = tmp_path / "shipped_bounds.parquet"
+    bad.write_bytes(b"PAR1 not a table")
+    before = (bad.read_bytes(), cases.CASES_FILE.read_bytes())
+    assert case_files.main(["--check", "--bounds"], bounds_file=bad) == 2
+    out = capsys.readouterr()
+    assert len(out.err.strip().splitlines()) == 1 and "not a readable shipped-bounds table" in out.err
+    assert "Traceback" not in out.err + out.out
+    assert case_files.main(["--check"], bounds_file=bad) == 2  # cases.json checked, then the bounds
+    out = capsys.readouterr()
+    assert out.out.strip() == "cases.json matches the generator" and len(out.err.strip().splitlines()) == 1
+    # a run solves (one note line), and writes only its own table
+    got = attach(tmp_path, results(terminated=False), 1, lambda tasks, w, fn: map(fn, tasks), progress=False,
+                 shipped=bad)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("note: ") and "every bound is solved" in err[0]
+    assert pd.read_parquet(tmp_path / "bounds.parquet").bound_source.tolist() == [SOLVED]
+    assert got.energy_bound.isna().all()
+    assert (bad.read_bytes(), cases.CASES_FILE.read_bytes()) == before
