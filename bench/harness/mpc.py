@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.oracle import mpc as planner
-from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan, solve
+from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan
 from ecodrive_bench.envs.config import ScenarioConfig
 
 NAME = "mpc"
@@ -81,8 +81,7 @@ class MPCAgent:
 
     def start(self, depart_time: float) -> None:
         """A new episode departing at ``depart_time`` [s]."""
-        self.plan = solve(self.cor, self.plan_cfg, depart_time, "cost", krauss=True)
-        self.table = planner.table(self.cor, self.plan_cfg, depart_time, int(self.plan.grid["horizon"]))
+        self.plan, self.table = planner.start(self.cor, self.plan_cfg, depart_time)
         self.k0, self.x, self.v = 0, self.plan.x, self.plan.v
         self.gaps, self.events, self.first = [], [], True
         self.counts = {"drift": 0, "leader": 0, "end": 0, "step": 0, "relaxed": 0, "lost": 0}

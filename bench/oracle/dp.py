@@ -181,6 +181,7 @@ class Plan:
     objective: str
     crossings: np.ndarray  # [s] start of the step in which each stop line is crossed
     grid: dict[str, Any] = field(default_factory=dict)  # resolution, horizon, states, wall_s, ...
+    table: tuple[Any, Any, int] | None = field(default=None, repr=False)  # (lattice, global pass, horizon): solve(slack=)
 
 
 def bound(cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
@@ -196,8 +197,10 @@ def bound(cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
 
 def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
           time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba",
-          krauss: bool = False) -> Plan:
-    """``bound`` on a given ``Corridor`` (tests drop or move its signals)."""
+          krauss: bool = False, slack: int = 0) -> Plan:
+    """``bound`` on a given ``Corridor`` (tests drop or move its signals). ``slack`` > 0 (``"cost"``
+    only): the global pass runs ``slack`` steps past the horizon it needs and the plan keeps it
+    (``Plan.table``: the cost-to-go a re-planning controller reads, ``bench.oracle.mpc``)."""
     if objective not in OBJECTIVES:
         raise ValueError(f"objective={objective!r} is not accepted; choose one of {', '.join(OBJECTIVES)}")
     if kernel not in KERNELS:
@@ -212,11 +215,12 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
         horizon = int(math.floor(float(time_limit) / cfg.step_length + GRID_EPS))
         sol = run.backward(lat, lat.windows(horizon))
     else:
-        horizon, sol = run.certified(lat)
+        horizon, sol = run.certified(lat, slack)
     if not np.isfinite(sol.value):
         raise ValueError(f"no plan arrives within {horizon * cfg.step_length:g} s (time_limit={time_limit})")
     rows, speeds = lat.extract(sol)
     value = coarse = run.objective(speeds, lat)
+    table = (lat, sol, horizon) if slack > 0 and objective == "cost" else None
     passes = 0
     for factor, tube_x, tube_v in grid.levels:  # local passes, each seeded with the plan in hand
         fine = _Lattice(cor, cfg, grid.n_v * factor, krauss)
@@ -245,6 +249,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
         grid={"n_v": grid.n_v, "fine": grid.fine, "dv": lat.dv, "dx": lat.dx, "da": lat.dv / dt,
               "horizon": horizon, "krauss": krauss, "passes": passes, "states": run.states, "coarse_objective": coarse,
               "objective": value, "wall_s": time.perf_counter() - started},
+        table=table,
     )
 
 
@@ -262,17 +267,18 @@ class _Run:
         self.states += out.states
         return out
 
-    def certified(self, lat: _Lattice) -> tuple[int, _Solution]:
-        """Global pass of the "cost" objective on a horizon that provably does not bind."""
+    def certified(self, lat: _Lattice, slack: int = 0) -> tuple[int, _Solution]:
+        """Global pass of the "cost" objective on a horizon that provably does not bind; ``slack``
+        > 0: ``slack`` steps longer, keeping every step's values (``solve``)."""
         cfg, cor, dt = self.cfg, self.cor, self.cfg.step_length
         rate = (self.phi + cfg.ev.constant_power_intake / 3600.0) * dt  # [Wh/step] least cost of a step
         if rate <= 0:
             raise ValueError("phi = 0 and no constant power intake: no horizon; use objective='energy'")
         ke_back = cfg.ev.recuperation_efficiency * 0.5 * (cfg.ev.mass + cfg.ev.rotating_mass) * cor.v0 ** 2 / 3600.0
         n_red = sum(math.ceil((c - g) / (dt * MS)) for c, g in zip(cor.cycles_ms, cor.greens_ms))
-        horizon = math.ceil((cor.x_end - cor.x0) / (cor.v0 * dt)) + n_red + HORIZON_MARGIN
+        horizon = math.ceil((cor.x_end - cor.x0) / (cor.v0 * dt)) + n_red + HORIZON_MARGIN + slack
         while horizon * dt <= MAX_HORIZON:
-            sol = self.backward(lat, lat.windows(horizon))
+            sol = self.backward(lat, lat.windows(horizon), keep=slack > 0)
             if not np.isfinite(sol.value):
                 horizon *= 2
             elif sol.value <= rate * (horizon + 1) - ke_back:

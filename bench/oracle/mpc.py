@@ -1,7 +1,7 @@
 """Re-planning on the DP: a cost-to-go table per departure, and a leader-aware re-plan onto it.
 
 The signal plans are fixed, so the least cost-to-go ``V(t, x, v)`` of the ``"cost"`` objective
-(E + phi T, the ego alone) does not change during an episode. ``table`` solves it once per
+(E + phi T, the ego alone) does not change during an episode. ``start`` solves it once per
 departure on the global lattice of ``bench.oracle.dp`` (``Grid.n_v`` speed cells) over the whole
 forward-reachable band, for ``SLACK`` steps more than the bound's certified horizon, so that a
 delayed ego still finds its cost-to-go there, and keeps every step's values and choices.
@@ -34,7 +34,7 @@ import numpy as np
 
 from ecodrive_bench.envs.config import ScenarioConfig
 
-from .dp import GRID_EPS, Corridor, Grid, Window, _Lattice, _Run
+from .dp import GRID_EPS, Corridor, Grid, Plan, Window, _Lattice, solve
 from .kernel import backward_step
 
 LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
@@ -66,7 +66,7 @@ class Table:
     choices: list[np.ndarray | None]  # [speed, row] acceleration choice index
     green: np.ndarray  # (steps, stop lines) bool: the arterial is green in the step from step k
     step_cost: np.ndarray  # [speed, choice] float32 [Wh]: energy + phi dt
-    wall_s: float  # [s] to build
+    wall_s: float  # [s] to build, with the first plan
 
     @property
     def horizon(self) -> int:
@@ -85,24 +85,25 @@ class Replan:
     wall_s: float  # [s]
 
 
-def table(cor: Corridor, cfg: ScenarioConfig, depart_time: float, horizon: int, grid: Grid | None = None) -> Table:
-    """The cost-to-go table of ``depart_time`` over ``horizon + SLACK`` steps (``horizon``: the
-    bound's certified one, ``Plan.grid["horizon"]``)."""
+def start(cor: Corridor, cfg: ScenarioConfig, depart_time: float, grid: Grid | None = None) -> tuple[Plan, Table]:
+    """The first plan of a departure (the ``"cost"`` optimum on the fine lattice, Krauss' red cap
+    obeyed) and the cost-to-go table of its global pass, run ``SLACK`` steps past the certified
+    horizon: one global pass serves both."""
     started = time.perf_counter()
-    grid = grid or Grid()
-    run = _Run(cor, cfg, depart_time, cfg.reward.phi, "numba")
-    lat = _Lattice(cor, cfg, grid.n_v, krauss=True)
-    windows = lat.windows(horizon + SLACK)
-    sol = run.backward(lat, windows, keep=True)
-    assert sol.values is not None
+    plan = solve(cor, cfg, depart_time, "cost", grid=grid, krauss=True, slack=SLACK)
+    assert plan.table is not None
+    lat, sol, horizon = plan.table
+    plan.table = None  # the plan's other holders (logs, agents) need not keep 200 MB alive
+    windows = lat.windows(horizon)
     dt = cfg.step_length
     steps = len(windows) + LOOKAHEAD
     green = (cor.green(depart_time + np.arange(steps) * dt, dt) if cor.stop_lines
              else np.ones((steps, 0), dtype=bool))
     cost = np.ascontiguousarray((lat.energy + cfg.reward.phi * dt).astype(np.float32))
-    return Table(cor=cor, cfg=cfg, depart_time=depart_time, lat=lat, windows=windows, values=sol.values,
-                 choices=[p[2] if p is not None else None for p in sol.policy], green=green, step_cost=cost,
-                 wall_s=time.perf_counter() - started)
+    tab = Table(cor=cor, cfg=cfg, depart_time=depart_time, lat=lat, windows=windows, values=sol.values,
+                choices=[p[2] if p is not None else None for p in sol.policy], green=green, step_cost=cost,
+                wall_s=time.perf_counter() - started)
+    return plan, tab
 
 
 def leader_travel(speed: float, m: int, cfg: ScenarioConfig, accel: float | None = None) -> float:
