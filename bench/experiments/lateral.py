@@ -36,6 +36,7 @@ from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.args import Parser, fail, int_in, name
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.scripted import brake, place_ahead, release
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
 from ecodrive_bench.envs.config import ScenarioConfig
 
@@ -77,29 +78,21 @@ class Script:
         self.name, self.vehicles, self.rows = name, SCENARIOS[name], []
 
     def start(self, env) -> None:
-        """SUMO inserts the vehicles in the next step, after it has moved the ego: each goes ``gap``
-        m ahead of where the ego's front bumper is then at its present speed (an ego that changes
-        speed in that step shifts every gap by that change x one step). ``x`` is the front bumper,
-        and the arterial's first edge starts at x = 0, so it is also the lane position."""
+        """Each vehicle enters ``gap`` m ahead of the ego after the next step
+        (``bench.harness.scripted.place_ahead``)."""
         s, cfg = env.session, env.cfg
-        x, _, _, v, _, lane, _ = env.ego.kin
-        front = x + v * cfg.step_length
+        lane, v = env.ego.kin.lane, env.ego.kin.speed
         for sv in self.vehicles:
             target = min(max(lane + sv.lane_offset, 0), cfg.lanes - 1)
-            s.add_scripted(sv.vid, lane=target, pos=front + sv.gap + cfg.vehicle_length,
-                           speed=v if sv.speed is None else sv.speed)
+            place_ahead(env, sv.vid, target, sv.gap, v if sv.speed is None else sv.speed)
             if not sv.hold:
                 s.release_speed(sv.vid)
 
     def before(self, env, step: int) -> None:
-        s = env.session
-        if self.name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in s.vehicle_ids():
-            v1 = s.kinematics("hdv1").speed
-            s.set_speed("hdv1", max(0.0, v1 + HDV1_BRAKE * env.cfg.step_length))
+        if self.name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in env.session.vehicle_ids():
+            brake(env, "hdv1", HDV1_BRAKE)
         if step == BRAKE_AT + BRAKE_STEPS:  # the event is over: the HDVs drive by Krauss (and signals) again
-            for v in self.vehicles:
-                if v.hold and v.vid in s.vehicle_ids():
-                    s.release_speed(v.vid)
+            release(env, [v.vid for v in self.vehicles if v.hold])
 
     def after(self, env, step: int) -> None:
         """Records the step; a vehicle SUMO did not insert in step 0 is an error (the scenario

@@ -20,7 +20,9 @@ for PRL); ``--paper`` starts from the paper's 1000 episodes and Table 2 instead 
 run whose episodes or config are not the recipe's gets its own folder
 (``<method>-<signals>-s<seed>+FIELD=VALUE``, ``+paper``, ``+e<episodes>``) and is never exported to the shipped ``models/``;
 give ``--models DIR`` to export it elsewhere, for example to evaluate it on the test cases with
-``ecodrive run --models DIR``.
+``ecodrive run --models DIR``. ``--braking-leaders RATE`` puts a scripted leader braking ahead of the
+ego into that share of the episodes (``bench.training.braking``), an experiment of the same kind
+(``+braking=RATE``).
 """
 from __future__ import annotations
 
@@ -40,13 +42,15 @@ from tqdm import tqdm
 
 from ecodrive_bench.agents.device import parse as parse_device
 from ecodrive_bench.agents.registry import LEARNING, make_agent
-from ecodrive_bench.bench.args import Parser, fail, int_in
+from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.episode import deep_merge, make_env, run_episode
 from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
 from ecodrive_bench.bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import write_train_log
+from ecodrive_bench.bench.training.braking import NO_SCRIPT, RATE_RANGE, BrakingLeaders
+from ecodrive_bench.bench.training.braking import spec as braking_spec
 from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, added_values, backfill, flat
 
@@ -179,7 +183,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
           stop_after: int | None = None, progress: bool = True, validation_cases: int = VALIDATION_CASES,
-          select: str = "objective", device: str = "cpu") -> pd.DataFrame:
+          select: str = "objective", device: str = "cpu", braking_leaders: float = 0.0) -> pd.DataFrame:
     """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
     after that many episodes of this call (used to test resumption).
 
@@ -188,7 +192,9 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     criterion of ``SELECTION``; the one named by ``select`` is exported, with its episode and
     validation metrics in the manifest. Epsilon decays over the run's own ``episodes`` (eq. 12
     with N = the training length) unless ``agent_config`` sets ``eps_decay_episodes``. ``device``
-    holds the networks (``agents.device``; the CPU unless given)."""
+    holds the networks (``agents.device``; the CPU unless given). ``braking_leaders`` > 0: that share of
+    the episodes gets a scripted leader braking ahead of the ego (``bench.training.braking``); the
+    run's identity, checkpoint and manifest record it."""
     if select not in SELECTION:
         raise ValueError(f"select {select!r} is not accepted; choose one of {', '.join(SELECTION)}")
     ckpt = out / "checkpoint.pt"
@@ -204,6 +210,9 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     agent.to(dev)  # before loading a checkpoint: the optimizers' state follows the parameters
     identity = {"method": method, "signals": signals, "seed": seed, "agent_config": agent_config or {},
                 "scenario": env.cfg.to_dict()}
+    leaders = BrakingLeaders(braking_leaders, seed) if braking_leaders else None  # off: no draw, no key
+    if leaders is not None:
+        identity["braking_leaders"] = braking_spec(leaders.rate)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng([seed, 7919])  # episode seeds; separate stream from the agent's
     rows: list[dict[str, Any]] = []
@@ -241,6 +250,8 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
                 rng.bit_generator.state = state["rng"]
             except (ValueError, TypeError, KeyError) as e:
                 raise CheckpointError(f"{ckpt}: its rng state is not a PCG64 state ({e})") from None
+            if leaders is not None:
+                leaders.restore(state, ckpt)
             rows, start, wall = state["rows"], state["episode"], state["wall_time"]
             best = state.get("best", {})
             if best and "episode" in best:  # a checkpoint that kept one criterion's best: return
@@ -254,11 +265,15 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     t_call = time.perf_counter()
     for ep in range(start, episodes):
         agent.begin_episode(ep)
+        script = leaders.episode() if leaders is not None else NO_SCRIPT
         obs, info = env.reset(seed=int(rng.integers(0, 2**31 - 1)))
         ret, steps, losses = 0.0, 0, []
+        script.start(env)
         while True:
             action = agent.act(obs, info, explore=True)
+            script.before(env, steps)
             next_obs, r, terminated, truncated, info = env.step(action)
+            script.after(env, steps)
             m = agent.observe(obs, action, r, next_obs, terminated, truncated, info)
             if m:
                 losses.append((m.get("loss_q", np.nan), m.get("loss_param", np.nan)))
@@ -269,7 +284,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         rows.append({"episode": ep, "energy": info["energy"], "travel_time": info["travel_time"], "return_": ret,
                      "epsilon": getattr(agent, "epsilon", 0.0), "loss_q": float(lq), "loss_param": float(lp),
                      "lane_changes": info["lane_changes"], "collisions": info["collisions"], "steps": steps,
-                     "updates": agent.updates, "truncated": bool(truncated)})
+                     "updates": agent.updates, "truncated": bool(truncated), **script.row()})
         recent = rows[-20:]
         bar.set_postfix(E=f"{np.mean([r['energy'] for r in recent]):.0f}Wh",
                         T=f"{np.mean([r['travel_time'] for r in recent]):.0f}s", eps=f"{rows[-1]['epsilon']:.2f}")
@@ -287,7 +302,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
                         policy = policy or snapshot(agent)
                         best[crit] = {"episode": ep + 1, "score": score, "agent": policy}
             wall_now = wall + time.perf_counter() - t_call
-            _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity, best)
+            _checkpoint(out, agent, rng, rows, ep + 1, wall_now, identity, best, leaders)
         if stop_after is not None and done_here >= stop_after and not last:
             bar.close()
             env.close()
@@ -303,7 +318,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
             "method": method, "signals": signals, "seed": seed, "episodes": episodes,
             "command": " ".join(command or sys.argv), "git_sha": git_sha(), "packages": package_versions(),
             "training_wall_time_s": round(wall_total, 1), "device": str(dev), "agent_config": agent_config or {},
-            "scenario": identity["scenario"],
+            "scenario": identity["scenario"], **({"braking_leaders": identity["braking_leaders"]} if leaders else {}),
             "final_metrics": {f"mean_last_{FINAL_WINDOW}_{k}": round(float(tail[k].mean()), 3)
                               for k in ("energy", "travel_time", "return_", "collisions", "lane_changes")},
             "selection": select if chosen else "final",
@@ -340,12 +355,14 @@ def validate(env, agent, n: int, progress: bool = False) -> dict[str, float]:
             for k, col in (("energy", "energy"), ("travel_time", "travel_time"), ("return", "return_"))}
 
 
-def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict, best: dict) -> None:
+def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity: dict, best: dict,
+                leaders: BrakingLeaders | None = None) -> None:
     replay_name = f"replay-{episode:05d}.npz"
     with atomic_file(out / replay_name) as f:  # never through a link planted under the name
         agent.replay.save(f)
     state = {"identity": identity, "agent": agent.state_dict(), "replay": replay_name, "best": best,
-             "rng": rng.bit_generator.state, "rows": rows, "episode": episode, "wall_time": wall}
+             "rng": rng.bit_generator.state, "rows": rows, "episode": episode, "wall_time": wall,
+             **({"braking_rng": leaders.state} if leaders is not None else {})}
     atomic_torch_save(state, out / "checkpoint.pt")  # the commit point: it names the replay file
     for old in out.glob("replay-*.npz"):
         if old.name != replay_name:
@@ -374,6 +391,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--paper", action="store_true",
                     help="the paper's schedule and Table 2 (1000 episodes, none of the recipe's departures); an "
                          "experiment where the recipe departs from the paper")
+    ap.add_argument("--braking-leaders", type=float_in(*RATE_RANGE), default=0.0, metavar="RATE",
+                    help="share of episodes (0-1; default 0: off) with a scripted leader braking ahead of the ego "
+                         "(bench.training.braking); an experiment")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override an agent config field (repeatable); a run whose config is not the recipe's is an "
                          "experiment, exported only to an explicit --models DIR")
@@ -393,9 +413,11 @@ def main(argv: list[str] | None = None) -> int:
     overrides = {**base, **given}
     suffix = (("+paper" if chosen != rec else "")
               + "".join(f"+{k}={v}" for k, v in sorted(overrides.items()) if k not in base or base[k] != v)
-              + (f"+e{args.episodes}" if args.episodes != chosen.episodes else ""))
+              + (f"+e{args.episodes}" if args.episodes != chosen.episodes else "")
+              + (f"+braking={args.braking_leaders:g}" if args.braking_leaders else ""))
     out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
-    reference = is_recipe(args.method, args.signals, overrides) and args.episodes == rec.episodes
+    reference = (is_recipe(args.method, args.signals, overrides) and args.episodes == rec.episodes
+                 and not args.braking_leaders)
     experiment_to_shipped = not reference and args.models.resolve() == MODELS.resolve()
     try:
         writable_dir(out)
@@ -409,7 +431,7 @@ def main(argv: list[str] | None = None) -> int:
                    models=None if args.no_export or experiment_to_shipped else args.models,
                    command=["ecodrive", "train", *(argv if argv is not None else sys.argv[1:])],
                    validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select,
-                   device=args.device)
+                   device=args.device, braking_leaders=args.braking_leaders)
     except CheckpointError as e:
         return fail(ap.prog, str(e))
     tail = df.tail(FINAL_WINDOW)
