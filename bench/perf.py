@@ -18,6 +18,8 @@ LEARNERS = ("prl", "mpdqn", "dqn", "ddpg")  # test_learner_update[...] benchmark
 CONV_PARTS = ("forward", "backward")  # test_prl_conv_pass[...]: the conv blocks' share of a PRL update
 KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind: a PRL update's op time by kind
 COMPILED = "test_prl_update_compiled"  # the autograd formulation under torch.compile: the alternative
+REPLAN_MEDIAN_MS, REPLAN_P99_MS = 20.0, 100.0  # [ms] one mpc re-plan on one core
+COLD_SOLVE_LIMIT = 0.1  # a whole case's bound at least 10x faster than the numpy-kernel solver
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 ACT_LIMIT_S = 0.3e-3  # [s] a greedy batch-1 act (test_greedy_act[...], one thread)
 TARGETS = {  # name: (numerator, denominator, limit, what)
@@ -72,6 +74,14 @@ def ratios(path: Path) -> dict[str, float]:
             out[f"act_over_env_step_in_episode_{m}"] = e["episode_act_s"] / e["episode_step_s"]
     if "test_env_reset" in med:
         out["reset_ms"] = med["test_env_reset"] * 1e3
+    if "median_s" in extra.get("test_dp_replan", {}):  # one re-plan of mpc, against the cold solve
+        out["replan_median_ms"] = extra["test_dp_replan"]["median_s"] * 1e3
+        out["replan_p99_ms"] = extra["test_dp_replan"]["p99_s"] * 1e3
+        if "test_dp_cold_solve" in med:
+            out["replan_over_cold_solve"] = extra["test_dp_replan"]["median_s"] / med["test_dp_cold_solve"]
+    if "test_dp_cold_solve" in med and "test_dp_cold_solve_numpy" in med:
+        out["cold_solve_over_numpy"] = med["test_dp_cold_solve"] / med["test_dp_cold_solve_numpy"]
+        out["cold_solve_s"] = med["test_dp_cold_solve"]
     if "test_learner_update[prl]" in med and "test_training_env_step" in med:
         per_step = mean["test_learner_update[prl]"] + mean["test_training_env_step"]
         out["updates_per_s"] = 1.0 / mean["test_learner_update[prl]"]
@@ -153,6 +163,17 @@ def main(argv: list[str] | None = None) -> int:
         ok &= good
         print(f"{'mixed traffic: control / sim step':40s} {r['fleet_control_over_sim']:6.2f}x "
               f"({r['fleet_cvs']:.0f} CVs; target <= 3x) {'ok' if good else 'MISSED'}")
+    if "replan_median_ms" in r:
+        good = r["replan_median_ms"] <= REPLAN_MEDIAN_MS and r["replan_p99_ms"] <= REPLAN_P99_MS
+        ok &= good
+        vs = f", {r['replan_over_cold_solve']:.4f}x a cold solve" if "replan_over_cold_solve" in r else ""
+        print(f"{'mpc re-plan (median, p99)':40s} {r['replan_median_ms']:6.2f} ms, {r['replan_p99_ms']:.2f} ms "
+              f"(target <= {REPLAN_MEDIAN_MS:g} ms, <= {REPLAN_P99_MS:g} ms{vs}) {'ok' if good else 'MISSED'}")
+    if "cold_solve_over_numpy" in r:
+        good = r["cold_solve_over_numpy"] <= COLD_SOLVE_LIMIT
+        ok &= good
+        print(f"{'DP cold solve / numpy-kernel solve':40s} {r['cold_solve_over_numpy']:6.3f}x ({r['cold_solve_s']:.2f} s; "
+              f"target <= {COLD_SOLVE_LIMIT:g}x) {'ok' if good else 'MISSED'}")
     if "sumo_step_us" in r:
         print(f"{'raw SUMO step':40s} {r['sumo_step_us']:6.0f} us")
     for m in LEARNERS:

@@ -145,3 +145,20 @@ def test_greedy_act_against_a_sumo_step(tmp_path, capsys):
     data["benchmarks"] = data["benchmarks"][1:2]  # no SUMO step in the run: the act alone
     path.write_text(json.dumps(data))
     assert "act_over_sumo_step_prl" not in ratios(path) and main([str(path)]) == 0
+
+
+def test_dp_replan_and_cold_solve_lines(tmp_path, capsys):
+    data = {"benchmarks": [
+        _bench("test_dp_cold_solve", 0.8),
+        _bench("test_dp_cold_solve_numpy", 1.6),
+        _bench("test_dp_replan", 0.2, replans=200, median_s=0.001, p99_s=0.05),
+    ]}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    r = ratios(path)
+    assert r["replan_median_ms"] == pytest.approx(1.0) and r["replan_p99_ms"] == pytest.approx(50.0)
+    assert r["replan_over_cold_solve"] == pytest.approx(0.001 / 0.8)
+    assert r["cold_solve_over_numpy"] == pytest.approx(0.5)
+    assert main([str(path)]) == 1  # the re-plan meets its goal, the cold solve misses 10x
+    out = capsys.readouterr().out
+    assert "mpc re-plan" in out and "ok" in out.splitlines()[0] and "MISSED" in out.splitlines()[1]
