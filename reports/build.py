@@ -121,8 +121,8 @@ def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page) -> l
              "the method beats the closed-loop controller that knows the signal plans.", ""]
     for s, g in shares[shares.method.isin(LEARNED)].groupby("signals"):
         best = g.loc[g.share_closed.idxmax()]
-        lines += [f"{s}: the best learned method, {best.method}, closes {100 * best.share_closed:.0f}% "
-                  f"[{100 * best.ci_low:.0f}, {100 * best.ci_high:.0f}] of the gap between baseline0 and mpc.", ""]
+        lines += [f"{s}: the best learned method, {best.method}, closes {headline.share_text(best)} of the gap "
+                  "between baseline0 and mpc.", ""]
     lines += [f"![headroom](figures/{p[0].name})", "",
               tables.frame_markdown(shares.set_index(["method", "signals"]), digits=3), ""]
     return lines

@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from ecodrive_bench.bench.io import atomic_text
@@ -31,6 +32,13 @@ LABELS = {"baseline": "baseline (SUMO's driver)", "baseline0": "baseline0 (SUMO,
 
 
 LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
+
+
+def share_text(row) -> str:
+    """``42% [30, 55]`` (a share with its CI over seeds), or ``42% (one seed)`` without one."""
+    if np.isnan(row.ci_low):
+        return f"{100 * row.share_closed:.0f}% (one seed)"
+    return f"{100 * row.share_closed:.0f}% [{100 * row.ci_low:.0f}, {100 * row.ci_high:.0f}]"
 
 
 def phis(results: pd.DataFrame, manifest: dict) -> dict[str, float]:
@@ -51,8 +59,7 @@ def headroom_line(results: pd.DataFrame, manifest: dict) -> str:
         g = shares[shares.signals == s]
         if len(g):
             b = g.loc[g.share_closed.idxmax()]
-            parts.append(f"{LABELS[b.method]} {100 * b.share_closed:.0f}% [{100 * b.ci_low:.0f}, "
-                         f"{100 * b.ci_high:.0f}] {short}")
+            parts.append(f"{LABELS[b.method]} {share_text(b)} {short}")
     return ("Headroom: of the cost gap (E + phi T) between baseline0 (no information) and mpc (the signal plans, "
             "closed loop), the best learned method closes " + "; ".join(parts) + " (95% CI over seeds).")
 
