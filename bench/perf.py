@@ -1,7 +1,8 @@
 """Ratios from one pytest-benchmark JSON file (all numbers from the same run): env step against
 raw SUMO, logging overhead, the projected training run, each learner's update against its FLOP
-floor (the update's counted FLOPs at this core's measured matmul rate), and each learned method's
-greedy act against a raw SUMO step.
+floor (the update's counted FLOPs at this core's measured matmul rate), each learned method's
+greedy act against a raw SUMO step, and the DP: mpc's re-plan (median, p99) and a cold solve
+against the numpy-kernel solver.
 
     ecodrive perf .benchmarks/perf.json
 """
