@@ -17,7 +17,7 @@ vehicles). From the first step at which the ego's front bumper has passed the tr
 starts at the first step at which:
 
 * the ego drives at ``MIN_EGO_SPEED`` or faster on the first edge, its lane is empty up to
-  ``CLEAR_AHEAD`` past where the leader will be, and the leader, held at the ego's speed until
+  ``CLEAR_AHEAD`` past where the leader will be (no vehicle in it, none moving into it), and the leader, held at the ego's speed until
   its braking ends, stays ``STOP_MARGIN`` short of J1's stop line (so a red light never brakes it
   and it never runs one); and
 * an adjacent lane is free from the grid's back edge to ``FREE_AHEAD`` ahead of the ego's front
@@ -29,8 +29,9 @@ The leader enters at the ego's speed in the ego's lane in that step, drives at t
 Krauss (no lane changes) along the arterial. Unlike scenario A's HDVs it is held with Krauss's
 safety checks on (``SPEED_MODE_SAFE``), so traffic cutting in ahead of it in a full corridor
 brakes it rather than meets it. An episode whose ego gives the event no such step
-has none (``no_spot``); one whose leader SUMO does not insert (``refused``) gets it as an ordinary
-Krauss vehicle whenever SUMO does. The episode's row records what happened (``ROW_KEYS``).
+has none (``no_spot``). A vehicle that starts a change into the ego's lane in the insertion step
+itself can still take the spot: SUMO then does not insert the leader (``refused``), and it enters
+later as an ordinary Krauss vehicle, where SUMO finds room at its spot. The episode's row records what happened (``ROW_KEYS``).
 """
 from __future__ import annotations
 
@@ -42,10 +43,13 @@ import numpy as np
 
 from ecodrive_bench.bench.harness.policies import CheckpointError
 from ecodrive_bench.bench.harness.scripted import brake, place_ahead, release
-from ecodrive_bench.envs.observation import occupancy_grid
+from ecodrive_bench.envs.observation import HEADING_EAST, occupancy_grid
+from ecodrive_bench.envs.vehicle import LATERAL_START
 
 RATE_RANGE = (0.0, 1.0)  # [events per episode] accepted RATE (a probability; 0: off)
-GAP = (15.0, 40.0)  # [m] uniform: ego front bumper to the leader's back bumper after the insertion step
+# [m] uniform: ego front bumper to the leader's back bumper after the insertion step. SUMO refuses
+# to insert a leader closer than the ego's secure gap plus minGap (about 19 m at the speed limit)
+GAP = (20.0, 40.0)
 DECEL = (-4.0, -2.0)  # [m/s^2] uniform: the leader's deceleration while it brakes (scenario A: -2)
 BRAKE_STEPS = (2, 4)  # [steps] uniform integer, both ends included (scenario A: 3)
 BRAKE_AFTER = 2  # [steps] from the insertion step to the first braking step (one step at the ego's speed)
@@ -153,8 +157,7 @@ class BrakingLeader:
         reach = self._reach(kin.speed, cfg)
         if kin.x + reach > self.stop_line - STOP_MARGIN:
             return False
-        ahead = env.session.leader(env.ego.vid, reach + CLEAR_AHEAD)
-        if ahead is not None:
+        if env.session.leader(env.ego.vid, reach + CLEAR_AHEAD) is not None or entering(env, reach + CLEAR_AHEAD):
             return False
         self.adjacent_free = free_adjacent(env)
         last = kin.x + kin.speed * cfg.step_length + reach > self.stop_line - STOP_MARGIN
@@ -167,6 +170,18 @@ class BrakingLeader:
                 "braking_decel": self.d.decel if self.d.event else float("nan"),
                 "braking_steps": self.d.steps if self.d.event else 0,
                 "braking_entry_gap": self.entry_gap, "braking_adjacent_free": bool(inserted and self.adjacent_free)}
+
+
+def entering(env: Any, ahead: float) -> bool:
+    """Whether a vehicle beside the ego's lane, up to ``ahead`` m ahead of its front bumper, has
+    started moving into it (by ``LATERAL_START`` or more; SUMO's ``getLeader`` sees it only once its
+    lane index flips, and its cut-in would block the leader's insertion)."""
+    ego, lane_y = env.ego, env.files.lane_y
+    if len(lane_y) < 2:
+        return False
+    pitch, y0, x0 = lane_y[1] - lane_y[0], lane_y[ego.kin.lane], ego.kin.x
+    return any(x0 < x and x - length - x0 <= ahead and abs(y - y0) < pitch - LATERAL_START
+               and abs((angle - HEADING_EAST + 180.0) % 360.0 - 180.0) < 45.0 for x, y, angle, length in ego.others)
 
 
 def free_adjacent(env: Any) -> bool:
