@@ -115,7 +115,7 @@ def test_the_profile_plans_every_method_with_the_oracle_and_transfer(tmp_path):
     assert opts.transfer is True and opts.run_id == "generalisation" and len(opts.family) == 6
     runs, _ = resolve_methods(opts)
     methods = {m for m, _, _ in runs}
-    assert {"baseline", "baseline0", "oracle", "prl"} <= methods
+    assert {"baseline", "baseline0", "oracle", "mpc", "prl"} <= methods
     (tmp_path / "generalisation").mkdir()
     (tmp_path / "generalisation" / "results.parquet").write_bytes(b"")
     with pytest.raises(UsageError, match="single-scenario run"):
@@ -124,10 +124,10 @@ def test_the_profile_plans_every_method_with_the_oracle_and_transfer(tmp_path):
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    """One variant (3 lanes, random offsets) x one case: a shipped 5-lane policy, the baseline
-    and the oracle on it, for real."""
+    """One variant (3 lanes, random offsets) x one case: a shipped 5-lane policy, the baseline,
+    the oracle and mpc on it, for real."""
     logs = tmp_path_factory.mktemp("gen")
-    argv = ["--profile", "generalisation", "--variants", "g3", "--methods", "prl", "baseline", "oracle",
+    argv = ["--profile", "generalisation", "--variants", "g3", "--methods", "prl", "baseline", "oracle", "mpc",
             "--signals", "coordinated", "--train-seeds", "0", "--workers", "2", "--logs", str(logs)]
     opts = parse(argv)
     opts.family = [dataclasses.replace(v, cases=v.cases[:1]) for v in opts.family]
@@ -137,7 +137,7 @@ def tiny(tmp_path_factory):
 def test_a_shipped_policy_drives_a_held_out_variant_with_transfer(tiny):
     df, root, opts = tiny
     variant = opts.family[0]
-    assert len(df) == 3 and set(df.variant) == {variant.name} and df.terminated.all() and (df.collisions == 0).all()
+    assert len(df) == 4 and set(df.variant) == {variant.name} and df.terminated.all() and (df.collisions == 0).all()
     assert set(df.eval_scenario_hash) == {variant.config("coordinated").digest()}
     assert set(df.train_scenario_hash[df.method == "prl"]) == {ScenarioConfig(signals="coordinated").digest()}
     sub = root / variant.name
