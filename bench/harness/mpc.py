@@ -1,10 +1,11 @@
 """The ``mpc`` method: a closed-loop controller that knows the signal plans (``bench.oracle.mpc``).
 
-At the first step of an episode it takes the case's energy-optimal plan (the ``oracle``'s, on the
-fine lattice) as the plan in force, and builds the cost-to-go table of the departure. At every
-step it reads the ego's state (speed from the observation, position from ``info["position"]``)
-and the vehicle ahead from the occupancy grid. It keeps the energy-optimal plan until the first
-event that says it no longer holds:
+At the first step of an episode it solves, in one global pass (``bench.oracle.mpc.start``), the
+departure's least-cost plan on the fine lattice with Krauss' stop-for-red cap obeyed (the plan
+SUMO drives step for step when the ego is alone) and the cost-to-go table. At every step it reads
+the ego's state (speed from the observation, position from ``info["position"]``) and the vehicle
+ahead from the occupancy grid. It keeps the first plan until the first event that says it no
+longer holds:
 
 - ``drift``: the ego left the plan's cell (speed off by more than ``TOL_V``, or the position out
   of ``[x_plan - one global row - TOL_X, x_plan + TOL_X]``); between re-plans the state therefore
@@ -43,7 +44,7 @@ from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan
 from ecodrive_bench.envs.config import ScenarioConfig
 
 NAME = "mpc"
-GREEN_MARGINS = (0.0, 0.0)  # [s] planned crossings keep off the first / last seconds of each green
+GREEN_MARGINS = (0.0, 0.0)  # [s] planned crossings keep off the first / last seconds of each green (variant)
 PLAN_HEADWAY = 0.0  # [s] time gap the plan keeps to the vehicle ahead, beyond MIN_GAP (validation: docs/mpc.md)
 TOL_V = 0.05  # [m/s] speed drift that triggers a re-plan
 TOL_X = 0.05  # [m] position drift (beyond the one-row rounding) that triggers a re-plan
@@ -52,7 +53,13 @@ LOG_DECIMALS = 3  # [-] rounding of the logged plans ([m], [m/s])
 
 
 class MPCAgent:
-    """Re-plans on the DP's cost-to-go table when the ego drifts or the vehicle ahead is in the way."""
+    """Re-plans on the DP's cost-to-go table when the ego drifts or the vehicle ahead is in the way.
+
+    The keywords are the variants compared on validation cases (docs/mpc.md): ``margins`` [s] keep
+    planned crossings off the start / end of each green, ``time_weight`` [Wh/s] plans with another
+    phi, ``follow=False`` leaves the vehicle ahead to the safety layer, ``headway`` [s] and
+    ``leader_accel`` [m/s^2] set the gap kept and the leader's prediction. The defaults are the
+    shipped method."""
 
     name = NAME
     action_interface = "longitudinal"
@@ -76,7 +83,7 @@ class MPCAgent:
         self.v = np.zeros(0)  # [m/s]
         self.gaps: list[float | None] = []  # last two gaps to the vehicle ahead [m]
         self.events: list[dict[str, Any]] = []
-        self.first = True  # the plan in force is the departure's energy-optimal plan (fine lattice)
+        self.first = True  # the plan in force is the departure's first plan (fine lattice)
         self.counts: dict[str, int] = {}
 
     def start(self, depart_time: float) -> None:
