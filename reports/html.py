@@ -265,6 +265,16 @@ def warnings_section(page: Page) -> str:
             + "".join(f"<li>{esc(w)}</li>" for w in page.warnings) + "</ul></section>")
 
 
+
+def _floor_all(man: dict) -> str:
+    """The whole job's ratio to its floor: wall time x workers / SUMO's time, over every command
+    that wrote the run folder ("" where the manifest lacks them)."""
+    wall, sumo, workers = (man.get(k) for k in ("wall_time_all_commands_s", "sumo_time_all_commands_s", "workers"))
+    if not (wall and sumo and workers):
+        return ""
+    return (f" <span class='ci'>(every command: {esc(duration(sumo))}; wall time \u00d7 workers / SUMO's time = "
+            f"{wall * workers / sumo:.2f})</span>")
+
 def provenance_section(page: Page) -> str:
     man = page.manifest
     out = ["<section id='provenance'><h2>Provenance</h2>"]
@@ -300,7 +310,7 @@ def provenance_section(page: Page) -> str:
                  if man.get("wall_time_all_commands_s") else "")),
              ("Time in SUMO (the floor)", esc(duration(man.get("sumo_time_s"))) + (
                  f" <span class='ci'>(wall time \u00d7 workers / SUMO's time = {man['floor_ratio']:.2f})</span>"
-                 if man.get("floor_ratio") else "")),
+                 if man.get("floor_ratio") else "") + _floor_all(man)),
              ("Sum of episode times", esc(duration(man.get("episode_time_sum_s")))),
              ("Harness overhead", esc(pct(overhead, 1) if not missing(overhead) else DASH)
               + " <span class='ci'>(wall time \u00d7 workers / sum of episode times \u2212 1)</span>")]

@@ -42,3 +42,11 @@ def test_the_readme_line_names_the_best_learned_method():
     line = headroom_line(pd.DataFrame(rows), {})
     assert "PRL 50% [" in line and "coord." in line and "DQN" not in line
     assert headroom_line(pd.DataFrame(_rows("prl", 0, [80.0])), {}) == ""
+
+
+def test_the_report_states_the_whole_jobs_ratio_to_its_floor():
+    from ecodrive_bench.reports.html import _floor_all
+
+    man = {"wall_time_all_commands_s": 600.0, "sumo_time_all_commands_s": 800.0, "workers": 2}
+    assert "= 1.50" in _floor_all(man)
+    assert _floor_all({"workers": 2}) == ""
