@@ -219,8 +219,16 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
     if not np.isfinite(sol.value):
         raise ValueError(f"no plan arrives within {horizon * cfg.step_length:g} s (time_limit={time_limit})")
     rows, speeds = lat.extract(sol)
-    value = coarse = run.objective(speeds, lat)
     table = (lat, sol, horizon) if slack > 0 and objective == "cost" else None
+    return refine(run, lat, rows, speeds, horizon, grid, krauss, objective, started, table)
+
+
+def refine(run: _Run, lat: _Lattice, rows: np.ndarray, speeds: np.ndarray, horizon: int, grid: Grid, krauss: bool,
+           objective: str, started: float, table: tuple[Any, Any, int] | None = None) -> Plan:
+    """The local passes of ``grid.levels`` from a global-lattice plan (row and speed indices on
+    ``lat``, arriving within ``horizon`` steps), as a ``Plan``."""
+    cor, cfg, depart_time = run.cor, run.cfg, run.depart_time
+    value = coarse = run.objective(speeds, lat)
     passes = 0
     for factor, tube_x, tube_v in grid.levels:  # local passes, each seeded with the plan in hand
         fine = _Lattice(cor, cfg, grid.n_v * factor, krauss)

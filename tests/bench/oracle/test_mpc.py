@@ -12,7 +12,7 @@ from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.harness.mpc import MPCAgent
 from ecodrive_bench.bench.logs.mcaplog import read_log
 from ecodrive_bench.bench.oracle import mpc
-from ecodrive_bench.bench.oracle.dp import Corridor, bound
+from ecodrive_bench.bench.oracle.dp import Corridor, bound, solve
 from ecodrive_bench.envs.config import ScenarioConfig
 from ecodrive_bench.envs.env import EcoDriveEnv
 
@@ -110,3 +110,25 @@ def test_in_traffic_mpc_never_runs_a_red_and_logs_its_plans(cases, tmp_path):
         assert row["terminated"] and all(len(r["speed"]) <= mpc.LOOKAHEAD + 1 for r in plan["replans"])
     finally:
         env.close()
+
+
+def test_one_periodic_table_serves_every_departure(table):
+    """The infinite-horizon cost-to-go over one cycle gives, at any departure, the global-lattice
+    optimum the certified pass finds; junctions on different cycles get no periodic table."""
+    assert table.period == 90 and table.horizon == mpc.MAX_STEPS
+    cor = Corridor.from_config(CFG)
+    for depart in (200.0, 260.0):
+        view = dataclasses.replace(table, offset=int(depart) % table.period)
+        first = mpc.replan(view, 0, cor.x0, cor.v0)
+        assert first.value == pytest.approx(bound(CFG, depart, krauss=True).grid["coarse_objective"], rel=1e-5)
+    uneven = dataclasses.replace(cor, cycles_ms=(90000, 120000, 90000, 90000, 90000))
+    assert mpc.periodic(uneven, CFG) is None
+
+
+def test_without_one_cycle_a_departure_gets_its_own_table():
+    cor = dataclasses.replace(Corridor.from_config(CFG), cycles_ms=(90000, 120000, 90000, 90000, 90000))
+    plan, tab = mpc.start(cor, CFG, DEPART)
+    assert tab.period == 0 and tab.horizon > plan.travel_time
+    assert plan.cost == pytest.approx(solve(cor, CFG, DEPART, krauss=True).cost, rel=1e-9)
+    again = mpc.replan(tab, 3, float(plan.x[3]), float(plan.v[3]))
+    assert again is not None and again.x[-1] >= cor.x_end
