@@ -1,4 +1,4 @@
-"""pytest-benchmark: the DP's cold solve (``bound``), the re-planning table, and a re-plan.
+"""pytest-benchmark: the DP's cold solve (``bound``), mpc's periodic table and first plan, and a re-plan.
 
 Run with ``nox -s perf``; ``ecodrive perf`` prints the re-plan's median and p99 against the cold
 solve of the same case in the same run. The re-plans are the ones ``mpc`` made while driving a
@@ -61,9 +61,21 @@ def test_dp_cold_solve_numpy(benchmark, driven):
                        rounds=ROUNDS, iterations=1)
 
 
-def test_dp_table(benchmark, driven):
-    """What ``mpc`` solves once per episode: its first plan and the cost-to-go table."""
+def test_dp_periodic_table(benchmark, driven):
+    """What ``mpc`` solves once per process and corridor: the periodic cost-to-go table."""
     agent, _ = driven
+
+    def build():
+        mpc._PERIODIC.clear()
+        return mpc.periodic(agent.cor, agent.plan_cfg)
+
+    benchmark.pedantic(build, rounds=ROUNDS, iterations=1)
+
+
+def test_dp_mpc_start(benchmark, driven):
+    """What ``mpc`` solves once per episode, the table in hand: its first plan (local passes)."""
+    agent, _ = driven
+    mpc.periodic(agent.cor, agent.plan_cfg)
     benchmark.pedantic(mpc.start, args=(agent.cor, agent.plan_cfg, float(agent.plan.t[0])), rounds=ROUNDS, iterations=1)
 
 
