@@ -1,8 +1,9 @@
 """The ``mpc`` method: a closed-loop controller that knows the signal plans (``bench.oracle.mpc``).
 
-At the first step of an episode it solves, in one global pass (``bench.oracle.mpc.start``), the
-departure's least-cost plan on the fine lattice with Krauss' stop-for-red cap obeyed (the plan
-SUMO drives step for step when the ego is alone) and the cost-to-go table. At every step it reads
+At the first step of an episode it takes the cost-to-go table (``bench.oracle.mpc.start``: the
+corridor's periodic one, solved once per process) and the departure's least-cost plan on the
+fine lattice with Krauss' stop-for-red cap obeyed (the plan SUMO drives step for step when the
+ego is alone). At every step it reads
 the ego's state (speed from the observation, position from ``info["position"]``) and the vehicle
 ahead from the occupancy grid. It keeps the first plan until the first event that says it no
 longer holds:

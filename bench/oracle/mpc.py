@@ -1,10 +1,12 @@
-"""Re-planning on the DP: a cost-to-go table per departure, and a leader-aware re-plan onto it.
+"""Re-planning on the DP: a cost-to-go table, and a leader-aware re-plan onto it.
 
 The signal plans are fixed, so the least cost-to-go ``V(t, x, v)`` of the ``"cost"`` objective
-(E + phi T, the ego alone) does not change during an episode. ``start`` solves it once per
-departure on the global lattice of ``bench.oracle.dp`` (``Grid.n_v`` speed cells) over the whole
-forward-reachable band, for ``SLACK`` steps more than the bound's certified horizon, so that a
-delayed ego still finds its cost-to-go there, and keeps every step's values and choices.
+(E + phi T, the ego alone) does not change during an episode, on the global lattice of
+``bench.oracle.dp`` (``Grid.n_v`` speed cells). Where every junction runs one cycle it is
+periodic in t: ``periodic`` solves one cycle of it for every state of the corridor, once per
+process, and every departure reads it at its phase. Otherwise ``start`` solves one departure's
+table over its forward-reachable band, ``SLACK`` steps past the bound's certified horizon, so that
+a delayed ego still finds its cost-to-go there.
 
 ``replan`` is then a small problem: from the ego's state at step ``k``, a backward DP over the
 next ``LOOKAHEAD`` steps on the states reachable from it, onto the table's values at step
