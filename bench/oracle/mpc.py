@@ -75,6 +75,7 @@ class Table:
     step_cost: np.ndarray  # [speed, choice] float32 [Wh]: energy + phi dt
     wall_s: float  # [s] to build, with the first plan
     period: int = 0  # [steps] of a periodic table, 0 for one departure's
+    cycles: int = 0  # [-] value-iteration cycles a periodic table took to repeat
     offset: int = 0  # [steps] phase of the departure in a periodic table
 
     def at(self, k: int) -> int:
@@ -96,6 +97,7 @@ class Replan:
     value: float  # [Wh] its cost-to-go (float32 sums)
     leader: str  # "none" (no vehicle ahead), "kept" (the gap constraint holds) or "relaxed"
     wall_s: float  # [s]
+    states: int = 0  # [-] states the look-ahead evaluated (the rest is read from the table)
 
 
 def start(cor: Corridor, cfg: ScenarioConfig, depart_time: float, grid: Grid | None = None) -> tuple[Plan, Table]:
@@ -162,8 +164,9 @@ def periodic(cor: Corridor, cfg: ScenarioConfig, grid: Grid | None = None) -> Ta
     cur = nxt.copy()
     values: list[np.ndarray | None] = [None] * period
     choices: list[np.ndarray | None] = [None] * period
-    last = None
-    for _ in range(MAX_CYCLES):
+    last, cycles = None, 0
+    while cycles < MAX_CYCLES:
+        cycles += 1
         for p in range(period - 1, -1, -1):
             red = no_red
             if not green[p].all():
@@ -178,7 +181,7 @@ def periodic(cor: Corridor, cfg: ScenarioConfig, grid: Grid | None = None) -> Ta
         last = values[0]
     tab = Table(cor=cor, cfg=cfg, depart_time=0.0, lat=lat, windows=[(0, i_end - 1, 0, nv)] * period,
                 values=values, choices=choices, green=green, step_cost=cost, wall_s=time.perf_counter() - started,
-                period=period)
+                period=period, cycles=cycles)
     _PERIODIC[key] = tab
     return tab
 
@@ -217,17 +220,17 @@ def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
         plan = _solve(tab, k, i0, j0, lookahead, None, 0.0, headway, leader_accel)
     if plan is None:
         return None
-    rows, speeds, value = plan
+    rows, speeds, value, states = plan
     lat = tab.lat
-    return Replan(k=k, x=tab.cor.x0 + rows * lat.dx, v=speeds * lat.dv, value=value, leader=mode,
+    return Replan(k=k, x=tab.cor.x0 + rows * lat.dx, v=speeds * lat.dv, value=value, leader=mode, states=states,
                   wall_s=time.perf_counter() - started)
 
 
 def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: float | None,
-           leader_speed: float, headway: float, leader_accel: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+           leader_speed: float, headway: float, leader_accel: float) -> tuple[np.ndarray, np.ndarray, float, int] | None:
     lat, nv = tab.lat, tab.lat.nv
     if i0 >= lat.i_end:
-        return np.array([i0]), np.array([j0]), 0.0
+        return np.array([i0]), np.array([j0]), 0.0, 0
     horizon = tab.horizon
     if k >= horizon:
         return None
@@ -281,6 +284,7 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
     value = float(nxt[j0, i0])
     if not np.isfinite(value):
         return None
+    states = sum((hi - lo + 1) * (jhi - jlo + 1) for lo, hi, jlo, jhi in wins if lo <= hi)
     rows, speeds = [i0], [j0]
     i, j = i0, j0
     for m in range(steps):
@@ -290,7 +294,7 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
         rows.append(i)
         speeds.append(j)
         if i >= lat.i_end:
-            return np.array(rows), np.array(speeds), value
+            return np.array(rows), np.array(speeds), value, states
     for kk in range(k + steps, horizon):  # the table's own choices to the end
         lo, _, jlo, _ = tab.windows[tab.at(kk)]
         j += int(tab.choices[tab.at(kk)][j - jlo, i - lo]) + lat.d_min  # type: ignore[index]
@@ -299,4 +303,4 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
         speeds.append(j)
         if i >= lat.i_end:
             break
-    return np.array(rows), np.array(speeds), value
+    return np.array(rows), np.array(speeds), value, states

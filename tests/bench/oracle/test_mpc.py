@@ -132,3 +132,15 @@ def test_without_one_cycle_a_departure_gets_its_own_table():
     assert plan.cost == pytest.approx(solve(cor, CFG, DEPART, krauss=True).cost, rel=1e-9)
     again = mpc.replan(tab, 3, float(plan.x[3]), float(plan.v[3]))
     assert again is not None and again.x[-1] >= cor.x_end
+
+
+def test_dp_work_regression(table):
+    """Work, not time (timings belong to ``nox -s perf``): a re-plan evaluates only the states
+    reachable over its look-ahead (about a thousandth of what a cold solve evaluates), and the
+    periodic table converges in a handful of cycles."""
+    cold = bound(CFG, DEPART).grid["states"]
+    plan = mpc.replan(table, 40, table.cor.x0 + 400.0, 8.0, mpc.Leader(gap=30.0, speed=5.0))
+    lat = table.lat
+    reach = sum((m * (lat.d_max - lat.d_min) + 1) ** 2 * (m + 1) for m in range(mpc.LOOKAHEAD))  # rows x speeds
+    assert 0 < plan.states <= reach and plan.states * 100 < cold
+    assert table.cycles <= 10
