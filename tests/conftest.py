@@ -19,3 +19,17 @@ def cases():
     from ecodrive_bench.bench.harness.cases import load
 
     return load()
+
+
+@pytest.fixture(scope="module")
+def two_ray_nodes():
+    """A Ray cluster of two nodes (raylets) of one CPU each on this machine; shut down after the module."""
+    ray = pytest.importorskip("ray")
+    from ray.cluster_utils import Cluster
+
+    cluster = Cluster()
+    for _ in range(2):
+        cluster.add_node(num_cpus=1, include_dashboard=False)
+    yield cluster
+    ray.shutdown()
+    cluster.shutdown()

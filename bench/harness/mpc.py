@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from ecodrive_bench.bench.harness.not_learning import NotLearning
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan
 from ecodrive_bench.envs.config import ScenarioConfig
@@ -53,7 +54,7 @@ LOGGED_STEPS = planner.LOOKAHEAD  # [steps] of each re-plan kept in the step log
 LOG_DECIMALS = 3  # [-] rounding of the logged plans ([m], [m/s])
 
 
-class MPCAgent:
+class MPCAgent(NotLearning):
     """Re-plans on the DP's cost-to-go table when the ego drifts or the vehicle ahead is in the way.
 
     The keywords are the variants compared on validation cases (docs/mpc.md): ``margins`` [s] keep
@@ -170,13 +171,3 @@ class MPCAgent:
                 "travel_time": p.travel_time, "cost": p.cost, "objective": p.objective,
                 "replans": self.events, "events": dict(self.counts),
                 "table_wall_s": self.table.wall_s if self.table is not None else 0.0}
-
-    def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
-        return {}
-
-    def state_dict(self) -> dict[str, Any]:
-        return {"name": self.name}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        if state.get("name") != self.name:
-            raise ValueError(f"state is for agent {state.get('name')!r}, not {self.name!r}")

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.harness import shipped_bounds
+from ecodrive_bench.bench.harness.not_learning import NotLearning
 from ecodrive_bench.bench.oracle.dp import Plan, bound
 from ecodrive_bench.envs.config import ScenarioConfig
 
@@ -33,7 +34,7 @@ NAME = "oracle"
 OBJECTIVE = "cost"  # the bound the oracle replays: least E + phi T
 
 
-class OracleAgent:
+class OracleAgent(NotLearning):
     """Replays the energy-optimal plan of each episode's departure; never learns."""
 
     name = NAME
@@ -66,13 +67,3 @@ class OracleAgent:
         p = self.plan
         return {"time": p.t.tolist(), "x": p.x.tolist(), "speed": p.v.tolist(), "energy": p.energy,
                 "travel_time": p.travel_time, "cost": p.cost, "objective": p.objective}
-
-    def observe(self, obs, action, reward, next_obs, terminated, truncated, info) -> dict[str, float]:
-        return {}
-
-    def state_dict(self) -> dict[str, Any]:
-        return {"name": self.name}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        if state.get("name") != self.name:
-            raise ValueError(f"state is for agent {state.get('name')!r}, not {self.name!r}")

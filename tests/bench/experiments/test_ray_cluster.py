@@ -22,17 +22,9 @@ WALL_TIMES = {"job_wall_s", "training_wall_time_s", "sumo_s"}  # [s] measured, s
 
 
 @pytest.fixture(scope="module")
-def cluster():
+def cluster(two_ray_nodes):
     """Two Ray nodes of one CPU each; the commands join it through ``--address``."""
-    ray = pytest.importorskip("ray")
-    from ray.cluster_utils import Cluster
-
-    c = Cluster()
-    for _ in range(2):
-        c.add_node(num_cpus=1, include_dashboard=False)
-    yield c
-    ray.shutdown()
-    c.shutdown()
+    return two_ray_nodes
 
 
 def _without_wall_times(value):

@@ -68,20 +68,15 @@ def test_skipped_tasks_are_not_run(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def ray_cluster():
-    """Two Ray nodes of one CPU each on this machine."""
-    ray = pytest.importorskip("ray")
-    from ray.cluster_utils import Cluster
+def ray_cluster(two_ray_nodes):
+    """Two Ray nodes of one CPU each on this machine, joined by this process."""
+    import ray
 
-    cluster = Cluster()
-    for _ in range(2):
-        cluster.add_node(num_cpus=1, include_dashboard=False)
+    cluster = two_ray_nodes
     here, root = Path(__file__).parent, Path(__file__).parents[3]
     ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False,
              runtime_env={"env_vars": {"PYTHONPATH": f"{here}{os.pathsep}{root}"}})  # the workers import this module
-    yield cluster
-    ray.shutdown()
-    cluster.shutdown()
+    return cluster
 
 
 def test_ray_retries_a_task_whose_worker_died(ray_cluster, tmp_path):
