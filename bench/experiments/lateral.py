@@ -304,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     import sys
 
     from ecodrive_bench.agents.registry import METHODS
-    from ecodrive_bench.bench.harness.executors import EXECUTORS, run_local, run_ray
+    from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local, run_ray
     from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError
     from ecodrive_bench.bench.io import sha256
     from ecodrive_bench.bench.logs.mcaplog import episode_summary
@@ -314,17 +314,16 @@ def main(argv: list[str] | None = None) -> int:
     # default None: a learning method named here must have a shipped policy (module docstring)
     ap.add_argument("--methods", nargs="+", default=None,
                     help=f"among {', '.join(METHODS)} (default: the paper's figure, {' '.join(LATERAL_METHODS)})")
-    ap.add_argument("--executor", default="local", help=f"one of {', '.join(EXECUTORS)}")
-    ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
+    add_options(ap)
     ap.add_argument("--workers", type=int_in(1), default=2, help="parallel episodes (>= 1)")
     ap.add_argument("--run-id", type=name, default="paper", help="run folder under --logs (letters, digits, '.', '_', '-')")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
     ap.add_argument("--models", type=Path, default=MODELS, help="shipped policies (default: models/)")
     args = ap.parse_args(argv)
+    check_options(ap, args)
     explicit, methods = args.methods is not None, args.methods or list(LATERAL_METHODS)
     bad = ", ".join(m for m in methods if m not in METHODS)
-    error = (bad and f"--methods {bad} is not accepted; accepted: {', '.join(METHODS)}"
-             or args.executor not in EXECUTORS and f"--executor {args.executor} is not accepted; accepted: {', '.join(EXECUTORS)}")
+    error = bad and f"--methods {bad} is not accepted; accepted: {', '.join(METHODS)}"
     if error:
         return fail(ap.prog, error)
     root = args.logs / args.run_id / "lateral"

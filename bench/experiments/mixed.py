@@ -28,7 +28,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
-from ecodrive_bench.bench.harness.executors import EXECUTORS, run_local, run_ray
+from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local, run_ray
 from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, policy_dir
 from ecodrive_bench.bench.harness.provenance import git_sha
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
@@ -229,15 +229,16 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--demand", nargs="+", type=float_in(0, 1000, lo_open=True), default=list(DEMANDS), help="arterial demands [veh/h/lane], each in (0, 1000]")
     ap.add_argument("--reps", type=int_in(1), default=REPS, help="repetitions (traffic draws) per cell (>= 1)")
     ap.add_argument("--duration", type=float_in(10, 7200), default=DURATION, help="simulated seconds per cell (10-7200)")
-    ap.add_argument("--executor", default="local", choices=list(EXECUTORS))
-    ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray)")
+    add_options(ap)
     ap.add_argument("--workers", type=int_in(1), default=2, help="parallel cells (>= 1)")
     ap.add_argument("--cv-lateral", default="policy", choices=CV_LATERAL,
                     help="policy: PRL decides lane changes (the paper); stay: lane changes masked for every CV "
                          "(ablation, beyond the paper; cells get a '-stay' suffix)")
     ap.add_argument("--run-id", type=name, default="paper", help="run folder under --logs (cells go to <run-id>/mixed/)")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
-    return ap.parse_args(argv)
+    args = ap.parse_args(argv)
+    check_options(ap, args)
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:

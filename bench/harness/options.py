@@ -12,7 +12,7 @@ from ecodrive_bench.bench.args import Parser, int_in, name
 from ecodrive_bench.bench.harness import scenarios
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.errors import AgentError
-from ecodrive_bench.bench.harness.executors import EXECUTORS
+from ecodrive_bench.bench.harness.executors import add_options, check_options
 from ecodrive_bench.bench.harness.external import GROUP, registered
 from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FamilyError, Variant
 from ecodrive_bench.bench.harness.planners import MPC, ORACLE, PLANNERS
@@ -109,8 +109,7 @@ def parser() -> Parser:
                     help="the --agent's or --sb3's method name in results and reports (default: the factory's "
                          "name; sb3-<algo> for --sb3)")
     ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS), help="signal settings")
-    ap.add_argument("--executor", default="local", choices=list(EXECUTORS), help="local process pool, or Ray")
-    ap.add_argument("--address", default=None, help="Ray cluster address (with --executor ray; default: a local Ray)")
+    add_options(ap)
     ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, help="parallel episodes (>= 1)")
     ap.add_argument("--run-id", type=name, default=None,
                     help="run folder under --logs: letters, digits, '.', '_', '-' (default: the profile)")
@@ -128,7 +127,9 @@ def parser() -> Parser:
 def parse(argv: list[str]) -> RunOptions:
     """The checked options; bad input exits 2 with one line (``bench.args.Parser``)."""
     ap = parser()
-    opts = vars(ap.parse_args(argv))
+    ns = ap.parse_args(argv)
+    check_options(ap, ns)
+    opts = vars(ns)
     opts["run_id"] = opts["run_id"] or opts["profile"]
     users = registered()
     opts["factories"] = {m: users[m] for m in opts["methods"] or [] if m in users}
