@@ -180,7 +180,8 @@ def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callabl
         if address:
             ray.init(address=address, **kwargs)
         else:
-            ray.init(num_cpus=workers, **kwargs)
+            # "local": a Ray of its own, even where a cluster started on this machine would be joined
+            ray.init(address="local", num_cpus=workers, **kwargs)
     # a task whose worker died is retried by Ray; an exception raised by the task is not
     remote = ray.remote(num_cpus=1, max_retries=RETRIES, retry_exceptions=False)(fn)
     pending = {remote.remote(t): t for t in tasks}

@@ -187,3 +187,18 @@ def test_a_rerun_with_fewer_methods_keeps_the_finished_rows(tmp_path):
     log.write_bytes(log.read_bytes()[:100])
     run(parse([*common, "--methods", "baseline"]), progress=False)
     assert len(pd.read_parquet(tmp_path / "smoke" / "results.parquet")) == 5
+
+
+def test_without_an_address_ray_starts_its_own_beside_a_running_cluster(local_results, two_ray_nodes, tmp_path):
+    """A cluster already running on this machine (as `ray start` leaves one) is not joined
+    without --address: the run starts a Ray of its own with its --workers CPUs."""
+    pytest.importorskip("ray")
+    import ray
+
+    df_local, _ = local_results
+    try:
+        df_ray = run(_opts(tmp_path, "--executor", "ray", "--workers", "2"), progress=False)
+        assert ray.cluster_resources().get("CPU") == 2 and two_ray_nodes.address not in str(ray.get_runtime_context().gcs_address)
+    finally:
+        ray.shutdown()
+    pd.testing.assert_frame_equal(df_local[COMPARE], df_ray[COMPARE])
