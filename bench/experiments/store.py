@@ -103,6 +103,8 @@ def restore(store: Path, study: str, label: str, identity: dict[str, Any], log_d
     shutil.copyfile(src / "metrics.parquet", log_dir / "metrics.parquet")
     shutil.copyfile(src / "manifest.json", log_dir / POLICY_MANIFEST)
     row = {**stored["row"], "log_dir": str(log_dir), "restored_from": str(src)}
+    if row.get("finished") is None and "terminated" in episodes:  # a job stored before rows had it
+        row["finished"] = float(episodes.terminated.mean())  # as sweep.run_job computes it
     atomic_json({"job": stored["job"], "row": row}, log_dir / "job.json", default=float)  # last: finished
     return True
 

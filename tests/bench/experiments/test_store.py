@@ -63,3 +63,16 @@ def test_a_corrupt_finished_job_is_not_stored(tmp_path):
     with pytest.raises(ConfigError, match="job.json: a finished job's record that cannot be read"):
         store.save(tmp_path / "store", "reward", "r-phi1-s0", IDENTITY, log)
     assert not (tmp_path / "store").exists() or not any((tmp_path / "store").rglob("*"))
+
+
+def test_a_job_stored_without_its_finished_share_gets_it_from_its_episodes(tmp_path):
+    """A job stored before rows carried ``finished`` (2 of 4 trips cut at the truncation) is
+    restored with it, so the claims leave its unfinished trips out of the energy means."""
+    src = _stored(tmp_path / "store")
+    pd.DataFrame({"energy": [1.0] * 4, "terminated": [True, False, True, False], "mcap": [""] * 4}).to_parquet(
+        src / "episodes.parquet")
+    assert store.restore(tmp_path / "store", "reward", "r-phi1-s0", IDENTITY, tmp_path / "log")
+    assert json.loads((tmp_path / "log" / "job.json").read_text())["row"]["finished"] == 0.5
+    _stored(tmp_path / "store2")  # no terminated column: nothing is made up
+    assert store.restore(tmp_path / "store2", "reward", "r-phi1-s0", IDENTITY, tmp_path / "log2")
+    assert "finished" not in json.loads((tmp_path / "log2" / "job.json").read_text())["row"]
