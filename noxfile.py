@@ -3,6 +3,9 @@ first): torch is pinned to a local CPU wheel, and a fresh virtualenv per session
 reinstall it. Each session calls the ``ecodrive`` command."""
 from __future__ import annotations
 
+import argparse
+from pathlib import Path
+
 import nox
 
 # the lateral scenarios with every method docs/experiments.md reports (the command's default is the paper's figure)
@@ -19,32 +22,42 @@ def tests(session: nox.Session) -> None:
     session.run("python", "-m", "pytest", "-q", *session.posargs)
 
 
+def _given(posargs: list[str]) -> argparse.Namespace:
+    """The ``ecodrive run`` options this session reuses, as given (None where not given). Read
+    here, not imported: nox's interpreter need not have the package; ``ecodrive run`` has already
+    checked them by the time they are read."""
+    ap = argparse.ArgumentParser(add_help=False)
+    for flag in ("--profile", "--executor", "--address", "--workers", "--run-id", "--logs"):
+        ap.add_argument(flag, default=None)
+    ap.add_argument("--methods", nargs="+", default=None)
+    ap.add_argument("--signals", nargs="+", default=None)
+    return ap.parse_known_args(posargs)[0]
+
+
 @nox.session
 def benchmark(session: nox.Session) -> None:
     """The main job: every available method over the fixed cases, MCAP logs, results, report."""
-    from ecodrive_bench.bench.harness.options import parse
-
     session.run("ecodrive", "run", "--bounds", *session.posargs)
-    opts = parse(list(session.posargs))
+    opts = _given(list(session.posargs))
+    profile = opts.profile or "paper"
+    run_id, logs = opts.run_id or profile, Path(opts.logs or "logs")
     if opts.methods is None:  # and the planners: the bound's plan replayed, the closed-loop mpc (docs/mpc.md)
         session.run("ecodrive", "run", "--bounds", *session.posargs, "--methods", "oracle", "mpc")
-    if opts.profile == "full":  # section 5's further experiments, into the same run folder
-        common = ["--executor", opts.executor, "--workers", str(opts.workers),
-                  "--run-id", opts.run_id, "--logs", str(opts.logs)]
-        common += ["--address", opts.address] if opts.address else []
+    if profile == "full":  # section 5's further experiments, into the same run folder
+        pool = [f for flag, v in (("--executor", opts.executor), ("--workers", opts.workers),
+                                  ("--address", opts.address)) if v is not None for f in (flag, v)]
+        common = [*pool, "--run-id", run_id, "--logs", str(logs)]
         session.run("ecodrive", "lateral", *common, "--methods", *LATERAL_ALL)
         session.run("ecodrive", "mixed", *common)
         session.run("ecodrive", "sweep", "reward", *common)  # days on 2 cores: see docs/experiments.md
         session.run("ecodrive", "sweep", "heatmap", *common)
         # zero-shot: every method on the held-out corridors (docs/generalisation.md), beside this run
-        gen = ["--executor", opts.executor, "--workers", str(opts.workers), "--logs", str(opts.logs),
-               "--run-id", f"{opts.run_id}-generalisation", "--signals", *opts.signals]
-        gen += ["--address", opts.address] if opts.address else []
+        gen = [*pool, "--logs", str(logs), "--run-id", f"{run_id}-generalisation"]
+        gen += ["--signals", *opts.signals] if opts.signals else []
         session.run("ecodrive", "run", "--profile", "generalisation", *gen)
-        session.run("ecodrive", "report", str(opts.logs / opts.run_id),
-                    "--generalisation", str(opts.logs / f"{opts.run_id}-generalisation"))
+        session.run("ecodrive", "report", str(logs / run_id), "--generalisation", str(logs / f"{run_id}-generalisation"))
         return
-    session.run("ecodrive", "report", str(opts.logs / opts.run_id))
+    session.run("ecodrive", "report", str(logs / run_id))
 
 
 @nox.session
