@@ -2,7 +2,7 @@
 raw SUMO, logging overhead, the projected training run, each learner's update against its FLOP
 floor (the update's counted FLOPs at this core's measured matmul rate), each learned method's
 greedy act against a raw SUMO step, and the DP: mpc's re-plan (median, p99) and a cold solve
-against the numpy-kernel solver.
+against the reference solver (numpy kernel, unpruned global pass).
 
     ecodrive perf .benchmarks/perf.json
 """
@@ -20,7 +20,7 @@ CONV_PARTS = ("forward", "backward")  # test_prl_conv_pass[...]: the conv blocks
 KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind: a PRL update's op time by kind
 COMPILED = "test_prl_update_compiled"  # the autograd formulation under torch.compile: the alternative
 REPLAN_MEDIAN_MS, REPLAN_P99_MS = 20.0, 100.0  # [ms] one mpc re-plan on one core
-COLD_SOLVE_LIMIT = 0.1  # a whole case's bound at least 10x faster than the numpy-kernel solver
+COLD_SOLVE_LIMIT = 0.1  # a whole case's bound at least 10x faster than the reference solver (numpy, unpruned)
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 ACT_LIMIT_S = 0.3e-3  # [s] a greedy batch-1 act (test_greedy_act[...], one thread)
 TARGETS = {  # name: (numerator, denominator, limit, what)
@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     if "cold_solve_over_numpy" in r:
         good = r["cold_solve_over_numpy"] <= COLD_SOLVE_LIMIT
         ok &= good
-        print(f"{'DP cold solve / numpy-kernel solve':40s} {r['cold_solve_over_numpy']:6.3f}x ({r['cold_solve_s']:.2f} s; "
+        print(f"{'DP cold solve / reference solve':40s} {r['cold_solve_over_numpy']:6.3f}x ({r['cold_solve_s']:.2f} s; "
               f"target <= {COLD_SOLVE_LIMIT:g}x) {'ok' if good else 'MISSED'}")
     if "sumo_step_us" in r:
         print(f"{'raw SUMO step':40s} {r['sumo_step_us']:6.0f} us")

@@ -26,15 +26,21 @@ backwards over the time steps, vectorised: for all states at once, the value aft
 speed is one strided view of the next value array. The inner loop, one backward step over a
 window of states, is compiled with numba (``bench.oracle.kernel``; the numpy form stays as its
 reference, ``kernel="numpy"``, with the same plans bit for bit). (1) A global pass on ``n = Grid.n_v`` evaluates every state in the forward-reachable
-and backward-feasible band: it picks the green windows. (2) Local passes on the ``Grid.fine``
+and backward-feasible band: it picks the green windows. Its horizon (the band's time extent) comes
+from the cost of the optimal plan on the lattice with twice the speed cell, solved the same way
+down to ``COARSEST`` cells: that plan is one of this lattice's, so no plan slower than the last
+step count whose lower bound (``bench.oracle.horizon``) is within its cost can be optimal. The band shrinks
+by about a third and the plan is the unpruned pass's bit for bit (``prune=False`` runs the
+guess-and-certify loop alone). (2) Local passes on the ``Grid.fine``
 times finer lattice evaluate only a tube (``tube_x``, ``tube_v``) around the current plan,
 re-centred until the cost stops falling. The coarse plan lies on the fine lattice, so a local
 pass never does worse. It matters: coasting (drag alone, about -0.14 m/s^2 at 50 km/h) is the
 cheap way to slow down, and at da = 0.5 m/s^2 a plan must mix braking (recuperated at 70 %)
 with driving (drawn at 1/0.9) instead. ``"cost"`` certifies the global horizon ``K``: every plan
-has ``E >= P_aux T/3600 - eta_rec KE0/3600`` (drag only dissipates; at most the starting kinetic
-energy comes back), so no plan slower than ``K`` steps beats the one found when
-``J <= (phi + P_aux/3600) (K+1) dt - eta_rec KE0/3600``; otherwise ``K`` grows and it re-solves.
+has a cost of at least ``rate T + eta_rec W(T)/3600`` (``bench.oracle.horizon``: the auxiliaries,
+and eta_rec times the least mechanical work of T steps over the corridor), so no plan slower than
+``K`` steps beats the one found when its cost is within that bound's least value over T > K;
+otherwise ``K`` grows and it re-solves.
 
 Resolution (default ``Grid()``, 50 km/h, dt = 1 s): global dv = dx = da = 0.496 (m/s, m,
 m/s^2), final 0.124. A plan is feasible, so its cost bounds the continuous-control optimum of
@@ -43,9 +49,10 @@ by 0.013-0.026 % on the 5-intersection corridor (departures 200, 231, 260 s) and
 on the 450 m one-intersection corridor, where the end manoeuvre weighs more; the tests assert
 < 0.2 %. The local passes matched a global pass on their final lattice to 0.01 % (one-
 intersection corridor); where the cost is flat in the cruise speed they may stop a coarse cell
-from the best one (phi = 0.3: 12.3 instead of 11.9 m/s, about 0.08 % of cost). One case took
-1.5-3.5 s on one core of this 2-core machine while it ran two trainings (``Plan.grid["wall_s"]``,
-``python -m bench.oracle.dp``); dt = 0.5 s takes about 4 times as long. Not timed in tests.
+from the best one (phi = 0.3: 12.3 instead of 11.9 m/s, about 0.08 % of cost). A ``"cost"`` case takes
+0.13-0.17 s on one core of the 2-core machine beside two trainings (``Plan.grid["wall_s"]``,
+``python -m bench.oracle.dp``; ``nox -s perf`` measures it against the reference solver); dt =
+0.5 s takes about 4 times as long. Not timed in tests.
 
 Not a constraint here, but one in SUMO: while a light is red, SUMO caps the speed so that the
 car can still stop at the line (Krauss). A plan that reaches the line at speed just as green
@@ -56,20 +63,18 @@ from __future__ import annotations
 
 import math
 import time
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from ecodrive_bench.envs.config import ScenarioConfig
-from ecodrive_bench.envs.scenario import build
 
+from .corridor import MS, Corridor
 from .energy import energy_wh
-from .kernel import backward_step, backward_step_numpy
+from .horizon import LeastCost
+from .kernel import backward_step, backward_step_in, backward_step_numpy
 
-POSITION_EPS = 0.1  # [m] SUMO's POSITION_EPS: departPos "base" = vehicle length + this
-MS = 1000  # [ms/s] SUMO's time unit
 OBJECTIVES = ("cost", "energy")
 HORIZON_MARGIN = 10  # [steps] added to the first guess of the "cost" horizon
 LATE_STEPS = 5  # [steps] a local pass may arrive this much later than the plan it refines
@@ -79,6 +84,7 @@ MAX_HORIZON = 86400.0  # [s] the "cost" horizon stops growing here
 VERSION = 1  # [-] of the plans and values ``bound`` returns: bump it with any change that alters one, so
 # the bounds shipped with the fixed cases (bench.harness.shipped_bounds) miss and are solved again
 
+COARSEST = 7  # [-] speed cells: ``_Run._upper`` halves the lattice down to this, no further
 KRAUSS_TAU = 1.0  # [s] SUMO's default tau: the ego's reaction time in Krauss' safe speed
 KERNELS = {"numba": backward_step, "numpy": backward_step_numpy}  # the inner loop, compiled or the reference
 Window = tuple[int, int, int, int]  # rows lo..hi, speeds jlo..jhi evaluated at one step
@@ -119,53 +125,6 @@ class Grid:
         return dv, dv * cfg.step_length, dv / cfg.step_length
 
 
-@dataclass(frozen=True)
-class Corridor:
-    """What the DP needs of the built scenario: start, end, stop lines and signal timing."""
-
-    x0: float  # [m] the ego's front bumper at insertion
-    v0: float  # [m/s] its insertion speed
-    x_end: float  # [m] start of the exit edge: reaching it ends the episode
-    stop_lines: tuple[float, ...]  # [m] W->E stop lines
-    offsets_ms: tuple[int, ...]  # [ms] signal offsets as SUMO reads them, one per stop line
-    cycles_ms: tuple[int, ...]  # [ms] one per stop line
-    greens_ms: tuple[int, ...]  # [ms] arterial green at the start of each cycle, one per stop line
-
-    @classmethod
-    def from_config(cls, cfg: ScenarioConfig) -> Corridor:
-        files = build(cfg)
-        net = ET.parse(files.net).getroot()
-
-        def lane_start(edge: str) -> float:
-            lane = net.find(f"./edge[@id='{edge}']/lane")
-            if lane is None:
-                raise RuntimeError(f"edge {edge} not found in {files.net}")
-            return float(lane.get("shape").split()[0].split(",")[0])
-
-        def sumo_ms(seconds: float) -> int:  # the .add.xml writes "%g"; SUMO keeps milliseconds
-            return int(round(float(f"{seconds:g}") * MS))
-
-        timing, y = cfg.timing, cfg.yellow  # a cycle is the sum of the phases SUMO read
-        return cls(
-            x0=lane_start(files.arterial_edges[0]) + cfg.vehicle_length + POSITION_EPS,
-            v0=cfg.speed_limit, x_end=lane_start(files.exit_edge), stop_lines=tuple(files.stop_lines),
-            offsets_ms=tuple(sumo_ms(t.offset) for t in timing), greens_ms=tuple(sumo_ms(t.green) for t in timing),
-            cycles_ms=tuple(sumo_ms(t.green) + 2 * sumo_ms(y) + sumo_ms(t.cycle - t.green - 2 * y) for t in timing),
-        )
-
-    def first(self, k: int) -> Corridor:
-        """The corridor with only its first ``k`` signals (tests: none, or a single red)."""
-        return replace(self, stop_lines=self.stop_lines[:k], offsets_ms=self.offsets_ms[:k],
-                       cycles_ms=self.cycles_ms[:k], greens_ms=self.greens_ms[:k])
-
-    def green(self, t_start: np.ndarray, dt: float) -> np.ndarray:
-        """(len(t_start), n stop lines) bool: the arterial is green in the step from ``t``."""
-        t_ms = np.rint(np.asarray(t_start, dtype=float) * MS).astype(np.int64)
-        end = t_ms[:, None] + int(round(dt * MS)) - np.asarray(self.offsets_ms, dtype=np.int64)[None, :]
-        pos = np.mod(end, np.asarray(self.cycles_ms, dtype=np.int64)[None, :])
-        return (pos > 0) & (pos <= np.asarray(self.greens_ms, dtype=np.int64)[None, :])
-
-
 @dataclass
 class Plan:
     """An optimal trajectory. ``t, x, v`` have one entry per time step from the departure to
@@ -186,18 +145,20 @@ class Plan:
 
 def bound(cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
           time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba",
-          krauss: bool = False) -> Plan:
+          krauss: bool = False, prune: bool = True) -> Plan:
     """The optimal plan for ``cfg``'s corridor and signals, departing at ``depart_time`` [s]
     (the env's ``t_depart``). ``objective="energy"`` needs ``time_limit`` [s]. ``kernel``: the
     inner loop, ``"numba"`` or the numpy reference ``"numpy"`` (``KERNELS``; the same plan).
     ``krauss``: Krauss' stop-for-red cap is a constraint too (the best plan SUMO's driver model
-    lets the ego drive alone, for a controller; not the bound)."""
-    return solve(Corridor.from_config(cfg), cfg, depart_time, objective, time_limit, grid, kernel, krauss)
+    lets the ego drive alone, for a controller; not the bound). ``prune`` (``"cost"``): the global
+    pass's horizon comes from a plan on coarser lattices (the same plan, less work); False runs the
+    guess-and-certify loop alone, the reference ``nox -s perf`` takes the speed-up against."""
+    return solve(Corridor.from_config(cfg), cfg, depart_time, objective, time_limit, grid, kernel, krauss, prune=prune)
 
 
 def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
           time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba",
-          krauss: bool = False, slack: int = 0) -> Plan:
+          krauss: bool = False, slack: int = 0, prune: bool = True) -> Plan:
     """``bound`` on a given ``Corridor`` (tests drop or move its signals). ``slack`` > 0 (``"cost"``
     only): the global pass runs ``slack`` steps past the horizon it needs and the plan keeps it
     (``Plan.table``: the cost-to-go a re-planning controller reads, ``bench.oracle.mpc``)."""
@@ -215,7 +176,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
         horizon = int(math.floor(float(time_limit) / cfg.step_length + GRID_EPS))
         sol = run.backward(lat, lat.windows(horizon))
     else:
-        horizon, sol = run.certified(lat, slack)
+        horizon, sol = run.certified(lat, slack, prune)
     if not np.isfinite(sol.value):
         raise ValueError(f"no plan arrives within {horizon * cfg.step_length:g} s (time_limit={time_limit})")
     rows, speeds = lat.extract(sol)
@@ -275,25 +236,45 @@ class _Run:
         self.states += out.states
         return out
 
-    def certified(self, lat: _Lattice, slack: int = 0) -> tuple[int, _Solution]:
+    def certified(self, lat: _Lattice, slack: int = 0, prune: bool = True) -> tuple[int, _Solution]:
         """Global pass of the "cost" objective on a horizon that provably does not bind; ``slack``
-        > 0: ``slack`` steps longer, keeping every step's values (``solve``)."""
-        cfg, cor, dt = self.cfg, self.cor, self.cfg.step_length
-        rate = (self.phi + cfg.ev.constant_power_intake / 3600.0) * dt  # [Wh/step] least cost of a step
-        if rate <= 0:
+        > 0: ``slack`` steps longer, keeping every step's values (``solve``). ``prune`` (``slack``
+        0 only): the horizon comes from the cost of a plan solved on the lattice half as fine
+        (``_upper``), which shrinks the band without changing the optimum or its plan."""
+        cor, dt, least = self.cor, self.cfg.step_length, LeastCost(self.cor, self.cfg, self.phi)
+        if least.rate <= 0:
             raise ValueError("phi = 0 and no constant power intake: no horizon; use objective='energy'")
-        ke_back = cfg.ev.recuperation_efficiency * 0.5 * (cfg.ev.mass + cfg.ev.rotating_mass) * cor.v0 ** 2 / 3600.0
+        if prune and slack == 0:
+            upper = self._upper(lat)
+            if upper is not None:
+                horizon = least.last_steps(upper + _margin(upper))
+                sol = self.backward(lat, lat.windows(horizon))
+                if sol.value <= upper + _margin(upper):  # every plan costing <= upper arrives within it
+                    return horizon, sol
         n_red = sum(math.ceil((c - g) / (dt * MS)) for c, g in zip(cor.cycles_ms, cor.greens_ms))
         horizon = math.ceil((cor.x_end - cor.x0) / (cor.v0 * dt)) + n_red + HORIZON_MARGIN + slack
         while horizon * dt <= MAX_HORIZON:
             sol = self.backward(lat, lat.windows(horizon), keep=slack > 0)
             if not np.isfinite(sol.value):
                 horizon *= 2
-            elif sol.value <= rate * (horizon + 1) - ke_back:
+            elif sol.value <= least.after(horizon):
                 return horizon, sol  # no plan slower than the horizon can cost less (module docstring)
             else:
-                horizon = max(horizon + 1, math.ceil((sol.value + ke_back) / rate))
+                horizon = max(horizon + 1, least.last_steps(float(sol.value)))
         raise ValueError(f"no plan certified within {MAX_HORIZON:g} s")
+
+    def _upper(self, lat: _Lattice) -> float | None:
+        """E + phi T [Wh] of the optimal plan on the lattice with twice the speed cell (its
+        states lie on ``lat``, so the plan is one of ``lat``'s), solved the same way in turn;
+        None where ``lat`` has no such coarser lattice or it has no plan."""
+        if lat.nv % 2 or lat.nv // 2 < COARSEST:
+            return None
+        coarse = _Lattice(self.cor, self.cfg, lat.nv // 2, lat.krauss)
+        try:
+            _, sol = self.certified(coarse)
+        except ValueError:
+            return None
+        return self.objective(coarse.extract(sol)[1], coarse)
 
     def objective(self, speeds: np.ndarray, lat: _Lattice) -> float:
         """E + phi T [Wh] of a path of speed indices, in float64."""
@@ -315,7 +296,7 @@ class _Lattice:
 
     def __init__(self, cor: Corridor, cfg: ScenarioConfig, n_v: int, krauss: bool = False) -> None:
         dt = cfg.step_length
-        self.nv = n_v
+        self.nv, self.krauss = n_v, krauss
         self.dv = cfg.speed_limit / n_v  # [m/s]
         self.dx = self.dv * dt  # [m]
         self.d_min = math.ceil(cfg.a_min * dt / self.dv - GRID_EPS)  # [speed cells per step]
@@ -372,6 +353,12 @@ class _Lattice:
         return np.array(rows), np.array(speeds)
 
 
+def _margin(cost: float) -> float:
+    """[Wh] more than the float32 error of a DP value near ``cost`` (sums of at most a few
+    thousand float32 terms)."""
+    return 1e-3 * abs(cost) + 0.1
+
+
 def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float,
               kernel: str = "numba", keep: bool = False) -> _Solution:
     """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start,
@@ -403,7 +390,11 @@ def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], ti
                 r = np.nonzero(~green[k])[0]
                 red = (lat.cross_low[r], lat.cross_top[r])
             arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=arg_type)  # [speed, row]
-            step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red)
+            if step is backward_step:  # the compiled kernel skips landings outside the next window
+                nlo, nhi, njlo, njhi = reg_nxt if reg_nxt is not None else (1, 0, 1, 0)
+                backward_step_in(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red, nlo, nhi, njlo, njhi, i_end)
+            else:
+                step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red)
             reg_cur = (lo, hi, jlo, jhi)
             policy[k] = (lo, jlo, arg)
             if values is not None:

@@ -1,12 +1,14 @@
-"""The DP's compiled inner loop (``bench.oracle.kernel.backward_step``, numba) against its numpy
-reference: the same values and choices bit for bit, on random steps and on whole solves."""
+"""The DP's compiled inner loop (``bench.oracle.kernel.backward_step``, numba, and its windowed form
+``backward_step_in``) against its numpy reference: the same values and choices bit for bit, on
+random steps and on whole solves; the pruned global pass against the unpruned one."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from ecodrive_bench.bench.oracle.dp import Corridor, Grid, solve
-from ecodrive_bench.bench.oracle.kernel import backward_step, backward_step_numpy
+from ecodrive_bench.bench.oracle.horizon import LeastCost
+from ecodrive_bench.bench.oracle.kernel import backward_step, backward_step_in, backward_step_numpy
 from ecodrive_bench.envs.config import ScenarioConfig
 
 
@@ -36,6 +38,26 @@ def test_one_step_equals_the_numpy_reference(seed):
     np.testing.assert_array_equal(outs[0][0], outs[1][0])
     np.testing.assert_array_equal(outs[0][1], outs[1][1])
     assert (outs[0][0] == 7.0).sum() == nxt.size - (hi - lo + 1) * (jhi - jlo + 1)  # only the window written
+    # the windowed kernel, where (as in the DP's buffers) the next values are finite only in a
+    # window and on the arrived rows: the same values and choices
+    nlo, nhi = sorted(rng.integers(0, rows, 2))
+    njlo, njhi = sorted(rng.integers(0, nv + 1, 2))
+    outside = np.ones(nxt.shape, dtype=bool)
+    outside[njlo:njhi + 1, nlo:nhi + 1] = False
+    outside[:, rows:] = False
+    nxt[outside] = np.inf
+    both = []
+    for windowed in (False, True):
+        cur = np.full_like(nxt, 7.0)
+        arg = np.full((jhi - jlo + 1, hi - lo + 1), 99, dtype=np.int8)
+        if windowed:
+            backward_step_in(nxt, cur, arg, int(lo), int(hi), int(jlo), int(jhi), d_min, step_cost, low, tops,
+                             int(nlo), int(nhi), int(njlo), int(njhi), rows)
+        else:
+            backward_step(nxt, cur, arg, int(lo), int(hi), int(jlo), int(jhi), d_min, step_cost, low, tops)
+        both.append((cur, arg))
+    np.testing.assert_array_equal(both[0][0], both[1][0])
+    np.testing.assert_array_equal(both[0][1], both[1][1])
 
 
 @pytest.mark.parametrize("objective,limit", [("cost", None), ("energy", 120.0)])
@@ -55,3 +77,39 @@ def test_an_unknown_kernel_is_refused():
     cfg = ScenarioConfig(n_intersections=1)
     with pytest.raises(ValueError, match="kernel='fortran' is not accepted; choose one of numba, numpy"):
         solve(Corridor.from_config(cfg), cfg, 20.0, kernel="fortran")
+
+
+# the paper's corridor in both settings, and a short one whose start speed outweighs its rolling
+# resistance (the lower bound's work term is negative there)
+PRUNED = [({}, 200.0), ({"signals": "uncoordinated"}, 231.0), ({"n_intersections": 1, "spacing": 200.0}, 20.0),
+          ({"lanes": 3, "spacings": (300.0, 650.0, 180.0), "n_intersections": 4, "signals": "uncoordinated"}, 95.0)]
+
+
+@pytest.mark.parametrize("scenario,depart", PRUNED, ids=["coordinated", "uncoordinated", "short", "uneven"])
+def test_pruned_global_pass_finds_the_same_plan_with_less_work(scenario, depart):
+    """The horizon from a coarser plan's cost shrinks the band but keeps every plan that could
+    beat it: the plan is the unpruned one's, bit for bit."""
+    cfg = ScenarioConfig(**scenario)
+    cor = Corridor.from_config(cfg)
+    pruned, full = solve(cor, cfg, depart), solve(cor, cfg, depart, prune=False)
+    np.testing.assert_array_equal(pruned.x, full.x)
+    np.testing.assert_array_equal(pruned.v, full.v)
+    assert pruned.cost == full.cost and pruned.grid["objective"] == full.grid["objective"]
+    assert pruned.grid["horizon"] <= full.grid["horizon"]
+
+
+@pytest.mark.parametrize("scenario,depart", PRUNED, ids=["coordinated", "uncoordinated", "short", "uneven"])
+def test_least_cost_bounds_every_solved_plan(scenario, depart):
+    """``LeastCost`` (the pruning's and the certificate's lower bound) is below the cost of real
+    plans of every length: the cost optimum and energy optima at several time limits."""
+    cfg = ScenarioConfig(**scenario)
+    cor = Corridor.from_config(cfg)
+    least = LeastCost(cor, cfg, cfg.reward.phi)
+    best = solve(cor, cfg, depart)
+    plans = [best] + [solve(cor, cfg, depart, "energy", best.travel_time + extra) for extra in (0.0, 30.0, 120.0)]
+    for plan in plans:
+        steps = round(plan.travel_time / cfg.step_length)
+        cost = plan.energy + cfg.reward.phi * plan.travel_time
+        assert least.at(steps) <= cost, (plan.objective, steps)
+    assert least.at(steps) > 0.5 * cost  # and not vacuous: it holds most of the cost
+    assert least.after(steps - 1) <= least.at(steps) and least.last_steps(cost) >= steps
