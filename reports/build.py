@@ -25,7 +25,7 @@ from ecodrive_bench.bench.io import atomic_csv, atomic_text, refuse_links
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
-from . import claims, experiments, figures, generalisation, headline, metrics, stats, tables
+from . import claims, experiments, figures, generalisation, headline, metrics, mpc_goal, stats, tables
 from .html import render
 from .html_markdown import experiment_caption
 from .html_parts import Figure, Page, esc, label
@@ -103,8 +103,9 @@ def _gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
     return lines
 
 
-def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page) -> list[str]:
-    """What information can buy (``metrics.headroom``), when the run has ``baseline0`` and ``mpc``."""
+def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page, run_dir: Path) -> list[str]:
+    """What information can buy (``metrics.headroom``), when the run has ``baseline0`` and ``mpc``; and mpc
+    against its goal (``mpc_goal``), with the evidence where it misses (read from ``run_dir``'s step logs)."""
     phis = headline.phis(results, manifest)
     shares = pd.concat([metrics.headroom(results[results.signals == s], phi) for s, phi in phis.items()],
                        ignore_index=True)
@@ -125,7 +126,7 @@ def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page) -> l
                   "between baseline0 and mpc.", ""]
     lines += [f"![headroom](figures/{p[0].name})", "",
               tables.frame_markdown(shares.set_index(["method", "signals"]), digits=3), ""]
-    return lines
+    return lines + mpc_goal.lines(results, phis, run_dir, LEARNED)
 
 
 def _manifest(run_dir: Path) -> dict:
@@ -191,7 +192,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
            f"cases with a {int(stats.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
            "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed has no CI.",
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
-    page.experiments_md = _gaps(results, manifest, out) + _headroom(results, manifest, out, page)
+    page.experiments_md = _gaps(results, manifest, out) + _headroom(results, manifest, out, page, run_dir)
     md += page.experiments_md
     warnings = dropped + unfinished_warnings(results)
     parts, partial = _return_parts(results, run_dir, warnings, progress)

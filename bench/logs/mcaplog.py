@@ -236,6 +236,19 @@ def is_complete(path: str | Path) -> bool:
         return False
 
 
+def read_plan(path: str | Path) -> dict[str, Any] | None:
+    """The ``plan`` metadata record of a log through the MCAP index (no step is decoded), or None
+    when the log has none or cannot be read."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            rec = next((m for m in make_reader(f).iter_metadata() if m.name == PLAN), None)
+            return json.loads(rec.metadata["json"]) if rec is not None else None
+    except Exception:  # a missing or damaged log has no plan to show
+        return None
+
+
 def episode_summary(path: str | Path, agent_sha256: str | None = None, eval_scenario: str | None = None,
                     legacy_scenario: str = "") -> dict[str, Any] | None:
     """The /episode record of a finished log through the MCAP index (fast), or None when the
