@@ -24,7 +24,7 @@ from ecodrive_bench.envs.config import ScenarioConfig
 from .energy import AIR_DENSITY, GRAVITY, J_PER_WH
 
 if TYPE_CHECKING:
-    from .dp import Corridor
+    from .corridor import Corridor
 
 
 @dataclass(frozen=True)

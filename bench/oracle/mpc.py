@@ -30,14 +30,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ecodrive_bench.envs.config import ScenarioConfig
 
 from .dp import GRID_EPS, MS, Corridor, Grid, Plan, Window, _Lattice, _Run, refine, solve
-from .kernel import backward_step
+from .kernel import backward_step, backward_step_in
 
 LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
 SLACK = 150  # [steps] the table reaches this far past the bound's certified horizon
@@ -77,6 +77,7 @@ class Table:
     period: int = 0  # [steps] of a periodic table, 0 for one departure's
     cycles: int = 0  # [-] value-iteration cycles a periodic table took to repeat
     offset: int = 0  # [steps] phase of the departure in a periodic table
+    scratch: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)  # ``_solve``'s buffers
 
     def at(self, k: int) -> int:
         """Index of step ``k`` after the departure in the table's lists."""
@@ -186,6 +187,17 @@ def periodic(cor: Corridor, cfg: ScenarioConfig, grid: Grid | None = None) -> Ta
     return tab
 
 
+def _buffers(tab: Table) -> tuple[np.ndarray, np.ndarray]:
+    """Two [speed, row] value buffers for ``_solve``, kept with the table and reused: rows from
+    ``i_end`` on (arrived) hold 0 and are never written."""
+    if tab.scratch is None:
+        lat = tab.lat
+        buf = np.full((lat.nv + 1, lat.i_end + lat.nv + 1), np.inf, dtype=np.float32)
+        buf[:, lat.i_end:] = 0.0
+        tab.scratch = (buf, buf.copy())
+    return tab.scratch
+
+
 def leader_travel(speed: float, m: int, cfg: ScenarioConfig, accel: float | None = None) -> float:
     """[m] the vehicle ahead covers in ``m`` steps by the prediction model: from ``speed`` [m/s]
     at ``accel`` (``LEADER_ACCEL``) up to the speed limit, SUMO's Euler update ``x' = x + v' dt``."""
@@ -242,33 +254,35 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
         wins.append((lo, min(hi, lat.i_end - 1), jl, jh))
         jl, jh = max(0, jl + lat.d_min), min(nv, jh + lat.d_max)
         lo, hi = lo + jl, hi + jh
-    n_rows = lat.i_end + nv + 1
-    nxt = np.full((nv + 1, n_rows), np.inf, dtype=np.float32)
-    nxt[:, lat.i_end:] = 0.0
-    if k + steps < horizon:  # the table's cost-to-go after the look-ahead
+    wins.append((lo, min(hi, lat.i_end - 1), jl, jh))  # reachable after the look-ahead
+    nxt, cur = _buffers(tab)  # values outside each step's window are stale: the kernel never reads them
+    nwin: Window = (1, 0, 1, 0)  # the window of nxt's values (empty: only the arrived rows, 0)
+    if k + steps < horizon:  # the table's cost-to-go after the look-ahead, where reachable
         tlo, thi, tjlo, tjhi = tab.windows[tab.at(k + steps)]
-        if tlo <= thi and tjlo <= tjhi:
-            nxt[tjlo:tjhi + 1, tlo:thi + 1] = tab.values[tab.at(k + steps)]
-    cur = np.full_like(nxt, np.inf)
-    cur[:, lat.i_end:] = 0.0
+        rlo, rhi, rjlo, rjhi = wins[steps]
+        nwin = (max(tlo, rlo), min(thi, rhi), max(tjlo, rjlo), min(tjhi, rjhi))
+        if nwin[0] <= nwin[1] and nwin[2] <= nwin[3]:
+            src = tab.values[tab.at(k + steps)]
+            nxt[nwin[2]:nwin[3] + 1, nwin[0]:nwin[1] + 1] = src[nwin[2] - tjlo:nwin[3] - tjlo + 1,
+                                                                nwin[0] - tlo:nwin[1] - tlo + 1]
+        else:
+            nwin = (1, 0, 1, 0)
     speeds_ms = np.arange(nv + 1) * lat.dv
 
-    def keep_gap(buf: np.ndarray, m: int) -> None:  # states at look-ahead step m that come too close
-        if leader_rear is None:
+    def keep_gap(buf: np.ndarray, m: int, win: Window) -> None:  # states at look-ahead step m that come too close
+        lo, hi, jlo, jhi = win
+        if leader_rear is None or lo > hi or jlo > jhi:
             return
-        limit = leader_rear + leader_travel(leader_speed, m, tab.cfg, leader_accel) - MIN_GAP - headway * speeds_ms  # [m] per speed
-        top = np.floor((limit - tab.cor.x0) / lat.dx + GRID_EPS).astype(np.int64)
-        for j in range(nv + 1):
-            first = max(int(top[j]) + 1, 0)
-            if first < lat.i_end:
-                buf[j, first:lat.i_end] = np.inf
+        limit = leader_rear + leader_travel(leader_speed, m, tab.cfg, leader_accel) - MIN_GAP - headway * speeds_ms[jlo:jhi + 1]
+        top = np.floor((limit - tab.cor.x0) / lat.dx + GRID_EPS).astype(np.int64)  # [row] per speed
+        block = buf[jlo:jhi + 1, lo:hi + 1]
+        block[np.arange(lo, hi + 1)[None, :] > top[:, None]] = np.inf
 
-    keep_gap(nxt, steps)
+    keep_gap(nxt, steps, nwin)
     args: list[np.ndarray | None] = [None] * steps
     no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))
     for m in range(steps - 1, -1, -1):
         lo, hi, jlo, jhi = wins[m]
-        cur[:, :lat.i_end] = np.inf
         if lo <= hi:
             green = tab.green[tab.at(k + m)]
             red = no_red
@@ -276,15 +290,18 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
                 r = np.nonzero(~green)[0]
                 red = (lat.cross_low[r], lat.cross_top[r])
             arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=np.int8 if lat.n_d < 127 else np.int16)
-            backward_step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, tab.step_cost, *red)
+            backward_step_in(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, tab.step_cost, *red, *nwin, lat.i_end)
             args[m] = arg
             if m > 0:
-                keep_gap(cur, m)
+                keep_gap(cur, m, wins[m])
+            nwin = (lo, hi, jlo, jhi)
+        else:
+            nwin = (1, 0, 1, 0)
         nxt, cur = cur, nxt
     value = float(nxt[j0, i0])
     if not np.isfinite(value):
         return None
-    states = sum((hi - lo + 1) * (jhi - jlo + 1) for lo, hi, jlo, jhi in wins if lo <= hi)
+    states = sum((hi - lo + 1) * (jhi - jlo + 1) for lo, hi, jlo, jhi in wins[:steps] if lo <= hi)
     rows, speeds = [i0], [j0]
     i, j = i0, j0
     for m in range(steps):
