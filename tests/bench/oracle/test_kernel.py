@@ -82,14 +82,23 @@ def test_an_unknown_kernel_is_refused():
 # the paper's corridor in both settings, and a short one whose start speed outweighs its rolling
 # resistance (the lower bound's work term is negative there)
 PRUNED = [({}, 200.0), ({"signals": "uncoordinated"}, 231.0), ({"n_intersections": 1, "spacing": 200.0}, 20.0),
-          ({"lanes": 3, "spacings": (300.0, 650.0, 180.0), "n_intersections": 4, "signals": "uncoordinated"}, 95.0)]
+          ({"lanes": 3, "spacings": (300.0, 650.0, 180.0), "n_intersections": 4, "signals": "uncoordinated"}, 95.0),
+          ({"signals": "uncoordinated", "phi": 0.3}, 260.0)]
+IDS = ["coordinated", "uncoordinated", "short", "uneven", "phi 0.3"]
 
 
-@pytest.mark.parametrize("scenario,depart", PRUNED, ids=["coordinated", "uncoordinated", "short", "uneven"])
+def _config(scenario: dict) -> ScenarioConfig:
+    scenario = dict(scenario)
+    phi = scenario.pop("phi", None)
+    cfg = ScenarioConfig(**scenario)
+    return cfg if phi is None else cfg.replace(reward={"phi": phi})
+
+
+@pytest.mark.parametrize("scenario,depart", PRUNED, ids=IDS)
 def test_pruned_global_pass_finds_the_same_plan_with_less_work(scenario, depart):
     """The horizon from a coarser plan's cost shrinks the band but keeps every plan that could
     beat it: the plan is the unpruned one's, bit for bit."""
-    cfg = ScenarioConfig(**scenario)
+    cfg = _config(scenario)
     cor = Corridor.from_config(cfg)
     pruned, full = solve(cor, cfg, depart), solve(cor, cfg, depart, prune=False)
     np.testing.assert_array_equal(pruned.x, full.x)
@@ -98,11 +107,11 @@ def test_pruned_global_pass_finds_the_same_plan_with_less_work(scenario, depart)
     assert pruned.grid["horizon"] <= full.grid["horizon"]
 
 
-@pytest.mark.parametrize("scenario,depart", PRUNED, ids=["coordinated", "uncoordinated", "short", "uneven"])
+@pytest.mark.parametrize("scenario,depart", PRUNED, ids=IDS)
 def test_least_cost_bounds_every_solved_plan(scenario, depart):
     """``LeastCost`` (the pruning's and the certificate's lower bound) is below the cost of real
     plans of every length: the cost optimum and energy optima at several time limits."""
-    cfg = ScenarioConfig(**scenario)
+    cfg = _config(scenario)
     cor = Corridor.from_config(cfg)
     least = LeastCost(cor, cfg, cfg.reward.phi)
     best = solve(cor, cfg, depart)
