@@ -51,28 +51,8 @@ def backward_step(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi
     ``red_low[s, jn] <= i <= red_top[s]``: the step crosses stop line ``s`` (ascending), whose
     signal is red in this step, so those landings are forbidden. Choices are tried in ascending
     order for every state and only a strictly better one replaces the best: numpy's tie rule."""
-    nv = nxt.shape[0] - 1
-    n_d = step_cost.shape[1]
-    n_red = red_top.shape[0]
-    for j in range(jlo, jhi + 1):
-        cur[j, lo:hi + 1] = np.inf
-        arg[j - jlo, :] = 0
-        arg_j = arg[j - jlo, :]
-        for c in range(n_d):
-            jn = j + d_min + c
-            if jn < 0:
-                continue
-            if jn > nv:
-                break
-            cost = step_cost[j, c]
-            start = lo
-            for s in range(n_red):  # the rows between the red stop lines' blocked intervals
-                b0, b1 = max(red_low[s, jn], lo), min(red_top[s], hi)
-                if b0 > b1:
-                    continue
-                _relax(nxt[jn], cur[j], arg_j, start, b0 - 1, lo, jn, cost, c)
-                start = b1 + 1
-            _relax(nxt[jn], cur[j], arg_j, start, hi, lo, jn, cost, c)
+    backward_step_in(nxt, cur, arg, lo, hi, jlo, jhi, d_min, step_cost, red_low, red_top,
+                     0, nxt.shape[1] - 1, 0, nxt.shape[0] - 1, nxt.shape[1])  # every landing may be finite
 
 
 @njit(nogil=True)
