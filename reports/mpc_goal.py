@@ -18,6 +18,7 @@ from ecodrive_bench.bench.logs.mcaplog import read_plan, resolve_log
 
 TIME_SLACK = 0.05  # [-] mpc's mean travel time may exceed the baseline's by this share
 SLOWER_S = 30.0  # [s] a case where mpc is this much slower than the best learned method "broke"
+LATE_S = 45.0  # [s] a delay over the first plan's travel time counted as a missed window (half a cycle)
 
 
 def goal(results: pd.DataFrame, phi: float, learned: tuple[str, ...], baseline: str = "baseline",
@@ -32,22 +33,25 @@ def goal(results: pd.DataFrame, phi: float, learned: tuple[str, ...], baseline: 
         present = [m for m in learned if m in set(s.method)]
         if mpc not in set(s.method) or baseline not in set(s.method) or not present:
             continue
-        cases = set(s[s.method == mpc].case) & set(s[s.method == baseline].case)
-        for m in present:
-            cases &= set(s[s.method == m].case)
-        if not cases:
+        s = s[s.case.isin(common_cases(s, [mpc, baseline, *present]))]
+        if s.empty:
             continue
-        s = s[s.case.isin(cases)]
         means = {m: s[s.method == m].groupby("train_seed").cost.mean().mean() for m in present}
         best = min(means, key=means.get)
         own, base = s[s.method == mpc], s[s.method == baseline]
         time_rel = own.travel_time.mean() / base.travel_time.mean() - 1.0
-        rows.append({"signals": signals, "cases": len(cases), "mpc_cost": float(own.cost.mean()),
+        rows.append({"signals": signals, "cases": int(s.case.nunique()), "mpc_cost": float(own.cost.mean()),
                      "best_learned": best, "best_cost": float(means[best]),
                      "mpc_time": float(own.travel_time.mean()), "baseline_time": float(base.travel_time.mean()),
                      "time_rel": float(time_rel), "cost_met": bool(own.cost.mean() < means[best]),
                      "time_met": bool(time_rel <= TIME_SLACK)})
     return pd.DataFrame(rows)
+
+
+def common_cases(results: pd.DataFrame, methods: list[str]) -> set[int]:
+    """The cases every one of ``methods`` ran in ``results``."""
+    cases = [set(results[results.method == m].case) for m in methods]
+    return set.intersection(*cases) if cases else set()
 
 
 def case_split(results: pd.DataFrame, phi: float, signals: str, method: str, mpc: str = "mpc") -> pd.DataFrame:
@@ -90,16 +94,28 @@ def lines(results: pd.DataFrame, phis: dict[str, float], run_dir: Path, learned:
                 f"{100 * g.time_rel:+.1f}% against the baseline's {g.baseline_time:.1f} s: **{verdict}**.", ""]
         if verdict == "met":
             continue
-        split = case_split(results, phis[g.signals], g.signals, g.best_learned)
+        halves = ([f"cost {100 * (g.mpc_cost / g.best_cost - 1):+.1f}% against {g.best_learned}"] if not g.cost_met
+                  else []) + ([f"travel time {100 * g.time_rel:+.1f}% against the baseline"] if not g.time_met else [])
+        setting = results[(results.signals == g.signals)
+                          & results.case.isin(common_cases(results[results.signals == g.signals],
+                                                           ["mpc", "baseline", g.best_learned]))]
+        split = case_split(setting, phis[g.signals], g.signals, g.best_learned)
         broke, kept = split[split.broke], split[~split.broke]
-        events = first_events(results, run_dir, g.signals)
-        counts = ", ".join(f"{e} {n}" for e, n in events.event.value_counts().items()) if len(events) else "no step logs"
-        out += [f"Why ({g.signals}): on the {len(broke)} cases where mpc is more than {SLOWER_S:.0f} s slower than "
-                f"{g.best_learned} (seed mean), mpc costs {broke.cost_mpc.mean():.1f} Wh against "
-                f"{broke.cost_other.mean():.1f}; on the other {len(kept)}, {kept.cost_mpc.mean():.1f} against "
-                f"{kept.cost_other.mean():.1f}. The event that first broke the first plan: {counts}"
-                + (f" (median {events.after_s.median():.0f} s after the departure); the delay over the first plan's "
-                   f"travel time: median {events.delay_s.median():.1f} s, over 45 s on "
-                   f"{int((events.delay_s > 45).sum())} cases." if len(events) else ".")
-                + " A missed green window costs up to a cycle (docs/mpc.md).", ""]
+        why = [f"Why ({g.signals}; missed on {' and '.join(halves)}):"]
+        for part, name in ((broke, f"where mpc is more than {SLOWER_S:.0f} s slower than {g.best_learned} (seed mean)"),
+                           (kept, "where it is not")):
+            if len(part):
+                why.append(f"on the {len(part)} cases {name}, mpc costs {part.cost_mpc.mean():.1f} Wh against "
+                           f"{part.cost_other.mean():.1f};")
+        events = first_events(setting, run_dir, g.signals)
+        if len(events):
+            counts = ", ".join(f"{e} {n}" for e, n in events.event.value_counts().items())
+            when = events.after_s.dropna()
+            why.append(f"the event that first broke the first plan: {counts}"
+                       + (f" (median {when.median():.0f} s after the departure)" if len(when) else "")
+                       + f"; the delay over the first plan's travel time: median {events.delay_s.median():.1f} s, "
+                       f"over {LATE_S:.0f} s on {int((events.delay_s > LATE_S).sum())} cases.")
+        else:
+            why.append("no step log of mpc carries its re-plans.")
+        out += [" ".join(why) + " A missed green window costs up to a cycle (docs/mpc.md).", ""]
     return out

@@ -151,11 +151,12 @@ class MPCAgent(NotLearning):
             else:
                 self.counts["relaxed"] += new.leader == "relaxed"
                 self.k0, self.x, self.v = k, new.x, new.v
-                head = slice(0, LOGGED_STEPS + 1)
-                self.events.append({"time": float(info["time"]), "event": event, "leader": new.leader,
-                                    "wall_ms": round((time.perf_counter() - started) * 1e3, LOG_DECIMALS),
-                                    "x": np.round(new.x[head], LOG_DECIMALS).tolist(),
-                                    "speed": np.round(new.v[head], LOG_DECIMALS).tolist()})
+            head = slice(0, LOGGED_STEPS + 1)
+            self.events.append({"time": float(info["time"]), "event": event,
+                                "leader": "lost" if new is None else new.leader,
+                                "wall_ms": round((time.perf_counter() - started) * 1e3, LOG_DECIMALS),
+                                "x": np.round(self.x[head], LOG_DECIMALS).tolist(),
+                                "speed": np.round(self.v[head], LOG_DECIMALS).tolist()})
         idx = k - self.k0
         target = float(self.v[idx + 1]) if idx + 1 < len(self.v) else cfg.speed_limit
         accel = min(max((target - speed) / dt, cfg.a_min), cfg.a_max)

@@ -236,11 +236,14 @@ class _Run:
         self.states += out.states
         return out
 
-    def certified(self, lat: _Lattice, slack: int = 0, prune: bool = True) -> tuple[int, _Solution]:
+    def certified(self, lat: _Lattice, slack: int = 0, prune: bool = True,
+                  patient: bool = True) -> tuple[int, _Solution]:
         """Global pass of the "cost" objective on a horizon that provably does not bind; ``slack``
         > 0: ``slack`` steps longer, keeping every step's values (``solve``). ``prune`` (``slack``
         0 only): the horizon comes from the cost of a plan solved on the lattice half as fine
-        (``_upper``), which shrinks the band without changing the optimum or its plan."""
+        (``_upper``), which shrinks the band without changing the optimum or its plan.
+        ``patient=False``: ValueError at once where the first horizon has no plan, instead of
+        doubling it (a coarse lattice's pass is worth nothing then)."""
         cor, dt, least = self.cor, self.cfg.step_length, LeastCost(self.cor, self.cfg, self.phi)
         if least.rate <= 0:
             raise ValueError("phi = 0 and no constant power intake: no horizon; use objective='energy'")
@@ -256,6 +259,8 @@ class _Run:
         while horizon * dt <= MAX_HORIZON:
             sol = self.backward(lat, lat.windows(horizon), keep=slack > 0)
             if not np.isfinite(sol.value):
+                if not patient:
+                    raise ValueError(f"no plan within {horizon} steps")
                 horizon *= 2
             elif sol.value <= least.after(horizon):
                 return horizon, sol  # no plan slower than the horizon can cost less (module docstring)
@@ -266,12 +271,15 @@ class _Run:
     def _upper(self, lat: _Lattice) -> float | None:
         """E + phi T [Wh] of the optimal plan on the lattice with twice the speed cell (its
         states lie on ``lat``, so the plan is one of ``lat``'s), solved the same way in turn;
-        None where ``lat`` has no such coarser lattice or it has no plan."""
+        None where ``lat`` has no such coarser lattice, the coarser one cannot both speed up and
+        slow down within a step, or it has no plan within its first horizon."""
         if lat.nv % 2 or lat.nv // 2 < COARSEST:
             return None
         coarse = _Lattice(self.cor, self.cfg, lat.nv // 2, lat.krauss)
+        if coarse.d_max < 1 or coarse.d_min > -1:
+            return None
         try:
-            _, sol = self.certified(coarse)
+            _, sol = self.certified(coarse, patient=False)
         except ValueError:
             return None
         return self.objective(coarse.extract(sol)[1], coarse)

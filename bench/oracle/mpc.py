@@ -278,6 +278,8 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
         block = buf[jlo:jhi + 1, lo:hi + 1]
         block[np.arange(lo, hi + 1)[None, :] > top[:, None]] = np.inf
 
+    if steps == 0 and nwin[0] > nwin[1]:  # no look-ahead and a start outside the table's window
+        return None
     keep_gap(nxt, steps, nwin)
     args: list[np.ndarray | None] = [None] * steps
     no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))

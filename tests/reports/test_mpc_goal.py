@@ -60,3 +60,13 @@ def test_the_report_lines_read_the_first_event_from_the_step_logs(tmp_path):
     assert "on the 2 cases where mpc is more than 30 s slower" in text
     assert "leader 2" in text and "drift 1" in text and "none 1" in text
     assert mpc_goal.lines(table[table.method != "mpc"], {"uncoordinated": 1.0}, tmp_path, ("prl",)) == []
+
+
+def test_a_miss_on_travel_time_alone_names_that_half_and_prints_no_nan(tmp_path):
+    rows = _rows("baseline", -1, [200.0, 200.0]) + _rows("prl", 0, [215.0, 215.0])
+    rows += _rows("mpc", -1, [220.0, 220.0], energy=50.0, mcap="mpc/case-{case:03d}.mcap")
+    text = "\n".join(mpc_goal.lines(pd.DataFrame(rows), {"uncoordinated": 1.0}, tmp_path, ("prl",)))
+    assert "**missed**" in text and "missed on travel time +10.0% against the baseline" in text
+    assert "cost +" not in text.split("Why")[1]  # the cost half is met: not named as missed
+    assert "nan" not in text and "where it is not, mpc costs 270.0 Wh against 315.0" in text
+    assert "no step log of mpc carries its re-plans" in text

@@ -83,8 +83,9 @@ def test_an_unknown_kernel_is_refused():
 # resistance (the lower bound's work term is negative there)
 PRUNED = [({}, 200.0), ({"signals": "uncoordinated"}, 231.0), ({"n_intersections": 1, "spacing": 200.0}, 20.0),
           ({"lanes": 3, "spacings": (300.0, 650.0, 180.0), "n_intersections": 4, "signals": "uncoordinated"}, 95.0),
-          ({"signals": "uncoordinated", "phi": 0.3}, 260.0)]
-IDS = ["coordinated", "uncoordinated", "short", "uneven", "phi 0.3"]
+          ({"signals": "uncoordinated", "phi": 0.3}, 260.0),
+          ({"step_length": 0.5, "n_intersections": 2, "signals": "uncoordinated"}, 57.0)]  # its 7-cell lattice cannot speed up
+IDS = ["coordinated", "uncoordinated", "short", "uneven", "phi 0.3", "dt 0.5"]
 
 
 def _config(scenario: dict) -> ScenarioConfig:
