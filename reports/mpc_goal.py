@@ -42,6 +42,8 @@ def goal(results: pd.DataFrame, phi: float, learned: tuple[str, ...], baseline: 
         time_rel = own.travel_time.mean() / base.travel_time.mean() - 1.0
         rows.append({"signals": signals, "cases": int(s.case.nunique()), "mpc_cost": float(own.cost.mean()),
                      "best_learned": best, "best_cost": float(means[best]),
+                     "ahead": ", ".join(f"{m} {means[m]:.1f}" for m in sorted(means, key=means.get)
+                                        if means[m] <= own.cost.mean()),
                      "mpc_time": float(own.travel_time.mean()), "baseline_time": float(base.travel_time.mean()),
                      "time_rel": float(time_rel), "cost_met": bool(own.cost.mean() < means[best]),
                      "time_met": bool(time_rel <= TIME_SLACK)})
@@ -102,6 +104,8 @@ def lines(results: pd.DataFrame, phis: dict[str, float], run_dir: Path, learned:
         split = case_split(setting, phis[g.signals], g.signals, g.best_learned)
         broke, kept = split[split.broke], split[~split.broke]
         why = [f"Why ({g.signals}; missed on {' and '.join(halves)}):"]
+        if g.ahead:
+            why.append(f"the learned methods that cost no more than mpc: {g.ahead} Wh (across-seed means);")
         for part, name in ((broke, f"where mpc is more than {SLOWER_S:.0f} s slower than {g.best_learned} (seed mean)"),
                            (kept, "where it is not")):
             if len(part):

@@ -59,6 +59,7 @@ def test_the_report_lines_read_the_first_event_from_the_step_logs(tmp_path):
     assert "**missed**" in text and "prl" in text
     assert "on the 2 cases where mpc is more than 30 s slower" in text
     assert "leader 2" in text and "drift 1" in text and "none 1" in text
+    assert "cost no more than mpc: prl 292.0 Wh" in text and "dqn" not in text.split("cost no more than mpc")[1].split("\n")[0]
     assert mpc_goal.lines(table[table.method != "mpc"], {"uncoordinated": 1.0}, tmp_path, ("prl",)) == []
 
 
