@@ -55,14 +55,19 @@ def sections(run_dir: Path, out: Path) -> tuple[list[str], list[tuple[str, Path]
         md += ["## Sensitivity heatmap (fig:heatmap)", "", "No cell of the heatmap has finished yet.", ""]
     if not sweep.empty:
         grids = {m: metrics.heatmap_grid(sweep, m) for m in ("energy", "travel_time")}
-        p = figures.heatmaps(grids, figs)
+        seeds = {m: metrics.heatmap_seeds(sweep, m) for m in grids}
+        p = figures.heatmaps(grids, figs, seeds)
         images.append(("sensitivity heatmap", p[0]))
         best = sweep.loc[sweep.energy.idxmin()]
         md += ["## Sensitivity heatmap (fig:heatmap)", "",
                f"|r_p^c| = 50; {_budget(sweep)}; {int(sweep.cases.max())} test cases per "
                f"cell. Lowest energy at |r_p^s| = {best.reward_speed_penalty:g}, |r_p^j| = {best.reward_jerk_penalty:g} "
                f"(the paper chose {HEATMAP_CHOICE[0]:g} and {HEATMAP_CHOICE[1]:g}).", "", f"![heatmap](figures/{p[0].name})", "",
+               "Each cell is the mean over its training seeds.", "",
                "Energy [Wh]:", "", _table(grids["energy"]), "", "Travel time [s]:", "", _table(grids["travel_time"]), "",
+               "Training seeds per cell:", "", _table(seeds["energy"][0]), "",
+               "Range over the seeds (max - min; empty with one seed), energy [Wh]:", "", _table(seeds["energy"][1]), "",
+               "and travel time [s]:", "", _table(seeds["travel_time"][1]), "",
                "The paper's claims on these cells (`reports/claims.py`):", "",
                _table(claims.heatmap_claims(sweep).set_index("claim")), ""]
     lateral = run_dir / "lateral" / "lateral.parquet"

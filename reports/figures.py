@@ -90,18 +90,31 @@ def reward_study(curves: pd.DataFrame, out: Path) -> list[Path]:
     return save(fig, out, "reward-study")
 
 
-def heatmaps(grids: dict[str, pd.DataFrame], out: Path) -> list[Path]:
-    """fig:heatmap: test-case means over the |r_p^s| x |r_p^j| grid."""
-    fig, axes = plt.subplots(1, len(grids), figsize=(6 * len(grids), 4.5))
+def heatmaps(grids: dict[str, pd.DataFrame], out: Path,
+             seeds: dict[str, tuple[pd.DataFrame, pd.DataFrame]] | None = None) -> list[Path]:
+    """fig:heatmap: test-case means over the |r_p^s| x |r_p^j| grid, averaged over seeds; with
+    ``seeds`` (``metrics.heatmap_seeds`` per metric) each cell also shows its number of seeds and
+    their range (max - min)."""
+    fig, axes = plt.subplots(1, len(grids), figsize=(6.5 * len(grids), 5))
     for ax, (metric, grid) in zip(np.atleast_1d(axes), grids.items()):
         im = ax.imshow(grid.to_numpy(), origin="lower", cmap="viridis")
         ax.set_xticks(range(grid.shape[1]), [f"{v:g}" for v in grid.columns])
         ax.set_yticks(range(grid.shape[0]), [f"{v:g}" for v in grid.index])
         ax.set_xlabel("|r_p^j| [reward units]")
         ax.set_ylabel("|r_p^s| [reward units]")
+        count, spread = seeds[metric] if seeds and metric in seeds else (None, None)
         for (i, j), v in np.ndenumerate(grid.to_numpy()):
-            ax.text(j, i, f"{v:.1f}", ha="center", va="center", color="w", fontsize=8)
+            if np.isnan(v):
+                continue
+            text = f"{v:.1f}"
+            if count is not None:
+                n, r = count.iat[i, j], spread.iat[i, j]
+                text += f"\n{int(n)} seed{'s' if n > 1 else ''}" + ("" if np.isnan(r) else f"\nrange {r:.1f}")
+            ax.text(j, i, text, ha="center", va="center", color="k" if im.norm(v) > 0.65 else "w",  # readable on yellow
+                    fontsize=6.5 if count is not None else 8)
         fig.colorbar(im, ax=ax, label=LABELS[metric])
+    if seeds:
+        fig.suptitle("mean over training seeds; below it, the seeds and their range (max - min)")
     return save(fig, out, "heatmap")
 
 

@@ -224,6 +224,15 @@ def heatmap_grid(sweep: pd.DataFrame, metric: str) -> pd.DataFrame:
     return sweep.pivot_table(index="reward_speed_penalty", columns="reward_jerk_penalty", values=metric, aggfunc="mean")
 
 
+def heatmap_seeds(sweep: pd.DataFrame, metric: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per cell of ``heatmap_grid``: (the number of training seeds, the range max - min of
+    ``metric`` over them; NaN for a cell with one seed)."""
+    grid = {"index": "reward_speed_penalty", "columns": "reward_jerk_penalty", "values": metric}
+    seeds = sweep.pivot_table(**grid, aggfunc="count")
+    spread = sweep.pivot_table(**grid, aggfunc=lambda v: v.max() - v.min() if len(v) > 1 else np.nan)
+    return seeds, spread.reindex_like(seeds)
+
+
 def mixed_cells(cells: pd.DataFrame) -> pd.DataFrame:
     """Mean over repetitions per (signals, MPR, demand) of fleet, CV and HDV energy, time and speed."""
     cols = [c for c in cells.columns if c.split("_", 1)[0] in ("all", "cv", "hdv")]
