@@ -18,6 +18,7 @@ import pandas as pd
 
 from ecodrive_bench.bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
 from ecodrive_bench.bench.paper import TABLE4 as PAPER
+from ecodrive_bench.reports.metrics import heatmap_cells
 
 PASS, FAIL, NOT_CHECKED = "PASS", "FAIL", "NOT CHECKED"
 STATUSES = (PASS, FAIL, NOT_CHECKED)
@@ -271,40 +272,66 @@ def complete_block(cells: pd.DataFrame) -> pd.DataFrame:
     return cells[cells.reward_speed_penalty.isin(rows) & cells.reward_jerk_penalty.isin(cols)]
 
 
-def heatmap_claims(sweep: pd.DataFrame) -> pd.DataFrame:
+MIN_SEEDS = 2  # [-] a heatmap cell enters the claims with this many training seeds whose trips all finish
+
+
+def _count(seeds: pd.Series) -> str:
+    lo, hi = int(seeds.min()), int(seeds.max())
+    return f"{lo}" if lo == hi else f"{lo}-{hi}"
+
+
+def heatmap_claims(sweep: pd.DataFrame, min_seeds: int = MIN_SEEDS) -> pd.DataFrame:
     """Section 5.2, fig:heatmap, on the cell means (over seeds) of the grid's largest complete block
-    (``complete_block``), which needs at least two values of each penalty: (1) a larger |r_p^s|
-    shortens the travel time (negative Spearman rank correlation over the cells) and (2) raises
-    the energy (positive); (3) |r_p^j| matters less than |r_p^s|: the range of the per-|r_p^j|
-    means is smaller than the range of the per-|r_p^s| means, for energy and travel time. Jobs
-    that leave test trips unfinished (``unfinished_jobs``) are named, not averaged."""
+    (``complete_block``) of cells with ``min_seeds`` seeds each, which needs at least two values of
+    each penalty: (1) a larger |r_p^s| shortens the travel time (negative Spearman rank correlation
+    over the cells) and (2) raises the energy (positive); (3) |r_p^j| matters less than |r_p^s|:
+    the range of the per-|r_p^j| means is smaller than the range of the per-|r_p^s| means, for
+    energy and travel time. The yardstick is the seeds' spread: the mean over the block's cells of
+    the range over their seeds. An effect (a range of per-value means, or the difference of two)
+    within it decides nothing: the claim is NOT CHECKED and says so. Jobs that leave test trips
+    unfinished (``unfinished_jobs``) are named, not averaged."""
     out = []
     lost = unfinished_jobs(sweep)  # a cell's jobs that crawl to the truncation are named, not averaged
-    done = sweep.drop(lost.index)
-    cells = (done.groupby(["reward_speed_penalty", "reward_jerk_penalty"])[["energy", "travel_time"]].mean()
-             .reset_index() if len(done) else pd.DataFrame())
-    block = complete_block(cells)
+    cells = heatmap_cells(sweep.drop(lost.index))  # ``reports.metrics``
+    block = complete_block(cells[cells.seeds >= min_seeds])
     enough = not block.empty and block.reward_speed_penalty.nunique() >= 2 and block.reward_jerk_penalty.nunique() >= 2
-    wait = (f"needs a complete block of two |r_p^s| x two |r_p^j| values; the largest has "
-            f"{block.reward_speed_penalty.nunique() if len(block) else 0} x {block.reward_jerk_penalty.nunique() if len(block) else 0}")
+    wait = (f"needs a complete block of two |r_p^s| x two |r_p^j| values with {min_seeds} seeds in every cell; the "
+            f"largest has {block.reward_speed_penalty.nunique() if len(block) else 0} x "
+            f"{block.reward_jerk_penalty.nunique() if len(block) else 0}")
     where = (f"{len(block)} cells: |r_p^s| {', '.join(f'{v:g}' for v in sorted(set(block.reward_speed_penalty)))} x "
-             f"|r_p^j| {', '.join(f'{v:g}' for v in sorted(set(block.reward_jerk_penalty)))}" if enough else "")
+             f"|r_p^j| {', '.join(f'{v:g}' for v in sorted(set(block.reward_jerk_penalty)))}, "
+             f"{_count(block.seeds)} seeds each" if enough else "")
     where += _unfinished_text(lost) if "config" in lost else ""
+    noise = {m: float(block[f"{m}_range"].mean()) for m, _ in METRICS} if enough else {}  # NaN: no cell has two
+    units = dict(METRICS)
     for metric, sign, what in (("travel_time", -1, "shortens the travel time"), ("energy", 1, "raises the energy")):
         claim = f"a larger |r_p^s| {what}"
         if not enough:
             out.append(_row(claim, None, wait))
             continue
         rho = block.reward_speed_penalty.corr(block[metric], method="spearman")
-        out.append(_row(claim, None if pd.isna(rho) else bool(sign * rho > 0),
-                        f"Spearman rank correlation {rho:+.2f} over {where}"))
+        means = block.groupby("reward_speed_penalty")[metric].mean()
+        effect, u = float(means.max() - means.min()), units[metric]
+        decided = effect > noise[metric] and not pd.isna(rho)
+        out.append(_row(claim, bool(sign * rho > 0) if decided else None,
+                        f"Spearman rank correlation {rho:+.2f}; |r_p^s| moves the mean by {effect:.1f} {u} against "
+                        f"the seeds' spread of {noise[metric]:.1f} {u}" + ("" if decided else ": within it, not decided")
+                        + f" ({where})"))
     claim = "|r_p^j| matters less than |r_p^s|"
     if not enough:
         out.append(_row(claim, None, wait))
     else:
         spans = {m: [float(block.groupby(f)[m].mean().agg(lambda x: x.max() - x.min()))
                      for f in ("reward_speed_penalty", "reward_jerk_penalty")] for m, _ in METRICS}
-        out.append(_row(claim, all(j < s for s, j in spans.values()), "; ".join(
-            f"{m}: range {s:.1f} {u} over |r_p^s|, {j:.1f} {u} over |r_p^j|"
-            for (m, u), (s, j) in zip(METRICS, spans.values())) + f" ({where})"))
+        decided = {m: abs(sp - jp) > noise[m] for m, (sp, jp) in spans.items()}
+        if any(decided[m] and jp > sp for m, (sp, jp) in spans.items()):
+            ok: bool | None = False
+        elif all(decided[m] for m in spans):
+            ok = all(jp < sp for sp, jp in spans.values())
+        else:
+            ok = None
+        out.append(_row(claim, ok, "; ".join(
+            f"{m}: range {sp:.1f} {u} over |r_p^s|, {jp:.1f} {u} over |r_p^j|, seeds' spread {noise[m]:.1f} {u}"
+            for (m, u), (sp, jp) in zip(METRICS, spans.values()))
+            + ("" if ok is not None else ": a difference within the spread decides nothing") + f" ({where})"))
     return pd.DataFrame(out)

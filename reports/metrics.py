@@ -224,13 +224,24 @@ def heatmap_grid(sweep: pd.DataFrame, metric: str) -> pd.DataFrame:
     return sweep.pivot_table(index="reward_speed_penalty", columns="reward_jerk_penalty", values=metric, aggfunc="mean")
 
 
+def heatmap_cells(sweep: pd.DataFrame) -> pd.DataFrame:
+    """Per (|r_p^s|, |r_p^j|) cell: the mean energy and travel time over its seeds, their range
+    over the seeds (``energy_range``, ``travel_time_range``; NaN with one seed) and the number of
+    seeds (``seeds``)."""
+    keys = ["reward_speed_penalty", "reward_jerk_penalty"]
+    if sweep.empty:
+        return pd.DataFrame(columns=keys + ["energy", "travel_time", "energy_range", "travel_time_range", "seeds"])
+    g = sweep.groupby(keys)[["energy", "travel_time"]]
+    spread = g.agg(lambda v: v.max() - v.min() if len(v) > 1 else np.nan).add_suffix("_range")  # none with one seed
+    return g.mean().join(spread).assign(seeds=g.size()).reset_index()
+
+
 def heatmap_seeds(sweep: pd.DataFrame, metric: str) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per cell of ``heatmap_grid``: (the number of training seeds, the range max - min of
-    ``metric`` over them; NaN for a cell with one seed)."""
-    grid = {"index": "reward_speed_penalty", "columns": "reward_jerk_penalty", "values": metric}
-    seeds = sweep.pivot_table(**grid, aggfunc="count")
-    spread = sweep.pivot_table(**grid, aggfunc=lambda v: v.max() - v.min() if len(v) > 1 else np.nan)
-    return seeds, spread.reindex_like(seeds)
+    ``metric`` over them; NaN for a cell with one seed), from ``heatmap_cells``."""
+    cells = heatmap_cells(sweep)
+    pivot = {"index": "reward_speed_penalty", "columns": "reward_jerk_penalty"}
+    return cells.pivot(**pivot, values="seeds"), cells.pivot(**pivot, values=f"{metric}_range")
 
 
 def mixed_cells(cells: pd.DataFrame) -> pd.DataFrame:
