@@ -46,12 +46,13 @@ def name(value: str) -> str:
 def int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:
     """An integer in [lo, hi] (hi None: no upper bound)."""
     def parse(value: str) -> int:
+        accepted = f"accepted: {lo}..{'' if hi is None else hi}"
         try:
             v = int(value)
         except ValueError:
-            v = None
-        if v is None or v < lo or (hi is not None and v > hi):
-            raise argparse.ArgumentTypeError(f"{value!r} is out of range; accepted: {lo}..{'' if hi is None else hi}")
+            raise argparse.ArgumentTypeError(f"{value!r} is not an integer; {accepted}") from None
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{value!r} is out of range; {accepted}")
         return v
     parse.__name__ = "integer"
     return parse
@@ -60,14 +61,14 @@ def int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:
 def float_in(lo: float | None, hi: float | None, lo_open: bool = False) -> Callable[[str], float]:
     """A finite float in [lo, hi] (or (lo, hi] with lo_open; None: no bound on that side)."""
     def parse(value: str) -> float:
+        left = "(-inf" if lo is None else f"{'(' if lo_open else '['}{lo}"
+        right = "inf)" if hi is None else f"{hi}]"
         try:
             v = float(value)
         except ValueError:
-            v = float("nan")
+            raise argparse.ArgumentTypeError(f"{value!r} is not a number; accepted: {left}, {right}") from None
         low = lo is None or (v > lo if lo_open else v >= lo)
         if not (math.isfinite(v) and low and (hi is None or v <= hi)):
-            left = "(-inf" if lo is None else f"{'(' if lo_open else '['}{lo}"
-            right = "inf)" if hi is None else f"{hi}]"
             raise argparse.ArgumentTypeError(f"{value!r} is out of range; accepted: {left}, {right}")
         return v
     parse.__name__ = "number"

@@ -109,8 +109,13 @@ def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page, run_
     phis = headline.phis(results, manifest)
     shares = pd.concat([metrics.headroom(results[results.signals == s], phi) for s, phi in phis.items()],
                        ignore_index=True)
+    goal = mpc_goal.lines(results, phis, run_dir, LEARNED)
     if shares.empty:
-        return []
+        if "mpc" not in set(results.method):
+            return goal
+        return ["## Headroom: how much of what information can buy a method buys", "",
+                "Not in this run: the share of the gap needs baseline0 and mpc on the same cases "
+                "(`ecodrive run --methods baseline0 mpc ...`).", ""] + goal
     atomic_csv(shares, out / "headroom.csv")
     p = figures.headroom(shares, out / "figures")
     caption = ("Share of the cost gap between baseline0 (steady driving, no information) and mpc (perfect signal "
@@ -126,7 +131,7 @@ def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page, run_
                   "between baseline0 and mpc.", ""]
     lines += [f"![headroom](figures/{p[0].name})", "",
               tables.frame_markdown(shares.set_index(["method", "signals"]), digits=3), ""]
-    return lines + mpc_goal.lines(results, phis, run_dir, LEARNED)
+    return lines + goal
 
 
 def _manifest(run_dir: Path) -> dict:

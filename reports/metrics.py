@@ -157,7 +157,7 @@ def headroom(results: pd.DataFrame, phi: float, low: str = "baseline0", high: st
             lo, hi = stratified_seed_bootstrap(mat)
             share = [(c_low - c) / span if span != 0 else float("nan") for c in (mat.mean(), hi, lo)]
             rows.append({"method": method, "signals": signals, "seeds": len(seeds), "cases": len(cases),
-                         "cost_low": float(c_low), "cost_high": float(c_high), "cost": float(mat.mean()),
+                         f"cost_{low}": float(c_low), f"cost_{high}": float(c_high), "cost": float(mat.mean()),
                          "share_closed": share[0], "ci_low": share[1], "ci_high": share[2]})
     return pd.DataFrame(rows)
 

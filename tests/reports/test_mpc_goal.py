@@ -71,3 +71,13 @@ def test_a_miss_on_travel_time_alone_names_that_half_and_prints_no_nan(tmp_path)
     assert "cost +" not in text.split("Why")[1]  # the cost half is met: not named as missed
     assert "nan" not in text and "where it is not, mpc costs 270.0 Wh against 315.0" in text
     assert "no step log of mpc carries its re-plans" in text
+
+
+def test_the_report_checks_the_goal_without_baseline0_and_says_what_headroom_needs(tmp_path):
+    from ecodrive_bench.reports.build import _headroom
+    from ecodrive_bench.reports.html_parts import Page
+
+    lines = "\n".join(_headroom(_table(), {}, tmp_path, Page(run_name="t"), tmp_path))
+    assert "## Headroom" in lines and "needs baseline0 and mpc" in lines
+    assert "### mpc against its goal" in lines and "**missed**" in lines
+    assert _headroom(_table()[lambda d: d.method != "mpc"], {}, tmp_path, Page(run_name="t"), tmp_path) == []

@@ -252,7 +252,8 @@ def test_a_bad_mixed_flag_names_just_itself(argv, flag, value, accepted, monkeyp
         mixed.parse(argv)
     err = capsys.readouterr().err.strip().splitlines()
     assert e.value.code == 2
-    assert err == [f"ecodrive mixed: error: argument {flag}: {value} is out of range; accepted: {accepted}"]
+    why = "is not an integer" if ".." in accepted and not value.strip("'").lstrip("-").isdigit() else "is out of range"
+    assert err == [f"ecodrive mixed: error: argument {flag}: {value} {why}; accepted: {accepted}"]
 
 
 def test_mixed_errors_after_parsing_start_with_the_command(tmp_path, monkeypatch, capsys):

@@ -27,7 +27,8 @@ def test_a_bad_flag_names_just_itself(flag, value, accepted, capsys):
         stalls.main([flag, value])
     err = capsys.readouterr().err.strip().splitlines()
     assert e.value.code == 2
-    assert err == [f"ecodrive stalls: error: argument {flag}: {value!r} is out of range; accepted: {accepted}"]
+    why = "is not an integer" if ".." in accepted and not value.lstrip("-").isdigit() else "is out of range"
+    assert err == [f"ecodrive stalls: error: argument {flag}: {value!r} {why}; accepted: {accepted}"]
 
 
 def test_a_policy_error_has_the_command_prefix(monkeypatch, capsys):

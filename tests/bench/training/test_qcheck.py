@@ -126,4 +126,4 @@ def test_bad_cases_names_the_flag_value_and_range(value, monkeypatch, capsys):
         main(["--cases", value])
     err = capsys.readouterr().err.strip().splitlines()
     assert e.value.code == 2 and len(err) == 1
-    assert err[0] == f"ecodrive qcheck: error: argument --cases: {value!r} is out of range; accepted: 1..100"
+    assert err[0] == f"ecodrive qcheck: error: argument --cases: {value!r} is {'not an integer' if value == 'nan' else 'out of range'}; accepted: 1..100"
