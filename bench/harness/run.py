@@ -84,12 +84,14 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
             if m not in LEARNING:
                 runs.append((m, s, -1))
                 continue
-            seeds = [sd for sd in shipped_seeds(m, s, opts.models) if wanted is None or sd in wanted]
+            have = shipped_seeds(m, s, opts.models)
+            seeds = [sd for sd in have if wanted is None or sd in wanted]
             if not seeds:
                 if explicit:
                     raise UsageError(f"no trained policy for {m} / {s}"
                                      f"{'' if wanted is None else ' with training seed ' + ' or '.join(map(str, wanted))}"
-                                     f" (expected {family_dir(m, s, opts.models)}/s<seed>/); "
+                                     f" (expected {family_dir(m, s, opts.models)}/s<seed>/; "
+                                     f"{'seeds there: ' + ' '.join(map(str, have)) if have else 'none there'}); "
                                      f"train it: ecodrive train --method {m} --signals {s}")
                 skipped.append(f"{m}/{s}")
             runs.extend((m, s, sd) for sd in seeds)
