@@ -220,8 +220,9 @@ def reward_curves(train: pd.DataFrame) -> pd.DataFrame:
 
 
 def heatmap_grid(sweep: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """Mean test-case ``metric`` per (|r_p^s| rows, |r_p^j| columns), averaged over seeds."""
-    return sweep.pivot_table(index="reward_speed_penalty", columns="reward_jerk_penalty", values=metric, aggfunc="mean")
+    """Mean test-case ``metric`` (energy or travel_time) per (|r_p^s| rows, |r_p^j| columns),
+    averaged over seeds (``heatmap_cells``)."""
+    return heatmap_cells(sweep).pivot(index="reward_speed_penalty", columns="reward_jerk_penalty", values=metric)
 
 
 def heatmap_cells(sweep: pd.DataFrame) -> pd.DataFrame:

@@ -73,7 +73,7 @@ from ecodrive_bench.envs.config import ScenarioConfig
 from .corridor import MS, Corridor
 from .energy import energy_wh
 from .horizon import LeastCost
-from .kernel import backward_step, backward_step_in, backward_step_numpy
+from .kernel import backward_step_in, backward_step_numpy
 
 OBJECTIVES = ("cost", "energy")
 HORIZON_MARGIN = 10  # [steps] added to the first guess of the "cost" horizon
@@ -86,7 +86,8 @@ VERSION = 1  # [-] of the plans and values ``bound`` returns: bump it with any c
 
 COARSEST = 7  # [-] speed cells: ``_Run._upper`` halves the lattice down to this, no further
 KRAUSS_TAU = 1.0  # [s] SUMO's default tau: the ego's reaction time in Krauss' safe speed
-KERNELS = {"numba": backward_step, "numpy": backward_step_numpy}  # the inner loop, compiled or the reference
+# the inner loop, compiled (it skips landings outside the next step's window) or the numpy reference
+KERNELS = {"numba": backward_step_in, "numpy": backward_step_numpy}
 Window = tuple[int, int, int, int]  # rows lo..hi, speeds jlo..jhi evaluated at one step
 
 
@@ -398,11 +399,8 @@ def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], ti
                 r = np.nonzero(~green[k])[0]
                 red = (lat.cross_low[r], lat.cross_top[r])
             arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=arg_type)  # [speed, row]
-            if step is backward_step:  # the compiled kernel skips landings outside the next window
-                nlo, nhi, njlo, njhi = reg_nxt if reg_nxt is not None else (1, 0, 1, 0)
-                backward_step_in(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red, nlo, nhi, njlo, njhi, i_end)
-            else:
-                step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red)
+            step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red,
+                 *(reg_nxt if reg_nxt is not None else (1, 0, 1, 0)), i_end)  # nxt's finite window, empty at the end
             reg_cur = (lo, hi, jlo, jhi)
             policy[k] = (lo, jlo, arg)
             if values is not None:

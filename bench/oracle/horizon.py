@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 from ecodrive_bench.envs.config import ScenarioConfig
@@ -35,11 +36,12 @@ class LeastCost:
     cfg: ScenarioConfig
     phi: float  # [Wh/s]
 
-    @property
+    @cached_property
     def rate(self) -> float:
         """[Wh/step] what every step costs at least: phi dt and the auxiliaries' energy."""
         return (self.phi + self.cfg.ev.constant_power_intake / J_PER_WH) * self.cfg.step_length
 
+    @cached_property
     def _terms(self) -> tuple[float, float]:
         """(eta_rec times the work that does not depend on T [Wh], the air term's b [Wh step^2])."""
         ev, dt = self.cfg.ev, self.cfg.step_length
@@ -50,17 +52,17 @@ class LeastCost:
 
     def at(self, steps: float) -> float:
         """[Wh] no plan arriving in ``steps`` steps costs less."""
-        fixed, air = self._terms()
+        fixed, air = self._terms
         return self.rate * steps + fixed + air / steps ** 2
 
     def after(self, horizon: int) -> float:
         """[Wh] no plan slower than ``horizon`` steps costs less (the bound's minimum over T > horizon)."""
-        t_min = (2.0 * self._terms()[1] / self.rate) ** (1.0 / 3.0)  # [steps] the convex bound's minimiser
+        t_min = (2.0 * self._terms[1] / self.rate) ** (1.0 / 3.0)  # [steps] the convex bound's minimiser
         return self.at(max(horizon + 1.0, t_min))
 
     def last_steps(self, cost: float) -> int:
         """The most steps a plan costing at most ``cost`` [Wh] can take (at least 1)."""
-        fixed, _ = self._terms()
+        fixed, _ = self._terms
         steps = math.ceil((cost - min(fixed, 0.0)) / self.rate) + 1  # the bound exceeds ``cost`` from here on
         while steps > 1 and self.at(steps) > cost:
             steps -= 1

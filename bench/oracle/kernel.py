@@ -101,9 +101,12 @@ def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int,
 
 
 def backward_step_numpy(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
-                        d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray) -> None:
+                        d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray,
+                        *next_window: int) -> None:
     """``backward_step`` in numpy, one array operation per choice: the reference the compiled
-    kernel is tested against (and the DP's form before it; ``Grid(kernel="numpy")``)."""
+    kernel is tested against (and the DP's form before it; ``Grid(kernel="numpy")``).
+    ``next_window``: ``backward_step_in``'s last five arguments, accepted so that both kernels take
+    the same call, and unused: this form reads every landing."""
     nxt, cur, arg = nxt.T, cur.T, arg.T  # [rows, speeds] views
     nv, n_d = nxt.shape[1] - 1, step_cost.shape[1]
     n, m = hi - lo + 1, jhi - jlo + 1
