@@ -1,14 +1,14 @@
-"""Greedy acting in numpy: the acting networks' forward pass for one observation, from a numpy
-copy of their weights.
+"""Greedy acting without torch: the acting networks' forward pass for one observation, on numpy
+copies of their weights, compiled (``agents/kernels.py``).
 
 At batch 1 the networks are a few hundred thousand multiply-adds; torch spends several times that
-in per-op dispatch, module calls and oneDNN's setup of two tiny convolutions. Here the conv block
-is two matmuls over patches gathered with precomputed indices, the pools are maxima over gathered
-windows, and the dense layers are matrix-vector products: about twenty numpy calls per network.
+in per-op dispatch, module calls and oneDNN's setup of two tiny convolutions. Here an act is two
+compiled calls: the conv blocks of every net (gathered patches with precomputed indices, 2x2
+max pools over gathered windows), then the dense layers and the choice.
 
-The arithmetic is float32, as torch's, but not in torch's order (oneDNN and MKL accumulate
-differently from OpenBLAS), so outputs agree to float32 rounding, not bit for bit
-(tests/agents/test_inference.py). Exploration and the learners' updates keep the torch path.
+The arithmetic is float32, as torch's, but not in torch's order, so outputs agree to float32
+rounding, not bit for bit (tests/agents/test_inference.py). Exploration and the learners' updates
+keep the torch path.
 
 The copy follows the torch weights: before each forward ``NumpyNets.current`` compares the
 parameters' version counters (bumped by in-place ops: ``load_state_dict``, ``copy_`` or ``add_``
@@ -24,6 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from . import kernels
 from .nets import Head, _pairs
 
 
@@ -84,6 +85,7 @@ class NumpyNets:
         c1 = self.nets[0].conv.conv1.out_channels
         self.plan = ConvPlan(grid_shape, len(self.nets), c1)
         self.buf = np.zeros(self.plan.pooled + 1, dtype=np.float32)  # pooled maps, then the padding's zero
+        self.nf = self.nets[0].conv.conv2.out_channels * self.plan.pool2.shape[1]  # conv features per net
         self.versions: list[int] | None = None
 
     def current(self) -> NumpyNets:
@@ -104,76 +106,54 @@ class NumpyNets:
 
         convs = [net.conv for net in self.nets]
         self.w1 = a(torch.cat([c.conv1.weight.flatten(1) for c in convs]))  # (N c1, 9)
-        self.b1 = a(torch.cat([c.conv1.bias for c in convs]))[:, None]
+        self.b1 = a(torch.cat([c.conv1.bias for c in convs]))  # (N c1,)
         self.w2 = np.stack([a(c.conv2.weight.flatten(1)) for c in convs])  # (N, c2, c1 9)
-        self.b2 = np.stack([a(c.conv2.bias) for c in convs])[:, :, None]
-        self.dense = [[(a(lin.weight), a(lin.bias)) for lin in (net.mlp[0], net.mlp[2], net.mlp[4])]
+        self.b2 = np.stack([a(c.conv2.bias) for c in convs])  # (N, c2)
+        # each head's dense layers as (wt (in, out), bias): transposed for the kernels
+        self.dense = [[(np.ascontiguousarray(a(lin.weight).T), a(lin.bias)) for lin in (net.mlp[0], net.mlp[2], net.mlp[4])]
                       for net in self.nets]
+        self.weights = [tuple(x for layer in head for x in layer) for head in self.dense]  # the kernels' arguments
+
+    def block(self, grid: np.ndarray, logic: np.ndarray) -> np.ndarray:
+        """(N, features) rows: [conv features, logic] of each net for one grid (cells, lanes) and
+        scaled logic vector."""
+        p = self.plan
+        logic = np.asarray(logic, dtype=np.float32)
+        out = np.empty((len(self.nets), self.nf + logic.shape[0]), dtype=np.float32)
+        kernels.conv_block(np.ascontiguousarray(grid, dtype=np.float32).ravel(), p.conv1, self.w1, self.b1, p.pool1,
+                           p.conv2, self.w2, self.b2, p.pool2, self.buf, logic, out)
+        return out
 
     def features(self, grid: np.ndarray, logic: np.ndarray) -> list[np.ndarray]:
         """[conv features, logic] of each net for one grid (cells, lanes) and scaled logic vector."""
-        p = self.plan
-        n = len(self.nets)
-        y1 = self.w1 @ grid.take(p.conv1).astype(np.float32, copy=False)  # (N c1, h1 w1)
-        y1 += self.b1
-        pooled = self.buf[:-1].reshape(y1.shape[0], -1)
-        np.max(y1[:, p.pool1], axis=1, out=pooled)  # ReLU after the pool: the two commute
-        np.maximum(pooled, 0.0, out=pooled)
-        y2 = np.matmul(self.w2, self.buf[p.conv2])  # (N, c2, hp wp)
-        y2 += self.b2
-        f = y2[:, :, p.pool2].max(axis=2)  # (N, c2, H' W')
-        np.maximum(f, 0.0, out=f)
-        logic = np.asarray(logic, dtype=np.float32)
-        return [np.concatenate([f[i].ravel(), logic]) for i in range(n)]
+        return list(self.block(grid, logic))
 
     def mlp(self, i: int, z: np.ndarray) -> np.ndarray:
         """Net ``i``'s dense layers on ``z``: one input vector, or rows of inputs (R, in)."""
-        (w1, b1), (w2, b2), (w3, b3) = self.dense[i]
+        w = self.weights[i]
+        z = np.asarray(z, dtype=np.float32)
         if z.ndim == 1:
-            h = w1 @ z
-            h += b1
-            np.maximum(h, 0.0, out=h)
-            h2 = w2 @ h
-            h2 += b2
-            np.maximum(h2, 0.0, out=h2)
-            out = w3 @ h2
-            out += b3
-            return out
-        h = z @ w1.T
-        h += b1
-        np.maximum(h, 0.0, out=h)
-        h2 = h @ w2.T
-        h2 += b2
-        np.maximum(h2, 0.0, out=h2)
-        out = h2 @ w3.T
-        out += b3
-        return out
+            return kernels.mlp(np.ascontiguousarray(z), *w)
+        return np.stack([kernels.mlp(np.ascontiguousarray(row), *w) for row in z])
 
 
 def pdqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.ndarray,
                 multipass: bool) -> tuple[int, np.ndarray]:
     """(k, normalised parameters x) of ``PDQNAgent``'s greedy choice; ``nets`` are [Q, parameter
     network], ``logic`` is scaled. Multi-pass: Q_k from the pass whose input keeps only x_k."""
-    fq, fp = nets.features(grid, logic)
-    x = np.tanh(nets.mlp(1, fp))
-    k = x.shape[0]
-    if multipass:
-        z = np.zeros((k, fq.shape[0] + k), dtype=np.float32)
-        z[:, :fq.shape[0]] = fq
-        z[:, fq.shape[0]:] = np.diag(x)
-        q = nets.mlp(0, z).diagonal()
-    else:
-        q = nets.mlp(0, np.concatenate([fq, x]))
-    return int(np.argmax(np.where(mask, q, -np.inf))), x
+    feats = nets.block(grid, logic)
+    x = np.empty(nets.weights[1][-1].shape[0], dtype=np.float32)
+    k = kernels.pdqn(feats, *nets.weights[0], *nets.weights[1], np.asarray(mask, dtype=np.bool_), multipass, x)
+    return k, x
 
 
 def dqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.ndarray) -> int:
     """``DQNAgent``'s greedy action index over the allowed actions ``mask``; ``logic`` is scaled."""
-    q = nets.mlp(0, nets.features(grid, logic)[0])
-    return int(np.argmax(np.where(mask, q, -np.inf)))
+    q = kernels.mlp(nets.block(grid, logic)[0], *nets.weights[0])
+    return kernels.masked_argmax(q, np.asarray(mask, dtype=np.bool_))
 
 
 def ddpg_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, bound: str) -> np.ndarray:
     """``DDPGAgent``'s normalised acceleration in [-1, 1], shape (1,); ``logic`` is scaled."""
-    out = nets.mlp(0, nets.features(grid, logic)[0])
+    out = kernels.mlp(nets.block(grid, logic)[0], *nets.weights[0])
     return np.tanh(out) if bound == "tanh" else np.clip(out, -1.0, 1.0)

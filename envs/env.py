@@ -224,7 +224,7 @@ class EcoDriveEnv(gym.Env):
             energy=m.energy, terminated=terminated, total_energy=ego.energy, travel_time=travel_time,
             step_time=self.cfg.step_length,  # each step advances SUMO by one step
         )
-        obs = self._last_obs if gone else ego.observe()
+        obs = self._last_obs if gone else ego.observe(measured=True)
         self._last_obs = obs
         info = self._info(m, comps, travel_time)
         info["ego_left_simulation"] = gone

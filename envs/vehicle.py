@@ -53,9 +53,12 @@ class ControlledVehicle:
     _pending: tuple = ()
     _manoeuvre: int = 0  # SUMO direction of a change charged at its start whose lane index has not flipped yet
 
-    def observe(self) -> dict[str, np.ndarray]:
+    def observe(self, measured: bool = False) -> dict[str, np.ndarray]:
+        """The vehicle's observation now, its signal view, neighbours and lateral mask updated.
+        ``measured``: ``measure`` has just read the state after the last step, so it is not read again."""
         s = self.session
-        self.kin = s.kinematics(self.vid)
+        if not measured:
+            self.kin = s.kinematics(self.vid)
         obs, self.signal, self.others = self.obs_type.observe(s, self.vid, self.kin, s.neighbours(self.vid))
         lane = self.kin.lane
         # the road's lanes, not the observation's: a change into a padded lane is masked

@@ -201,3 +201,15 @@ def test_shipped_policies_act_as_the_torch_forward_on_real_observations(method, 
                 break
     finally:
         env.close()
+
+
+def test_masked_argmax_is_numpys():
+    """The compiled choice is ``np.argmax(np.where(mask, q, -inf))``: ties to the first, a NaN
+    wins where allowed, nothing allowed gives 0."""
+    from ecodrive_bench.agents.kernels import masked_argmax
+
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        q = rng.choice([-1.0, 0.0, 0.5, 2.0, np.nan, -np.inf], size=3).astype(np.float32)
+        mask = rng.random(3) < 0.7
+        assert masked_argmax(q, mask) == int(np.argmax(np.where(mask, q, -np.inf))), (q, mask)

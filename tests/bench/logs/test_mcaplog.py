@@ -123,3 +123,42 @@ def test_log_of_another_policy_is_not_reused(logged):
     assert episode_summary(path)["energy"] > 0
     assert episode_summary(path, agent_sha256="") is not None  # rule-based: written with no policy
     assert episode_summary(path, agent_sha256="0" * 64) is None  # the harness reruns it
+
+
+def test_batched_encoding_writes_the_same_bytes(logged, cases, tmp_path, monkeypatch):
+    """Steps are encoded STEP_BATCH at a time; one at a time gives the same file, byte for byte."""
+    from ecodrive_bench.bench.logs import mcaplog
+
+    monkeypatch.setattr(mcaplog, "STEP_BATCH", 1)
+    agent = BaselineAgent()
+    env = make_env(agent, "uncoordinated")
+    run_episode(env, agent, cases[0], "baseline", log_path=tmp_path / "case-000.mcap")
+    env.close()
+    assert (tmp_path / "case-000.mcap").read_bytes() == (logged[0] / "run0" / "case-000.mcap").read_bytes()
+
+
+def test_failing_agent_leaves_every_recorded_step_in_the_part(cases, tmp_path):
+    """An agent that raises mid-episode: the .part holds every step recorded before it (held
+    steps are encoded and the file closed properly), and no finished .mcap appears."""
+    from ecodrive_bench.bench.logs.mcaplog import STEP_BATCH
+
+    fail_at = STEP_BATCH + STEP_BATCH // 2  # some steps encoded, some still held
+
+    class Failing(BaselineAgent):
+        calls = 0
+
+        def act(self, obs, info, explore=False):
+            Failing.calls += 1
+            if Failing.calls > fail_at:
+                raise RuntimeError("agent broke")
+            return super().act(obs, info, explore)
+
+    agent = Failing()
+    env = make_env(agent, "uncoordinated")
+    target = tmp_path / "case-000.mcap"
+    with pytest.raises(RuntimeError, match="agent broke"):
+        run_episode(env, agent, cases[0], "baseline", log_path=target)
+    env.close()
+    assert not target.exists()
+    data = read_log(target.with_name(target.name + ".part"))
+    assert len(data.steps) == fail_at + 1 and data.episode is None  # the reset's step, then fail_at steps
