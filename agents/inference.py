@@ -2,8 +2,8 @@
 copies of their weights, compiled (``agents/kernels.py``).
 
 At batch 1 the networks are a few hundred thousand multiply-adds; torch spends several times that
-in per-op dispatch, module calls and oneDNN's setup of two tiny convolutions. Here an act is two
-compiled calls: the conv blocks of every net (gathered patches with precomputed indices, 2x2
+in per-op dispatch, module calls and oneDNN's setup of two tiny convolutions. Here an act is two or
+three compiled calls: the conv blocks of every net (gathered patches with precomputed indices, 2x2
 max pools over gathered windows), then the dense layers and the choice.
 
 The arithmetic is float32, as torch's, but not in torch's order, so outputs agree to float32

@@ -9,37 +9,22 @@ and keeps the kernel in Python (no build step).
 
 Layout: a dense layer's weight is stored transposed, ``wt`` of shape (in, out), so the product
 runs over the inputs and adds one contiguous row of weights per input (a loop numba vectorises
-without reordering any sum); inputs that are exactly zero (ReLU outputs, free grid cells) add
+without reordering any sum); inputs that are exactly zero (ReLU outputs, the lane one-hot's zeros) add
 nothing and are skipped. Each output is its bias plus the terms in input order, in float32:
 another order than BLAS's, so results agree with torch's to float32 rounding, not bit for bit
 (``tests/agents/test_inference.py``).
 
-The kernels compile on their first call (about 4 s on one core) and numba caches the machine
-code on disk, so later processes load it (about 0.4 s): the harness's workers, the tests. The
-cache is keyed by this file's path and modification time, so an edit recompiles.
+The kernels compile on their first call (about 4 s on one core); the machine code is cached on
+disk, so later processes load it in about 0.4 s (``envs/jit.py``).
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import TypeVar
-
 import numpy as np
-from numba import njit
 
-F = TypeVar("F", bound=Callable)
-
-
-def _compiled(fn: F) -> F:
-    """``fn`` compiled, its machine code cached on disk (next to this file, or in the user's
-    cache folder where this one is read-only); compiled in each process where neither is
-    writable."""
-    try:
-        return njit(nogil=True, cache=True)(fn)
-    except RuntimeError:  # numba: "cannot cache function ...: no locator available"
-        return njit(nogil=True)(fn)
+from ecodrive_bench.envs.jit import compiled
 
 
-@_compiled
+@compiled
 def conv_block(grid: np.ndarray, conv1: np.ndarray, w1: np.ndarray, b1: np.ndarray, pool1: np.ndarray,
                conv2: np.ndarray, w2: np.ndarray, b2: np.ndarray, pool2: np.ndarray, pooled: np.ndarray,
                logic: np.ndarray, out: np.ndarray) -> None:
@@ -91,7 +76,7 @@ def conv_block(grid: np.ndarray, conv1: np.ndarray, w1: np.ndarray, b1: np.ndarr
             out[b, c2 * q2 + i] = logic[i]
 
 
-@_compiled
+@compiled
 def dense(z: np.ndarray, wt: np.ndarray, b: np.ndarray, relu: bool, out: np.ndarray) -> None:
     """``out`` = ``b`` + ``wt``.T ``z`` (``wt`` (in, out)), then ReLU if ``relu``; zero inputs skipped."""
     out[:] = b
@@ -107,7 +92,7 @@ def dense(z: np.ndarray, wt: np.ndarray, b: np.ndarray, relu: bool, out: np.ndar
                 out[j] = 0.0
 
 
-@_compiled
+@compiled
 def mlp(z: np.ndarray, wt1: np.ndarray, b1: np.ndarray, wt2: np.ndarray, b2: np.ndarray, wt3: np.ndarray,
         b3: np.ndarray) -> np.ndarray:
     """A head's three dense layers (ReLU between) on one input vector."""
@@ -120,7 +105,7 @@ def mlp(z: np.ndarray, wt1: np.ndarray, b1: np.ndarray, wt2: np.ndarray, b2: np.
     return out
 
 
-@_compiled
+@compiled
 def masked_argmax(q: np.ndarray, mask: np.ndarray) -> int:
     """``np.argmax(np.where(mask, q, -inf))``: the first allowed maximum (a NaN wins, as in numpy)."""
     best, k = -np.inf, 0
@@ -133,7 +118,7 @@ def masked_argmax(q: np.ndarray, mask: np.ndarray) -> int:
     return k
 
 
-@_compiled
+@compiled
 def pdqn(feats: np.ndarray, q1: np.ndarray, qb1: np.ndarray, q2: np.ndarray, qb2: np.ndarray, q3: np.ndarray,
          qb3: np.ndarray, p1: np.ndarray, pb1: np.ndarray, p2: np.ndarray, pb2: np.ndarray, p3: np.ndarray,
          pb3: np.ndarray, mask: np.ndarray, multipass: bool, x: np.ndarray) -> int:
