@@ -34,9 +34,14 @@ def _index(x, n: int) -> bool:
     return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_)) and 0 <= int(x) < n
 
 
-def _vector(x, box: spaces.Box) -> bool:
+def _vector(x, box: spaces.Box, bounds: tuple[list[float], list[float]] | None = None) -> bool:
     """``x`` is real, finite, of the box's shape and inside its bounds once cast to its dtype
-    (so a float64 a hair past a float32 bound, which the cast rounds onto it, is inside)."""
+    (so a float64 a hair past a float32 bound, which the cast rounds onto it, is inside).
+    ``bounds``: the box's finite bounds as Python floats (``_bounds``), for the fast form."""
+    if bounds is not None and type(x) is np.ndarray and x.dtype == box.dtype and x.shape == box.shape:
+        # an agent's own array (the env's hot path): NaN fails every comparison and the bounds are
+        # finite, so an infinity fails one; no cast, the dtype is the box's
+        return all(lo <= v <= hi for v, lo, hi in zip(x.ravel().tolist(), *bounds))
     try:
         a = np.asarray(x)
     except Exception:  # ragged sequences and the like
@@ -45,6 +50,13 @@ def _vector(x, box: spaces.Box) -> bool:
         return False
     a = a.astype(box.dtype)
     return bool(np.all(a >= box.low) and np.all(a <= box.high))
+
+
+def _bounds(box: spaces.Box) -> tuple[list[float], list[float]] | None:
+    """The box's bounds as Python floats, element by element, if all are finite (else None)."""
+    if not (np.isfinite(box.low).all() and np.isfinite(box.high).all()):
+        return None
+    return box.low.ravel().tolist(), box.high.ravel().tolist()
 
 
 class ActionType:
@@ -78,11 +90,12 @@ class ParameterizedAction(ActionType):
             spaces.Discrete(3),
             spaces.Box(cfg.a_min, cfg.a_max, shape=(3,), dtype=np.float32),
         ))
+        self._bounds = _bounds(self.space[1])
 
     def contains(self, action) -> bool:
         if isinstance(action, np.ndarray) or not isinstance(action, (tuple, list)) or len(action) != 2:
             return False
-        return _index(action[0], 3) and _vector(action[1], self.space[1])
+        return _index(action[0], 3) and _vector(action[1], self.space[1], self._bounds)
 
     def decode(self, action) -> Command:
         k_idx, params = action
@@ -120,9 +133,10 @@ class LongitudinalAction(ActionType):
     def __init__(self, cfg: ScenarioConfig) -> None:
         super().__init__(cfg)
         self.space = spaces.Box(cfg.a_min, cfg.a_max, shape=(1,), dtype=np.float32)
+        self._bounds = _bounds(self.space)
 
     def contains(self, action) -> bool:
-        return _vector(action, self.space)
+        return _vector(action, self.space, self._bounds)
 
     def decode(self, action) -> Command:
         return Command(float(np.clip(np.asarray(action).reshape(-1)[0], self.cfg.a_min, self.cfg.a_max)), None)

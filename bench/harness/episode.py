@@ -122,6 +122,10 @@ def run_episode(
 
 
 def _flatten(action: Any) -> list[float]:
+    """The action's numbers in order, as floats (the step log's ``raw_action``)."""
+    if type(action) is tuple and len(action) == 2 and isinstance(action[0], (int, np.integer)) \
+            and type(action[1]) is np.ndarray and action[1].dtype.kind == "f":  # a P-DQN action: the fast form
+        return [float(action[0]), *action[1].ravel().tolist()]
     if isinstance(action, tuple):
         return [float(v) for part in action for v in np.ravel(part)]
     return [float(v) for v in np.ravel(action)]

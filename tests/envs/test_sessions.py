@@ -109,6 +109,9 @@ def env():
     (-1, np.zeros(3)), (3, np.zeros(3)), (1.7, np.zeros(3)), (True, np.zeros(3)),
     (1, np.full(3, np.nan)), (1, np.array([0.0, 100.0, 0.0])), (1, np.zeros(5)), (1, "abc"),
     (1, np.array([0.0, np.inf, 0.0])), (1, np.zeros(3), 0), np.zeros(4), None, 1,
+    (1, np.array([0.0, 100.0, 0.0], dtype=np.float32)), (1, np.full(3, np.nan, dtype=np.float32)),
+    (1, np.array([0.0, -np.inf, 0.0], dtype=np.float32)), (1, np.array([0.0, 0.0, np.nextafter(np.float32(3.0), 4)])),
+    (1, np.array([np.nextafter(np.float32(-4.0), -5), 0.0, 0.0], dtype=np.float32)),
 ])
 def test_an_action_outside_the_space_is_refused_and_not_simulated(env, action):
     t = env.session.time()
@@ -119,13 +122,14 @@ def test_an_action_outside_the_space_is_refused_and_not_simulated(env, action):
 
 def test_numbers_of_any_width_inside_the_space_are_accepted(env):
     for action in [(np.int64(1), np.zeros(3)), (1, [0.0, 3.0, -4.0]), [0, np.zeros(3, dtype=np.float64)],
-                   (np.array(2), np.full(3, -4.0, dtype=np.float32))]:
+                   (np.array(2), np.full(3, -4.0, dtype=np.float32)), (0, np.array([-4.0, 3.0, 0.5], dtype=np.float32))]:
         env.step(action)
 
 
 @pytest.mark.parametrize("kind,bad", [("discrete27", 27), ("discrete27", -1), ("discrete27", 2.0),
                                       ("longitudinal", np.array([3.5])), ("longitudinal", np.zeros(2)),
-                                      ("longitudinal", np.array([np.nan])), ("sumo", 1)])
+                                      ("longitudinal", np.array([np.nan])), ("longitudinal", np.array([3.5], dtype=np.float32)),
+                                      ("longitudinal", np.array([np.inf], dtype=np.float32)), ("sumo", 1)])
 def test_other_action_types_enforce_their_space(kind, bad):
     e = gym.make("EcoDrive-v0", signals="uncoordinated", action=kind).unwrapped
     e.reset(options=B)
@@ -138,15 +142,20 @@ def test_other_action_types_enforce_their_space(kind, bad):
 @settings(max_examples=300, deadline=None, derandomize=True)
 @given(k=st.one_of(st.integers(-5, 5), st.floats(allow_nan=True), st.booleans(), st.none(), st.text(max_size=2)),
        params=st.one_of(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), max_size=5),
-                        st.just("x"), st.none()))
-def test_action_check_agrees_with_the_space(k, params):
+                        st.just("x"), st.none()),
+       dtype=st.sampled_from([np.float64, np.float32]))
+def test_action_check_agrees_with_the_space(k, params, dtype):
     """The action parser accepts exactly the actions of the space (fuzzed), never raising
-    anything but ``InvalidAction``."""
+    anything but ``InvalidAction``; float32 arrays take the parser's fast form."""
     from ecodrive_bench.envs.action import make_action
     from ecodrive_bench.envs.config import ScenarioConfig
 
     at = make_action("parameterized", ScenarioConfig.from_dict({"signals": "uncoordinated"}))
-    action = (k, params if params is None or isinstance(params, str) else np.asarray(params, dtype=np.float64))
+    if params is None or isinstance(params, str):
+        action = (k, params)
+    else:
+        with np.errstate(over="ignore"):  # float64 beyond float32's range becomes an infinity
+            action = (k, np.asarray(params, dtype=np.float64).astype(dtype))
     arr = action[1] if isinstance(action[1], np.ndarray) else None
     inside = (isinstance(k, int) and not isinstance(k, bool) and 0 <= k < 3 and arr is not None
               and arr.shape == (3,) and bool(np.isfinite(arr).all())
