@@ -29,8 +29,8 @@ from ecodrive_bench.bench.logs import schema
 
 CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
 # steps held before they are encoded: encoded back to back, the protobuf and MCAP code stays in the
-# core's caches (about 3x faster a step than encoding each between two SUMO steps); fewer than a
-# chunk holds (about 130), so a killed run loses no more than the chunk it was filling
+# core's caches (about 3x faster a step than encoding each between two SUMO steps); a killed run
+# loses these besides the chunk it was filling (a chunk holds about 130 steps)
 STEP_BATCH = 64
 TOPICS = {"/meta": schema.Metadata, "/step": schema.Step, "/episode": schema.Episode,
           "/train": schema.TrainEpisode, "/fleet/vehicle": schema.FleetVehicle, "/fleet/cell": schema.FleetCell}

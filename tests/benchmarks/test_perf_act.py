@@ -1,8 +1,9 @@
 """pytest-benchmark: one greedy ``act`` (batch 1, ``explore=False``) of each learned method on a
 real observation, one thread, against a raw SUMO step (``test_raw_sumo_step``, same run).
 
-``test_greedy_act[method]`` is the path the harness drives (agents/inference.py: the networks in
-numpy); ``test_greedy_act_torch[method]`` the same act through torch's forward, for reference.
+``test_greedy_act[method]`` is the path the harness drives (agents/inference.py: compiled
+kernels over numpy copies of the weights); ``test_greedy_act_torch[method]`` the same act through
+torch's forward, for reference.
 Each agent is seed 0 of the method's shipped policy (uncoordinated), a fresh agent where none
 ships; the observation is the one it sees ``OBS_STEP`` steps into the first fixed case.
 
@@ -59,7 +60,7 @@ def _episode(agent, env, case) -> tuple[tuple[dict, dict], dict[str, float]]:
 
 @pytest.fixture(scope="module")
 def acting(cases):
-    """method -> (agent, observation, info, {path: episode timings}), path "numpy" or "torch"."""
+    """method -> (agent, observation, info, {path: episode timings}), path "compiled" or "torch"."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     out = {}
@@ -70,10 +71,10 @@ def acting(cases):
             agent.numpy_greedy = False
             _, torch_episode = _episode(agent, env, cases[0])
             agent.numpy_greedy = True
-            (obs, info), numpy_episode = _episode(agent, env, cases[0])
+            (obs, info), compiled_episode = _episode(agent, env, cases[0])
         finally:
             env.close()
-        out[method] = (agent, obs, info, {"numpy": numpy_episode, "torch": torch_episode})
+        out[method] = (agent, obs, info, {"compiled": compiled_episode, "torch": torch_episode})
     yield out
     torch.set_num_threads(threads)
 
@@ -83,7 +84,7 @@ def test_greedy_act(benchmark, acting, method):
     agent, obs, info, episode = acting[method]
     assert agent.numpy_greedy
     benchmark.pedantic(agent.act, args=(obs, info), rounds=ROUNDS, iterations=ITERATIONS, warmup_rounds=5)
-    benchmark.extra_info.update(episode["numpy"])
+    benchmark.extra_info.update(episode["compiled"])
 
 
 @pytest.mark.parametrize("method", LEARNING)
