@@ -207,7 +207,7 @@ class EcoDriveEnv(gym.Env):
         tel = s.teleports()
         self.teleports_all += len(tel)
         self.teleports += EGO_ID in tel
-        gone = EGO_ID in s.arrived() or EGO_ID not in s.vehicle_ids()
+        gone = EGO_ID in s.arrived() or not s.present(EGO_ID)
         if gone:
             m = StepMeasure(cmd.accel or 0.0, cmd.lateral or 0, 0.0, 0, False, False, 0.0, 0.0, 0.0, 0.0)
             terminated = True

@@ -183,6 +183,18 @@ class SumoSession:
     def vehicle_ids(self) -> tuple[str, ...]:
         return self._api.vehicle.getIDList()
 
+    def present(self, vid: str) -> bool:
+        """Whether ``vid`` is in ``vehicle_ids()`` (on a road, parking or placed by TraCI), asked of
+        the one vehicle instead of fetching the whole list: SUMO names the road of such a vehicle,
+        gives "" for any other it knows (not yet inserted, teleporting), and does not know one that
+        has arrived or was removed."""
+        try:
+            return self._api.vehicle.getRoadID(vid) != ""
+        except Exception as e:  # libsumo's and traci's TraCIException: distinct classes, one name
+            if type(e).__name__ == "TraCIException":
+                return False
+            raise
+
     # ------------------------------------------------------------------ vehicles
     def add_vehicle(self, vid: str, controlled: bool, glosa: bool = False) -> None:
         """Insert a vehicle of the EV type at the arterial's start, now."""

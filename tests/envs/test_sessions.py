@@ -180,3 +180,4 @@ def test_bad_reset_options_are_one_line(options, match):
         e.reset(options=options)
     assert "\n" not in str(err.value)
     e.close()
+
