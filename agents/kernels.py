@@ -119,6 +119,25 @@ def masked_argmax(q: np.ndarray, mask: np.ndarray) -> int:
 
 
 @compiled
+def _add_input(h: np.ndarray, xk: np.float32, row: np.ndarray) -> None:
+    """``h`` += ``xk`` ``row``: one more input's term of a dense layer (none for a zero input)."""
+    if xk != 0.0:
+        for j in range(h.shape[0]):
+            h[j] += xk * row[j]
+
+
+@compiled
+def _rest(h1: np.ndarray, q2: np.ndarray, qb2: np.ndarray, q3: np.ndarray, qb3: np.ndarray, h2: np.ndarray,
+          out: np.ndarray) -> None:
+    """ReLU of the first layer's sum ``h1`` (in place), then the second and third layers into ``out``."""
+    for j in range(h1.shape[0]):
+        if h1[j] < 0.0:
+            h1[j] = 0.0
+    dense(h1, q2, qb2, True, h2)
+    dense(h2, q3, qb3, False, out)
+
+
+@compiled
 def pdqn(feats: np.ndarray, q1: np.ndarray, qb1: np.ndarray, q2: np.ndarray, qb2: np.ndarray, q3: np.ndarray,
          qb3: np.ndarray, p1: np.ndarray, pb1: np.ndarray, p2: np.ndarray, pb2: np.ndarray, p3: np.ndarray,
          pb3: np.ndarray, mask: np.ndarray, multipass: bool, x: np.ndarray) -> int:
@@ -134,31 +153,17 @@ def pdqn(feats: np.ndarray, q1: np.ndarray, qb1: np.ndarray, q2: np.ndarray, qb2
     h1 = np.empty(qb1.shape[0], np.float32)
     dense(feats[0], q1[:nf], qb1, False, h1)
     h2 = np.empty(qb2.shape[0], np.float32)
-    o = np.empty(qb3.shape[0], np.float32)
     q = np.empty(kk, np.float32)
     if not multipass:
         for k in range(kk):
-            xk = x[k]
-            if xk != 0.0:
-                for j in range(h1.shape[0]):
-                    h1[j] += xk * q1[nf + k, j]
-        for j in range(h1.shape[0]):
-            if h1[j] < 0.0:
-                h1[j] = 0.0
-        dense(h1, q2, qb2, True, h2)
-        dense(h2, q3, qb3, False, q)
+            _add_input(h1, x[k], q1[nf + k])
+        _rest(h1, q2, qb2, q3, qb3, h2, q)
         return masked_argmax(q, mask)
     hk = np.empty_like(h1)
+    o = np.empty(qb3.shape[0], np.float32)
     for k in range(kk):
         hk[:] = h1
-        xk = x[k]
-        if xk != 0.0:
-            for j in range(hk.shape[0]):
-                hk[j] += xk * q1[nf + k, j]
-        for j in range(hk.shape[0]):
-            if hk[j] < 0.0:
-                hk[j] = 0.0
-        dense(hk, q2, qb2, True, h2)
-        dense(h2, q3, qb3, False, o)
+        _add_input(hk, x[k], q1[nf + k])
+        _rest(hk, q2, qb2, q3, qb3, h2, o)
         q[k] = o[k]
     return masked_argmax(q, mask)
