@@ -100,13 +100,15 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
                  state: Any, **overrides: Any) -> Any:
     """A fresh ``method`` agent on ``spaces`` (observation, action), built with the
     ``agent_config`` the policy was trained with (``overrides`` on top) and holding its ``state``
-    (from ``load_policy``). A config or a state the agent does not accept is a ``CheckpointError``
-    naming the file: plain data of the wrong structure passes ``load_torch`` but not this."""
+    (from ``load_policy``), to act: its replay buffer holds one batch (``acting_config``), not the
+    training run's hundreds of thousands of transitions. A config or a state the agent does not
+    accept is a ``CheckpointError`` naming the file: plain data of the wrong structure passes
+    ``load_torch`` but not this."""
     from ecodrive_bench.agents.registry import make_agent
 
     config = manifest.get("agent_config") or {}
     try:  # an experiment's policy (ecodrive train --set) is built with the config it trained with
-        agent = make_agent(method, *spaces, **{**config, **overrides})
+        agent = make_agent(method, *spaces, **{**acting_config(config), **overrides})
     except (TypeError, ValueError) as e:
         raise CheckpointError(f"{folder / 'manifest.json'}: agent_config {config!r} not accepted ({e})") from None
     try:
@@ -118,19 +120,27 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
     return agent
 
 
+def acting_config(config: Any) -> dict[str, Any]:
+    """``config`` (a policy's ``agent_config``) for an agent that only acts: the replay buffer cut
+    to one batch (acting never fills it; at the learners' default of 500 000 transitions it would
+    take some 300 MB a policy). Anything not a dict is passed on for ``make_agent`` to refuse."""
+    if not isinstance(config, dict):
+        return config
+    batch = config.get("batch_size", 1)
+    batch = batch if type(batch) is int and batch >= 1 else 1  # a bad value: make_agent names it below
+    return {**config, "batch_size": config.get("batch_size", batch), "replay_size": batch}
+
+
 def check_policy(folder: Path, method: str) -> None:
     """Refuse, before anything runs, a policy that could not drive: ``load_policy``'s checks, then
     its state loaded into a fresh agent on the spaces it was trained with. The episodes' workers
     load it again; this is the parent's check, so a bad file is one error before any folder is
-    written. The agent's replay buffer is kept small (greedy driving never uses it)."""
+    written."""
     state, manifest = load_policy(folder, method)
-    config = manifest.get("agent_config")
-    batch = config.get("batch_size", 1) if isinstance(config, dict) else 1
-    small = {"batch_size": batch, "replay_size": batch if type(batch) is int and batch >= 1 else 1}
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # a few small networks: threads only contend
     try:
-        policy_agent(folder, method, policy_spaces(folder, manifest), manifest, state, **small)
+        policy_agent(folder, method, policy_spaces(folder, manifest), manifest, state)
     finally:
         torch.set_num_threads(threads)
 

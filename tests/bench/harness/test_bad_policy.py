@@ -191,3 +191,33 @@ def test_a_shipped_policy_loads_for_transfer_to_another_scenario():
     trained = read_manifest(folder)["scenario"]
     state, _ = load_policy(folder, METHOD, {**trained, "lanes": 2}, transfer=True)
     assert state
+
+
+@pytest.mark.parametrize("method", ["prl", "ddpg"])
+def test_a_loaded_policy_acts_as_trained_with_a_one_batch_replay(method):
+    """``policy_agent`` builds an agent to act: a replay buffer of one batch instead of the
+    training config's 500 000 transitions (some 300 MB each), and the same greedy actions as an
+    agent built with the full training config."""
+    import numpy as np
+
+    from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.harness.policies import load_policy, policy_agent, policy_dir
+
+    folder = policy_dir(method, "uncoordinated")
+    state, manifest = load_policy(folder, method)
+    env = make_env(method, "uncoordinated")
+    spaces = (env.observation_space, env.action_space)
+    acting = policy_agent(folder, method, spaces, manifest, state)
+    full = make_agent(method, *spaces, **(manifest.get("agent_config") or {}))
+    full.load_state_dict(state)
+    assert acting.replay.capacity <= 128 < full.replay.capacity
+    obs, info = env.reset(options={"sumo_seed": 99, "insert_time": 160.0})
+    for _ in range(40):
+        a, b = acting.act(obs, info), full.act(obs, info)
+        assert np.array_equal(np.ravel(np.asarray(a[1] if isinstance(a, tuple) else a)),
+                              np.ravel(np.asarray(b[1] if isinstance(b, tuple) else b)))
+        obs, _, done, trunc, info = env.step(a)
+        if done or trunc:
+            break
+    env.close()
