@@ -76,7 +76,7 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     import torch
 
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.policies import load_policy
+    from ecodrive_bench.bench.harness.policies import acting_config, load_policy
     from ecodrive_bench.bench.logs import schema
     from ecodrive_bench.envs.fleet import Fleet
 
@@ -86,7 +86,7 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     fleet = Fleet(cfg)
     policy, policy_sha = None, ""
     if cell.mpr > 0:
-        agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space)
+        agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space, **acting_config({}))
         state, manifest = load_policy(Path(cell.policy_dir), "prl")
         agent.load_state_dict(state)
         policy_sha = manifest["sha256"]

@@ -21,7 +21,7 @@ import pandas as pd
 
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
 from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, MASTER_SEED, cell_scenario
-from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
+from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, acting_config, load_policy, policy_dir
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
 from ecodrive_bench.envs.action import LATERAL
 from ecodrive_bench.envs.config import SIGNALS
@@ -55,7 +55,7 @@ def trace(signals: str, mpr: float, demand: float, duration: float, at: tuple[in
     torch.set_num_threads(1)
     cfg = cell_scenario(signals, mpr, demand)
     fleet = Fleet(cfg)
-    agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space)
+    agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space, **acting_config({}))
     state, _ = load_policy(policy_dir("prl", signals, models), "prl")  # trained alone, driven in a fleet
     agent.load_state_dict(state)
     lanes, front = cfg.observed_lanes, int(round(cfg.grid_behind / cfg.cell_length))

@@ -91,7 +91,7 @@ def run_job(job: Job, work: Path | None = None) -> dict[str, Any]:
     from ecodrive_bench.agents.registry import make_agent
     from ecodrive_bench.bench.harness.cases import load
     from ecodrive_bench.bench.harness.episode import make_env, run_episode
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir
+    from ecodrive_bench.bench.harness.policies import acting_config, load_policy, policy_dir
     from ecodrive_bench.bench.training.train import train
 
     torch.set_num_threads(1)
@@ -129,7 +129,7 @@ def run_job(job: Job, work: Path | None = None) -> dict[str, Any]:
         if (run_dir / fname).is_file():  # a shipped seed's training log is not kept, its metrics are
             shutil.copyfile(run_dir / fname, log_dir / fname)
     shutil.copyfile(folder / "manifest.json", log_dir / store.POLICY_MANIFEST)
-    agent = make_agent("prl", env.observation_space, env.action_space)
+    agent = make_agent("prl", env.observation_space, env.action_space, **acting_config({}))
     state, manifest = load_policy(folder, "prl", env.cfg.to_dict())
     agent.load_state_dict(state)
     rows = []
