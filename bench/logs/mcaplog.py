@@ -80,6 +80,10 @@ class EpisodeLog:
     def record(self, rec: dict[str, Any]) -> None:
         """Log one step (the env's ``_record``; ``raw_action`` is the agent's action before it).
         Steps are encoded in batches of ``STEP_BATCH``; ``finish`` and ``abort`` encode the rest."""
+        obs, info = rec["obs"], rec["info"]
+        # the agent gets obs and info before they are encoded: hold copies of what it could change
+        rec = {**rec, "obs": {"grid": np.array(obs["grid"]), "logic": np.array(obs["logic"])},
+               "info": {**info, "action_mask": np.array(info["action_mask"])}, "components": dict(rec["components"])}
         self._held.append((rec, self.raw_action))
         if len(self._held) >= STEP_BATCH:
             self._encode_held()

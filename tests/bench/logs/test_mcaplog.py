@@ -162,3 +162,26 @@ def test_failing_agent_leaves_every_recorded_step_in_the_part(cases, tmp_path):
     assert not target.exists()
     data = read_log(target.with_name(target.name + ".part"))
     assert len(data.steps) == fail_at + 1 and data.episode is None  # the reset's step, then fail_at steps
+
+
+def test_an_agent_that_changes_its_observation_in_place_does_not_change_the_log(logged, cases, tmp_path):
+    """Steps are encoded after the agent has seen them: an agent that overwrites the observation,
+    the mask and the reward parts it is given must leave the log as it was recorded."""
+
+    class Scribbler(BaselineAgent):
+        def act(self, obs, info, explore=False):
+            action = super().act(obs, info, explore)
+            obs["grid"][:] = 0
+            obs["logic"][:] = -1
+            info["action_mask"][:] = 0
+            info["reward_components"].clear()
+            info["energy"] = -1.0
+            return action
+
+    agent = Scribbler()
+    env = make_env(agent, "uncoordinated")
+    run_episode(env, agent, cases[0], "baseline", log_path=tmp_path / "case-000.mcap")
+    env.close()
+    a = read_log(logged[0] / "run0" / "case-000.mcap")
+    b = read_log(tmp_path / "case-000.mcap")
+    assert [s.SerializeToString() for s in a.steps] == [s.SerializeToString() for s in b.steps]
