@@ -86,6 +86,8 @@ class NumpyNets:
         self.plan = ConvPlan(grid_shape, len(self.nets), c1)
         self.buf = np.zeros(self.plan.pooled + 1, dtype=np.float32)  # pooled maps, then the padding's zero
         self.nf = self.nets[0].conv.conv2.out_channels * self.plan.pool2.shape[1]  # conv features per net
+        self.grid_shape = tuple(grid_shape)
+        self.logic_dim = min(net.mlp[0].in_features for net in self.nets) - self.nf  # the net without extra inputs
         self.versions: list[int] | None = None
 
     def current(self) -> NumpyNets:
@@ -119,6 +121,9 @@ class NumpyNets:
         scaled logic vector."""
         p = self.plan
         logic = np.asarray(logic, dtype=np.float32)
+        if np.shape(grid) != self.grid_shape or logic.shape != (self.logic_dim,):  # the kernels index unchecked
+            raise ValueError(f"observation of grid shape {np.shape(grid)} and logic shape {logic.shape}; the networks "
+                             f"take a grid of shape {self.grid_shape} and a logic vector of shape ({self.logic_dim},)")
         out = np.empty((len(self.nets), self.nf + logic.shape[0]), dtype=np.float32)
         kernels.conv_block(np.ascontiguousarray(grid, dtype=np.float32).ravel(), p.conv1, self.w1, self.b1, p.pool1,
                            p.conv2, self.w2, self.b2, p.pool2, self.buf, logic, out)
@@ -132,6 +137,8 @@ class NumpyNets:
         """Net ``i``'s dense layers on ``z``: one input vector, or rows of inputs (R, in)."""
         w = self.weights[i]
         z = np.asarray(z, dtype=np.float32)
+        if z.ndim not in (1, 2) or z.shape[-1] != w[0].shape[0]:
+            raise ValueError(f"input of shape {z.shape}; net {i} takes vectors of {w[0].shape[0]}")
         if z.ndim == 1:
             return kernels.mlp(np.ascontiguousarray(z), *w)
         return np.stack([kernels.mlp(np.ascontiguousarray(row), *w) for row in z])
@@ -143,17 +150,41 @@ def pdqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.n
     network], ``logic`` is scaled. Multi-pass: Q_k from the pass whose input keeps only x_k."""
     feats = nets.block(grid, logic)
     x = np.empty(nets.weights[1][-1].shape[0], dtype=np.float32)
-    k = kernels.pdqn(feats, *nets.weights[0], *nets.weights[1], np.asarray(mask, dtype=np.bool_), multipass, x)
+    k = kernels.pdqn(feats, *nets.weights[0], *nets.weights[1], _mask(mask, x.shape[0]), multipass, x)
     return k, x
+
+
+def _mask(mask: np.ndarray, n: int) -> np.ndarray:
+    """``mask`` as n booleans (a ValueError otherwise: the kernels index it unchecked)."""
+    out = np.asarray(mask, dtype=np.bool_)
+    if out.shape != (n,):
+        raise ValueError(f"action mask of shape {out.shape}; the network chooses among {n} actions")
+    return out
 
 
 def dqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.ndarray) -> int:
     """``DQNAgent``'s greedy action index over the allowed actions ``mask``; ``logic`` is scaled."""
     q = kernels.mlp(nets.block(grid, logic)[0], *nets.weights[0])
-    return kernels.masked_argmax(q, np.asarray(mask, dtype=np.bool_))
+    return kernels.masked_argmax(q, _mask(mask, q.shape[0]))
 
 
 def ddpg_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, bound: str) -> np.ndarray:
     """``DDPGAgent``'s normalised acceleration in [-1, 1], shape (1,); ``logic`` is scaled."""
     out = kernels.mlp(nets.block(grid, logic)[0], *nets.weights[0])
     return np.tanh(out) if bound == "tanh" else np.clip(out, -1.0, 1.0)
+
+
+def compile_kernels() -> None:
+    """Compile every greedy kernel in this process (or load it from numba's disk cache), on small
+    nets of the same array types as the agents': a parent calls it before it starts workers, so
+    they load the cache instead of all compiling it at once."""
+    grid_shape = (12, 6)
+    logic = np.zeros(9, dtype=np.float32)
+    grid = np.ones(grid_shape, dtype=np.float32)
+    q, param = Head(grid_shape, 9, 3, (8, 8), 3), Head(grid_shape, 9, 0, (8, 8), 3)
+    pair = NumpyNets([q, param], grid_shape).current()
+    for multipass in (False, True):
+        pdqn_greedy(pair, grid, logic, np.ones(3, dtype=np.int8), multipass)
+    one = NumpyNets([param], grid_shape).current()
+    dqn_greedy(one, grid, logic, np.ones(3, dtype=np.int8))
+    ddpg_greedy(one, grid, logic, "tanh")

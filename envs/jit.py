@@ -5,7 +5,10 @@ The machine code is cached on disk, next to the module (in ``__pycache__``) or, 
 folder is read-only, in the user's cache folder, so only the first process after an install or
 an edit compiles (a second or a few) and every later one, the harness's workers and the tests
 included, loads it in a fraction of that. numba keys the cache by the source file's path and
-modification time. Where no folder is writable, each process compiles.
+modification time, not by the options below: after changing them, delete the cached files
+(`find . -name "*.nb[ic]" -delete`). Where no folder is writable, each process compiles. A pool
+compiles in its parent before it starts its workers (``bench.harness.executors.compile_kernels``),
+so the workers only load the cache.
 """
 from __future__ import annotations
 

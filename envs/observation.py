@@ -31,7 +31,8 @@ def occupancy_grid(
     Columns beyond the road's lanes (``cfg.obs_lanes`` > ``len(lane_y)``) read as occupied.
 
     ``others``: rows of [x, y, angle (deg), length (m)] of the other vehicles (front bumper
-    positions, as SUMO reports them). A vehicle is in the lane whose centre is nearest (within
+    positions, as SUMO reports them; a sequence or an (N, 4) array; a non-finite value is a
+    ``ValueError``). A vehicle is in the lane whose centre is nearest (within
     half a lane width); heading along the arterial (within 45 deg) it covers [x - length, x],
     crossing a junction [x - 1, x + 1] m; it marks every cell it overlaps.
     """
@@ -39,10 +40,14 @@ def occupancy_grid(
     grid = np.ones((rows, lanes), dtype=np.float32)
     n = len(lane_y)
     grid[:, n:] = 0.0  # lanes the road does not have
-    if others:
+    if len(others):
+        vehicles = np.array(others, dtype=np.float64).reshape(-1, 4)
+        if not np.isfinite(vehicles).all():
+            bad = vehicles[~np.isfinite(vehicles).all(axis=1)][:3].tolist()
+            raise ValueError(f"neighbour rows must be finite [x, y, angle, length]; got {bad}")
         pitch = (lane_y[-1] - lane_y[0]) / (n - 1) if n > 1 else 1.0
-        _mark(grid, np.array(others, dtype=np.float64).reshape(-1, 4), np.asarray(lane_y, dtype=np.float64),
-              ego_x - cfg.grid_behind, 1.0 / cfg.cell_length, LANE_WIDTH / 2, pitch)
+        _mark(grid, vehicles, np.asarray(lane_y, dtype=np.float64), ego_x - cfg.grid_behind, 1.0 / cfg.cell_length,
+              LANE_WIDTH / 2, pitch)
     return grid
 
 

@@ -86,8 +86,9 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     fleet = Fleet(cfg)
     policy, policy_sha = None, ""
     if cell.mpr > 0:
-        agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space, **acting_config({}))
         state, manifest = load_policy(Path(cell.policy_dir), "prl")
+        agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space,
+                           **acting_config(manifest.get("agent_config") or {}))
         agent.load_state_dict(state)
         policy_sha = manifest["sha256"]
         policy = agent.act_batch if cell.cv_lateral == "policy" else _stay(agent.act_batch)

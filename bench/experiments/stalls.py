@@ -55,8 +55,9 @@ def trace(signals: str, mpr: float, demand: float, duration: float, at: tuple[in
     torch.set_num_threads(1)
     cfg = cell_scenario(signals, mpr, demand)
     fleet = Fleet(cfg)
-    agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space, **acting_config({}))
-    state, _ = load_policy(policy_dir("prl", signals, models), "prl")  # trained alone, driven in a fleet
+    state, manifest = load_policy(policy_dir("prl", signals, models), "prl")  # trained alone, driven in a fleet
+    agent = make_agent("prl", fleet.obs_type.space, fleet.action_type.space,
+                       **acting_config(manifest.get("agent_config") or {}))
     agent.load_state_dict(state)
     lanes, front = cfg.observed_lanes, int(round(cfg.grid_behind / cfg.cell_length))
     rows: list[dict[str, Any]] = []

@@ -129,8 +129,8 @@ def run_job(job: Job, work: Path | None = None) -> dict[str, Any]:
         if (run_dir / fname).is_file():  # a shipped seed's training log is not kept, its metrics are
             shutil.copyfile(run_dir / fname, log_dir / fname)
     shutil.copyfile(folder / "manifest.json", log_dir / store.POLICY_MANIFEST)
-    agent = make_agent("prl", env.observation_space, env.action_space, **acting_config({}))
     state, manifest = load_policy(folder, "prl", env.cfg.to_dict())
+    agent = make_agent("prl", env.observation_space, env.action_space, **acting_config(manifest.get("agent_config") or {}))
     agent.load_state_dict(state)
     rows = []
     for case in load()[: job.cases]:

@@ -159,8 +159,24 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
               on_failure: Callable[[Failure], None] | None = None,
               skip: Callable[[Any], bool] | None = None) -> Iterator[dict[str, Any]]:
     """Rows of ``fn(task)`` on a pool of ``workers`` processes, as they finish; a dead worker is
-    replaced and its task rerun up to ``RETRIES`` times (``bench.harness.pool``)."""
+    replaced and its task rerun up to ``RETRIES`` times (``bench.harness.pool``). With more than
+    one worker the step's compiled kernels are compiled here first (``compile_kernels``)."""
+    if workers > 1:
+        compile_kernels()
     return run_pool(tasks, workers, fn, on_failure, skip)
+
+
+def compile_kernels() -> None:
+    """The greedy act's and the occupancy grid's numba kernels compiled (or loaded from the disk
+    cache) in this process, so that workers started after it load the cache rather than all
+    compile at once, each for seconds (and numba's cache is not written safely by several
+    processes at a time)."""
+    from ecodrive_bench.agents.inference import compile_kernels as greedy
+    from ecodrive_bench.envs.config import ScenarioConfig
+    from ecodrive_bench.envs.observation import occupancy_grid
+
+    greedy()
+    occupancy_grid(0.0, [(5.0, -1.6, 90.0, 5.0)], (-4.8, -1.6), ScenarioConfig(lanes=2))
 
 
 def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callable[[Any], dict] = run_task,

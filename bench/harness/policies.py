@@ -117,7 +117,22 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
         why = " ".join(str(e).split())[:300]
         raise CheckpointError(f"{folder / 'policy.pt'}: not the state of a {method} agent ({type(e).__name__}: {why}); "
                               f"expected a policy saved by ecodrive train --method {method}") from None
+    bad = _non_finite(state)
+    if bad:  # a diverged training's weights: no action they give means anything
+        raise CheckpointError(f"{folder / 'policy.pt'}: non-finite weights in {', '.join(bad[:3])}; a policy must hold "
+                              f"finite numbers (retrain it)")
     return agent
+
+
+def _non_finite(state: Any, where: str = "") -> list[str]:
+    """Paths of the floating-point tensors in ``state`` (nested dicts, lists) holding NaN or inf."""
+    if isinstance(state, dict):
+        return [p for k, v in state.items() for p in _non_finite(v, f"{where}.{k}" if where else str(k))]
+    if isinstance(state, (list, tuple)):
+        return [p for i, v in enumerate(state) for p in _non_finite(v, f"{where}[{i}]")]
+    if isinstance(state, torch.Tensor) and state.is_floating_point() and not bool(torch.isfinite(state).all()):
+        return [where]
+    return []
 
 
 def acting_config(config: Any) -> dict[str, Any]:

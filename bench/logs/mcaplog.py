@@ -27,7 +27,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from ecodrive_bench.bench.io import exclusive_open
 from ecodrive_bench.bench.logs import schema
 
-CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses at most this much
+CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses the one it was filling (and STEP_BATCH)
 # steps held before they are encoded: encoded back to back, the protobuf and MCAP code stays in the
 # core's caches (about 3x faster a step than encoding each between two SUMO steps); a killed run
 # loses these besides the chunk it was filling (a chunk holds about 130 steps)
@@ -155,7 +155,10 @@ class EpisodeLog:
             except Exception:  # noqa: BLE001  (best effort on a failing run: its own error is the one raised)
                 pass
             finally:
-                self._f.close()
+                try:
+                    self._f.close()
+                except OSError:  # the same: a full disk must not hide why the run failed
+                    pass
 
 
 @dataclass

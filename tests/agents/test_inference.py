@@ -213,3 +213,24 @@ def test_masked_argmax_is_numpys():
         q = rng.choice([-1.0, 0.0, 0.5, 2.0, np.nan, -np.inf], size=3).astype(np.float32)
         mask = rng.random(3) < 0.7
         assert masked_argmax(q, mask) == int(np.argmax(np.where(mask, q, -np.inf))), (q, mask)
+
+
+@pytest.mark.parametrize("method", LEARNING)
+def test_a_misshapen_observation_or_mask_is_an_error(method):
+    """The compiled forward indexes its inputs unchecked, so their shapes are checked before it:
+    a grid, logic vector or mask of another shape is a ValueError naming both shapes."""
+    agent = _agent(method)
+    rng = np.random.default_rng(0)
+    obs, info = _obs(rng)
+    agent.act(obs, info, explore=False)
+    bad = [({**obs, "grid": obs["grid"][:50]}, info), ({**obs, "grid": obs["grid"].T.copy()}, info)]
+    if method != "ddpg":
+        bad.append((obs, {"action_mask": np.ones(2, dtype=np.int8)}))
+    for o, i in bad:
+        with pytest.raises(ValueError, match="shape"):
+            agent.act(o, i, explore=False)
+    nets = agent._numpy.current()
+    with pytest.raises(ValueError, match="logic shape"):
+        nets.block(obs["grid"], np.zeros(8, dtype=np.float32))
+    with pytest.raises(ValueError, match="takes vectors"):
+        nets.mlp(0, np.zeros(7, dtype=np.float32))
