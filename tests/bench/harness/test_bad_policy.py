@@ -55,6 +55,12 @@ def saved(obj: Any, tmp_path: Path) -> bytes:
     return path.read_bytes()
 
 
+def smoke_run(models: Path, logs: Path) -> int:
+    """``ecodrive run --profile smoke`` of the test's method and setting with ``models``; its exit code."""
+    return main(["--profile", "smoke", "--methods", METHOD, "--signals", SIGNALS, "--models", str(models),
+                 "--logs", str(logs), "--workers", "1"])
+
+
 def wrong_name(state: dict) -> Any:
     return {**state, "name": "x"}
 
@@ -84,8 +90,7 @@ def test_ecodrive_run_refuses_a_policy_of_the_wrong_structure_before_anything_ru
     state = torch.load(folder / "policy.pt", weights_only=True)
     path = replace_policy(folder, saved(corrupt(state), tmp_path))
     logs = tmp_path / "logs"
-    rc = main(["--profile", "smoke", "--methods", METHOD, "--signals", SIGNALS, "--models", str(models),
-               "--logs", str(logs), "--workers", "1"])
+    rc = smoke_run(models, logs)
     err = capsys.readouterr().err.strip()
     assert rc == 2
     assert len(err.splitlines()) == 1 and str(path) in err and f"not the state of a {METHOD} agent" in err
@@ -237,8 +242,7 @@ def test_ecodrive_run_refuses_a_policy_with_non_finite_weights(tmp_path, capsys)
     q[name][0, 0] = float("nan")
     path = replace_policy(folder, saved({**state, "q": q}, tmp_path))
     logs = tmp_path / "logs"
-    rc = main(["--profile", "smoke", "--methods", METHOD, "--signals", SIGNALS, "--models", str(models),
-               "--logs", str(logs), "--workers", "1"])
+    rc = smoke_run(models, logs)
     err = capsys.readouterr().err.strip()
     assert rc == 2
     assert len(err.splitlines()) == 1 and str(path) in err and f"non-finite weights in q.{name}" in err
