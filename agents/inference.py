@@ -111,10 +111,9 @@ class NumpyNets:
         self.b1 = a(torch.cat([c.conv1.bias for c in convs]))  # (N c1,)
         self.w2 = np.stack([a(c.conv2.weight.flatten(1)) for c in convs])  # (N, c2, c1 9)
         self.b2 = np.stack([a(c.conv2.bias) for c in convs])  # (N, c2)
-        # each head's dense layers as (wt (in, out), bias): transposed for the kernels
-        self.dense = [[(np.ascontiguousarray(a(lin.weight).T), a(lin.bias)) for lin in (net.mlp[0], net.mlp[2], net.mlp[4])]
-                      for net in self.nets]
-        self.weights = [tuple(x for layer in head for x in layer) for head in self.dense]  # the kernels' arguments
+        # the kernels' arguments: each head's dense layers as wt1, b1, wt2, b2, wt3, b3 (wt (in, out): transposed)
+        self.weights = [tuple(x for lin in (net.mlp[0], net.mlp[2], net.mlp[4])
+                              for x in (np.ascontiguousarray(a(lin.weight).T), a(lin.bias))) for net in self.nets]
 
     def block(self, grid: np.ndarray, logic: np.ndarray) -> np.ndarray:
         """(N, features) rows: [conv features, logic] of each net for one grid (cells, lanes) and

@@ -143,7 +143,7 @@ def test_greedy_act_follows_every_update_and_load(method):
 
     def weights() -> list[np.ndarray]:
         fast = agent._numpy
-        return [fast.w1, fast.w2] + [w for layers in fast.dense for w, _ in layers]
+        return [fast.w1, fast.w2] + [w for head in fast.weights for w in head[::2]]
 
     def check() -> None:
         for obs, info in probe:
