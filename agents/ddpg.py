@@ -130,6 +130,12 @@ class DDPGAgent(OnDevice):
         """The normalised acceleration in [-1, 1] from the actor's raw output."""
         return torch.tanh(out) if self.cfg.bound == "tanh" else out.clamp(-1.0, 1.0)
 
+    def freeze(self) -> None:
+        """Greedy acts use the weights as they are now, without checking them for edits at each act
+        (``NumpyNets.freeze``), until the next update, ``load_state_dict`` or device move: for an
+        agent that only acts (``bench.harness.policies.policy_agent``)."""
+        self._numpy.freeze()
+
     def act(self, obs, info, explore: bool = False) -> np.ndarray:
         if not explore and self.numpy_greedy and self.device == CPU:
             x = ddpg_greedy(self._numpy.current(), obs["grid"], self.scaler.logic(obs["logic"]), self.cfg.bound)

@@ -116,6 +116,12 @@ class DQNAgent(OnDevice):
         c = self.cfg
         self.epsilon = linear_epsilon(episode, c.eps_init, c.eps_end, c.eps_decay_episodes)
 
+    def freeze(self) -> None:
+        """Greedy acts use the weights as they are now, without checking them for edits at each act
+        (``NumpyNets.freeze``), until the next update, ``load_state_dict`` or device move: for an
+        agent that only acts (``bench.harness.policies.policy_agent``)."""
+        self._numpy.freeze()
+
     def act(self, obs, info, explore: bool = False) -> int:
         mask = self.action_mask(info["action_mask"])
         if explore and self.rng.random() < self.epsilon:

@@ -89,9 +89,13 @@ class NumpyNets:
         self.grid_shape = tuple(grid_shape)
         self.logic_dim = min(net.mlp[0].in_features for net in self.nets) - self.nf  # the net without extra inputs
         self.versions: list[int] | None = None
+        self.frozen = False
 
     def current(self) -> NumpyNets:
-        """Self, its copy of the weights made current (copied again when any parameter changed)."""
+        """Self, its copy of the weights made current (copied again when any parameter changed;
+        not checked while ``frozen``)."""
+        if self.frozen:
+            return self
         versions = [p._version for p in self.params]
         if versions != self.versions:
             self._copy()
@@ -99,8 +103,18 @@ class NumpyNets:
         return self
 
     def stale(self) -> None:
-        """Copy the weights again before the next forward (for writes the version counters miss)."""
+        """Copy the weights again before the next forward (for writes the version counters miss);
+        ends ``freeze``."""
         self.versions = None
+        self.frozen = False
+
+    def freeze(self) -> None:
+        """Copy the weights now and act on that copy without comparing the parameters' versions at
+        each forward (some twenty tensor attributes read with the caches cold, about 10 us an act in
+        an episode), until ``stale``: for an agent that only acts, as the harness's."""
+        self.stale()
+        self.current()
+        self.frozen = True
 
     def _copy(self) -> None:
         def a(t: torch.Tensor) -> np.ndarray:
@@ -143,14 +157,19 @@ class NumpyNets:
         return np.stack([kernels.mlp(np.ascontiguousarray(row), *w) for row in z])
 
 
-def pdqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.ndarray,
-                multipass: bool) -> tuple[int, np.ndarray]:
-    """(k, normalised parameters x) of ``PDQNAgent``'s greedy choice; ``nets`` are [Q, parameter
-    network], ``logic`` is scaled. Multi-pass: Q_k from the pass whose input keeps only x_k."""
+def pdqn_greedy(nets: NumpyNets, grid: np.ndarray, logic: np.ndarray, mask: np.ndarray, multipass: bool,
+                bounds: tuple[float, float] = (-1.0, 1.0)) -> tuple[int, np.ndarray, np.ndarray]:
+    """(k, normalised parameters x, accelerations) of ``PDQNAgent``'s greedy choice; ``nets`` are
+    [Q, parameter network], ``logic`` is scaled; the accelerations map x in [-1, 1] onto
+    ``bounds`` (low, high), in float32 as ``PDQNAgent._to_accel``. Multi-pass: Q_k from the pass
+    whose input keeps only x_k."""
     feats = nets.block(grid, logic)
     x = np.empty(nets.weights[1][-1].shape[0], dtype=np.float32)
-    k = kernels.pdqn(feats, *nets.weights[0], *nets.weights[1], _mask(mask, x.shape[0]), multipass, x)
-    return k, x
+    accel = np.empty_like(x)
+    low, high = bounds  # numpy's float32 arithmetic on x casts low and the span (a Python float) to float32
+    k = kernels.pdqn(feats, *nets.weights[0], *nets.weights[1], _mask(mask, x.shape[0]), multipass, x,
+                     np.float32(low), np.float32(high - low), accel)
+    return k, x, accel
 
 
 def _mask(mask: np.ndarray, n: int) -> np.ndarray:
@@ -183,7 +202,7 @@ def compile_kernels() -> None:
     q, param = Head(grid_shape, 9, 3, (8, 8), 3), Head(grid_shape, 9, 0, (8, 8), 3)
     pair = NumpyNets([q, param], grid_shape).current()
     for multipass in (False, True):
-        pdqn_greedy(pair, grid, logic, np.ones(3, dtype=np.int8), multipass)
+        pdqn_greedy(pair, grid, logic, np.ones(3, dtype=np.int8), multipass, (-4.0, 3.0))
     one = NumpyNets([param], grid_shape).current()
     dqn_greedy(one, grid, logic, np.ones(3, dtype=np.int8))
     ddpg_greedy(one, grid, logic, "tanh")

@@ -140,15 +140,18 @@ def _rest(h1: np.ndarray, q2: np.ndarray, qb2: np.ndarray, q3: np.ndarray, qb3: 
 @compiled
 def pdqn(feats: np.ndarray, q1: np.ndarray, qb1: np.ndarray, q2: np.ndarray, qb2: np.ndarray, q3: np.ndarray,
          qb3: np.ndarray, p1: np.ndarray, pb1: np.ndarray, p2: np.ndarray, pb2: np.ndarray, p3: np.ndarray,
-         pb3: np.ndarray, mask: np.ndarray, multipass: bool, x: np.ndarray) -> int:
+         pb3: np.ndarray, mask: np.ndarray, multipass: bool, x: np.ndarray, low: np.float32, span: np.float32,
+         accel: np.ndarray) -> int:
     """P-DQN's greedy choice from ``feats`` (2, F) (the Q network's, the parameter network's):
-    ``x`` receives the normalised parameters tanh(param net), the result is the masked argmax of
-    Q(s, k, x). Multi-pass (MP-DQN): Q_k comes from a pass whose input keeps only x_k, so the
-    first layer's sum over the features is shared by the passes."""
+    ``x`` receives the normalised parameters tanh(param net), ``accel`` the accelerations
+    ``low + (x + 1) / 2 span`` (float32 throughout, as ``PDQNAgent._to_accel``), the result is the
+    masked argmax of Q(s, k, x). Multi-pass (MP-DQN): Q_k comes from a pass whose input keeps
+    only x_k, so the first layer's sum over the features is shared by the passes."""
     out = mlp(feats[1], p1, pb1, p2, pb2, p3, pb3)
     kk = x.shape[0]
     for k in range(kk):
         x[k] = np.tanh(out[k])
+        accel[k] = low + (x[k] + np.float32(1.0)) * np.float32(0.5) * span
     nf = feats.shape[1]
     h1 = np.empty(qb1.shape[0], np.float32)
     dense(feats[0], q1[:nf], qb1, False, h1)

@@ -184,13 +184,19 @@ class PDQNAgent(OnDevice):
         self.noise.reset()
         self.window.reset()  # an n-step transition never spans two episodes
 
+    def freeze(self) -> None:
+        """Greedy acts use the weights as they are now, without checking them for edits at each act
+        (``NumpyNets.freeze``), until the next update, ``load_state_dict`` or device move: for an
+        agent that only acts (``bench.harness.policies.policy_agent``)."""
+        self._numpy.freeze()
+
     def act(self, obs, info, explore: bool = False):
         mask = np.asarray(info["action_mask"], dtype=bool)
         if not explore and self.numpy_greedy and self.device == CPU:
-            k, xn = pdqn_greedy(self._numpy.current(), obs["grid"], self.scaler.logic(obs["logic"]), mask,
-                                self.cfg.multipass)
+            k, xn, accel = pdqn_greedy(self._numpy.current(), obs["grid"], self.scaler.logic(obs["logic"]), mask,
+                                       self.cfg.multipass, (self.a_low, self.a_high))  # accel: _to_accel(xn)
             self._last = (k, xn)
-            return k, self._to_accel(xn)
+            return k, accel
         with torch.no_grad():
             g, l = self._tensors(obs)
             fq, fp = features(g, l, [self.q, self.param])

@@ -37,17 +37,41 @@ def occupancy_grid(
     crossing a junction [x - 1, x + 1] m; it marks every cell it overlaps.
     """
     rows, lanes = cfg.grid_shape
+    vehicles = np.array(others, dtype=np.float64).reshape(-1, 4) if len(others) else _NONE
+    return _grid(vehicles, np.asarray(lane_y, dtype=np.float64), rows, lanes, ego_x - cfg.grid_behind,
+                 1.0 / cfg.cell_length)
+
+
+_NONE = np.zeros((0, 4))  # no other vehicle
+
+
+def _grid(vehicles: np.ndarray, lane_y: np.ndarray, rows: int, lanes: int, origin: float, inv: float) -> np.ndarray:
+    """``occupancy_grid`` of (N, 4) float64 rows: one compiled call, or the ``ValueError`` that
+    names the first non-finite rows."""
+    grid = _fill(vehicles, lane_y, rows, lanes, origin, inv, LANE_WIDTH / 2)
+    if grid.shape[0] != rows:  # _fill's signal: a vehicle row is not finite
+        bad = vehicles[~np.isfinite(vehicles).all(axis=1)][:3].tolist()
+        raise ValueError(f"neighbour rows must be finite [x, y, angle, length]; got {bad}")
+    return grid
+
+
+@compiled
+def _fill(others: np.ndarray, lane_y: np.ndarray, rows: int, lanes: int, origin: float, inv: float,
+          half: float) -> np.ndarray:
+    """A new (rows, lanes) float32 grid of ones, the lanes past ``lane_y``'s zeroed and the cells of
+    ``others`` marked (``_mark``); an empty grid when a value of ``others`` is not finite. One
+    compiled call a step: numpy's per-call overhead, paid with cold caches after every SUMO step,
+    cost several times the work."""
+    for i in range(others.shape[0]):
+        for j in range(4):
+            if not math.isfinite(others[i, j]):
+                return np.empty((0, lanes), dtype=np.float32)
     grid = np.ones((rows, lanes), dtype=np.float32)
-    n = len(lane_y)
+    n = lane_y.shape[0]
     grid[:, n:] = 0.0  # lanes the road does not have
-    if len(others):
-        vehicles = np.array(others, dtype=np.float64).reshape(-1, 4)
-        if not np.isfinite(vehicles).all():
-            bad = vehicles[~np.isfinite(vehicles).all(axis=1)][:3].tolist()
-            raise ValueError(f"neighbour rows must be finite [x, y, angle, length]; got {bad}")
-        pitch = (lane_y[-1] - lane_y[0]) / (n - 1) if n > 1 else 1.0
-        _mark(grid, vehicles, np.asarray(lane_y, dtype=np.float64), ego_x - cfg.grid_behind, 1.0 / cfg.cell_length,
-              LANE_WIDTH / 2, pitch)
+    if others.shape[0]:
+        pitch = (lane_y[n - 1] - lane_y[0]) / (n - 1) if n > 1 else 1.0
+        _mark(grid, others, lane_y, origin, inv, half, pitch)
     return grid
 
 
@@ -122,6 +146,8 @@ class GridLogicObservation:
     def __init__(self, cfg: ScenarioConfig, files: ScenarioFiles) -> None:
         self.cfg = cfg
         self.lane_y = tuple(files.lane_y)
+        self._lane_y = np.asarray(self.lane_y, dtype=np.float64)
+        self._rows, self._lanes = cfg.grid_shape
         self.space = observation_space(cfg)
         self._high = self.space["logic"].high
 
@@ -142,7 +168,9 @@ class GridLogicObservation:
         """Observation of ``vid``; also returns its signal view and the others' [x, y, angle, length]."""
         x, _, _, speed, _, lane, _ = kin
         others = [(*v[VAR_POSITION], v[VAR_ANGLE], v[VAR_LENGTH]) for k, v in neighbours.items() if k != vid]
-        grid = occupancy_grid(x, others, self.lane_y, self.cfg)
+        cfg = self.cfg  # occupancy_grid, with its constants kept
+        grid = _grid(np.array(others, dtype=np.float64).reshape(-1, 4) if others else _NONE, self._lane_y, self._rows,
+                     self._lanes, x - cfg.grid_behind, 1.0 / cfg.cell_length)
         sig = self.signal(session, vid)
         if sig is None:
             logic = logic_vector(lane, self.cfg.observed_lanes, 0.0, speed, NO_V2I, NO_V2I)

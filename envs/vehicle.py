@@ -88,7 +88,7 @@ class ControlledVehicle:
         clipped = cmd.accel is not None and safety.was_clipped(cmd.accel, applied, v0, dt, cfg.speed_limit)
         lane_changed = kin.lane != lane0 and kin.edge[:1] != ":" and kin.edge != ""
         # what happened, not what was asked: SUMO re-checks safety when it executes a change
-        lateral = -int(np.sign(kin.lane - lane0)) if lane_changed else 0  # SUMO index grows to the left
+        lateral = (kin.lane < lane0) - (kin.lane > lane0) if lane_changed else 0  # SUMO index grows to the left
         if cfg.reward.lane_change_charge == "request":
             charged = self._charge(safety.paper_to_sumo(sent) if sent else 0, -lateral, kin.y - y0)
         else:

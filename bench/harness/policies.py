@@ -101,7 +101,8 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
     """A fresh ``method`` agent on ``spaces`` (observation, action), built with the
     ``agent_config`` the policy was trained with (``overrides`` on top) and holding its ``state``
     (from ``load_policy``), to act: its replay buffer holds one batch (``acting_config``), not the
-    training run's hundreds of thousands of transitions. A config or a state the agent does not
+    training run's hundreds of thousands of transitions, and its greedy acts do not re-check the
+    weights for edits (``freeze``; an update or a load ends that). A config or a state the agent does not
     accept is a ``CheckpointError`` naming the file: plain data of the wrong structure passes
     ``load_torch`` but not this."""
     from ecodrive_bench.agents.registry import make_agent
@@ -121,6 +122,9 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
     if bad:  # a diverged training's weights: no action they give means anything
         raise CheckpointError(f"{folder / 'policy.pt'}: non-finite weights in {', '.join(bad[:3])}; a policy must hold "
                               f"finite numbers (retrain it)")
+    freeze = getattr(agent, "freeze", None)  # the learning agents: act on these weights without re-checking them
+    if freeze is not None:
+        freeze()
     return agent
 
 

@@ -71,7 +71,7 @@ class EpisodeLog:
         self._write("/meta", m, 0)
         self._last_time = 0.0
         self.raw_action: list[float] = []
-        self._held: list[tuple[dict[str, Any], list[float]]] = []  # recorded steps not encoded yet
+        self._held: list[tuple] = []  # recorded steps not encoded yet: ``_encode``'s arguments
 
     def _write(self, topic: str, msg: Any, t: int) -> None:
         self._w.add_message(channel_id=self._channels[topic], log_time=t, data=msg.SerializeToString(),
@@ -81,26 +81,26 @@ class EpisodeLog:
         """Log one step (the env's ``_record``; ``raw_action`` is the agent's action before it).
         Steps are encoded in batches of ``STEP_BATCH``; ``finish`` and ``abort`` encode the rest."""
         obs, info = rec["obs"], rec["info"]
-        # the agent gets obs and info before they are encoded: hold copies of what it could change
-        rec = {**rec, "obs": {"grid": np.array(obs["grid"]), "logic": np.array(obs["logic"])},
-               "info": {**info, "action_mask": np.array(info["action_mask"])}, "components": dict(rec["components"])}
-        self._held.append((rec, self.raw_action))
+        # the agent gets obs and info before they are encoded: take what it could change now, in
+        # the form encoded (``rec`` itself is the env's, built for this call)
+        grid = obs["grid"]
+        self._held.append((rec, self.raw_action, np.asarray(grid, dtype=np.uint8).tobytes(), grid.shape,
+                           obs["logic"].tolist(), info["action_mask"].tolist(), info.copy(), dict(rec["components"])))
         if len(self._held) >= STEP_BATCH:
             self._encode_held()
 
     def _encode_held(self) -> None:
         held, self._held = self._held, []
-        for rec, raw_action in held:
-            self._encode(rec, raw_action)
+        for step in held:
+            self._encode(*step)
 
-    def _encode(self, rec: dict[str, Any], raw_action: list[float]) -> None:
-        info, m, obs, sig = rec["info"], rec["measure"], rec["obs"], rec["signal"]
-        grid = obs["grid"]
+    def _encode(self, rec: dict[str, Any], raw_action: list[float], grid: bytes, shape: tuple[int, int],
+                logic: list[float], mask: list[int], info: dict[str, Any], comps: dict[str, float]) -> None:
+        m, sig = rec["measure"], rec["signal"]
         s = schema.Step(
             time=rec["time"], travel_time=info["travel_time"], x=rec["x"], y=rec["y"], angle=rec["angle"],
             speed=rec["speed"], accel=rec["accel"], lane=rec["lane"], edge=rec["edge"],
-            grid=np.asarray(grid, dtype=np.uint8).tobytes(), grid_rows=grid.shape[0], grid_cols=grid.shape[1],
-            logic=obs["logic"].tolist(), action_mask=info["action_mask"].tolist(), raw_action=raw_action,
+            grid=grid, grid_rows=shape[0], grid_cols=shape[1], logic=logic, action_mask=mask, raw_action=raw_action,
             energy_step=info["energy_step"], energy_total=info["energy"], jerk=info["jerk"], reward=rec["reward"],
             tls_states=rec["tls_states"], collisions=info["collisions"], teleports=info["teleports"],
         )
@@ -109,7 +109,6 @@ class EpisodeLog:
             s.requested_lateral = m.requested_lateral
             s.requested_accel = 0.0 if m.requested_accel != m.requested_accel else m.requested_accel  # nan -> 0
             s.applied_lateral, s.applied_accel, s.clipped = m.applied_lateral, m.applied_accel, m.clipped
-        comps = rec["components"]
         if comps:
             c = s.components
             c.speed, c.jerk, c.lane_change = comps["speed"], comps["jerk"], comps["lane_change"]

@@ -93,6 +93,19 @@ def test_greedy_act_equals_the_torch_forward_on_random_observations(method):
             _check_same(agent, *_obs(rng), margin_needed=True)
 
 
+@pytest.mark.parametrize("method", ["prl", "mpdqn"])
+@pytest.mark.parametrize("bounds", [(-4.0, 3.0), (-3.3, 2.6)])
+def test_greedy_accelerations_are_to_accel_of_the_parameters(method, bounds):
+    """The compiled act maps its parameters x onto accelerations itself: bit for bit
+    ``_to_accel(x)``'s float32 arithmetic, also for bounds a float32 cannot hold exactly."""
+    rng = np.random.default_rng(13)
+    space = spaces.Tuple((spaces.Discrete(3), spaces.Box(*bounds, (3,), np.float32)))
+    agent = make_agent(method, OBS, space, seed=0, replay_size=64, batch_size=64)
+    for _ in range(N_OBS):
+        k, accel = agent.act(*_obs(rng), explore=False)
+        assert accel.dtype == np.float32 and accel.tobytes() == agent._to_accel(agent._last[1]).tobytes()
+
+
 def test_ddpg_tanh_bound_and_twin_q_act_as_the_torch_forward():
     rng = np.random.default_rng(12)
     for method, config in (("ddpg", {"bound": "tanh"}), ("prl", {"twin_q": True}), ("mpdqn", {"twin_q": True})):
@@ -134,8 +147,9 @@ def _equal(a, b) -> bool:
 @pytest.mark.parametrize("method", LEARNING)
 def test_greedy_act_follows_every_update_and_load(method):
     """The numpy copy is refreshed after an update (fused Adam writes the parameters in place),
-    after ``load_state_dict`` and after an in-place edit of a parameter, and dropped on a device
-    move; exploring acts and updates never use it, so training is the torch path's."""
+    after ``load_state_dict`` and after an in-place edit of a parameter (not while frozen, until the
+    next load), and dropped on a device move; exploring acts and updates never use it, so training
+    is the torch path's."""
     rng = np.random.default_rng(5)
     probe = [_obs(rng) for _ in range(20)]
     agent, ref = _agent(method, n=200), _agent(method, n=200)
@@ -173,6 +187,17 @@ def test_greedy_act_follows_every_update_and_load(method):
     with torch.no_grad():
         _nets(agent)[0].mlp[4].bias.add_(3.0)  # an in-place edit: a new version of the parameter
     check()
+
+    agent.freeze()  # acts on the weights as they are now: an edit is not followed ...
+    frozen = [agent.act(obs, info) for obs, info in probe]
+    with torch.no_grad():
+        _nets(agent)[0].mlp[4].weight.mul_(-1.0)  # the last layer's output negated: the torch forward acts otherwise
+        _nets(agent)[0].mlp[4].bias.mul_(-1.0)
+    assert not all(_equal(a, _torch_act(agent, obs, info)) for a, (obs, info) in zip(frozen, probe))
+    assert all(_equal(a, agent.act(obs, info)) for a, (obs, info) in zip(frozen, probe))
+    agent.load_state_dict(other.state_dict(with_training=False))  # ... but a load (or an update) ends it
+    check()
+    assert all(_equal(other.act(obs, info), agent.act(obs, info)) for obs, info in probe)
     agent.to("meta")
     assert agent._numpy.versions is None  # copied again from wherever the weights are next
 

@@ -167,6 +167,28 @@ def test_action_check_agrees_with_the_space(k, params, dtype):
             at.check(action)
 
 
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(k=st.integers(0, 2), params=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=3,
+                                             max_size=3),
+       bounds=st.sampled_from([(-4.0, 3.0), (-3.3, 2.6), (-0.1, 0.1)]), dtype=st.sampled_from([np.float32, np.float64]))
+def test_decode_clips_as_numpy_does(k, params, bounds, dtype):
+    """The parameterized action's acceleration is ``np.clip`` of the chosen parameter, value for
+    value, on float32 arrays (decoded without numpy) as on others, with bounds a float32 cannot
+    hold exactly (2.6: numpy clips a float32 at float32(2.6), a float64 at 2.6)."""
+    from ecodrive_bench.envs.action import make_action
+    from ecodrive_bench.envs.config import ScenarioConfig
+
+    at = make_action("parameterized", ScenarioConfig.from_dict({"signals": "uncoordinated", "a_min": bounds[0],
+                                                                "a_max": bounds[1]}))
+    arr = np.asarray(params, dtype=dtype)
+    edges = np.array([np.nextafter(np.float32(b), np.float32(d)) for b in bounds for d in (-9, 9)], dtype=dtype)
+    for a in (arr, edges[:3], edges[1:]):
+        want = float(np.clip(a[k], *bounds))
+        got = at.decode((k, a)).accel
+        assert got == want or (np.isnan(got) and np.isnan(want)), (a[k], got, want)
+        assert at.decode((k, a)).lateral == (-1, 0, 1)[k]
+
+
 @pytest.mark.parametrize("options,match", [
     ({"sumo_seed": 2**70}, r"sumo_seed=1180591620717411303424 is not accepted; accepted: an integer in \[0, "),
     ({"sumo_seed": -1}, "sumo_seed=-1 is not accepted"), ({"sumo_seed": "7"}, "sumo_seed='7' is not accepted"),
