@@ -55,7 +55,7 @@ def _traci_start(args: list[str]) -> Any:
                                    f"{TRACI_CONNECT_TIMEOUT:g} s ({e})") from None
             time.sleep(0.01)
 # context-subscription variables, as keys of ``neighbours()`` results
-VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH, tc.VAR_SPEED
+VAR_POSITION, VAR_ANGLE, VAR_LENGTH = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_LENGTH
 _GREEN = frozenset("gG")
 
 # speed mode 27 = 31 without bit 2 ("regard maximum deceleration"): SUMO's Krauss safe speed clips
@@ -207,7 +207,7 @@ class SumoSession:
     def subscribe(self, vid: str) -> None:
         """Context subscription of the vehicles around ``vid`` (read by ``neighbours``)."""
         self._api.vehicle.subscribeContext(vid, tc.CMD_GET_VEHICLE_VARIABLE, self._context_range,
-                                    [VAR_POSITION, VAR_ANGLE, VAR_LENGTH, VAR_SPEED])
+                                    [VAR_POSITION, VAR_ANGLE, VAR_LENGTH])
 
     def add_scripted(self, vid: str, lane: int, pos: float, speed: float) -> None:
         """Insert a human-driven vehicle at an exact spot of the arterial's first edge, held at

@@ -123,6 +123,10 @@ def run_episode(
 
 def _flatten(action: Any) -> list[float]:
     """The action's numbers in order, as floats (the step log's ``raw_action``)."""
+    if type(action) is int or type(action) is float:  # a discrete index (DQN, the rule-based methods)
+        return [float(action)]
+    if type(action) is np.ndarray:  # a continuous action (DDPG)
+        return [float(v) for v in action.ravel().tolist()]
     if type(action) is tuple and len(action) == 2 and isinstance(action[0], (int, np.integer)) \
             and type(action[1]) is np.ndarray and action[1].dtype.kind == "f":  # a P-DQN action: the fast form
         return [float(action[0]), *action[1].ravel().tolist()]

@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -205,3 +206,19 @@ def test_without_an_address_ray_starts_its_own_beside_a_running_cluster(local_re
     finally:
         ray.shutdown()
     pd.testing.assert_frame_equal(df_local[COMPARE], df_ray[COMPARE])
+
+
+@pytest.mark.parametrize("action", [
+    0, 26, 1.5, np.int64(3), np.float32(0.1), True, np.array([0.1], dtype=np.float32), np.array([-4.0, 2.5]),
+    np.array([[1, 2]]), (1, np.array([0.1, -3.9, 2.9], dtype=np.float32)), (np.int64(2), np.zeros(3)),
+    (0, [0.5, 1.5, 2.5]), [1, 2.5],
+])
+def test_the_logged_raw_action_is_every_number_of_the_action_as_a_float(action):
+    """``raw_action``: the action's numbers in order, as floats, whatever form the agent returns
+    (the fast forms for the built-in agents' actions give what the general rule gives)."""
+    from ecodrive_bench.bench.harness.episode import _flatten
+
+    parts = action if isinstance(action, tuple) else (action,)
+    want = [float(v) for part in parts for v in np.ravel(part)]
+    got = _flatten(action)
+    assert got == want and all(type(v) is float for v in got)
