@@ -64,12 +64,15 @@ def solve(task: BoundTask) -> dict[str, Any]:
 
 
 def solve_entry(task: BoundTask) -> dict[str, Any]:
-    """Both bounds of one case as a row of the shipped bounds, with the cost plan (runs in a
-    worker; ``ecodrive cases --write --bounds``)."""
+    """Both bounds of one case as a row of the shipped bounds, with the cost plan and mpc's first
+    plan (runs in a worker; ``ecodrive cases --write --bounds``)."""
     from ecodrive_bench.bench.harness.shipped_bounds import entry
+    from ecodrive_bench.bench.oracle import mpc
+    from ecodrive_bench.bench.oracle.dp import Corridor
 
     cfg, cost, eq, wall = _solve(task)
-    return entry(task.signals, task.case, cfg, task.depart_time, task.time_limit, cost, eq, wall)
+    first = mpc.shippable_first(Corridor.from_config(cfg), cfg, task.depart_time)  # the mpc method's first plan
+    return entry(task.signals, task.case, cfg, task.depart_time, task.time_limit, cost, eq, wall, first)
 
 
 def shipped_row(table: Any, task: BoundTask) -> dict[str, Any] | None:

@@ -4,8 +4,9 @@
 
 The fixed test cases (``bench/harness/cases.json``, ``bench.harness.cases``); with
 ``--generalisation``, the family of held-out corridors (``bench/harness/generalisation.json``,
-``bench.harness.generalisation``); with ``--bounds``, the DP's bounds and the oracle's plans for
-the fixed cases (``bench/harness/shipped_bounds.parquet``, ``bench.harness.shipped_bounds``).
+``bench.harness.generalisation``); with ``--bounds``, the DP's bounds, the oracle's plans and
+mpc's first plans for the fixed cases (``bench/harness/shipped_bounds.parquet``,
+``bench.harness.shipped_bounds``).
 ``--check`` alone checks cases.json and the shipped bounds: the DP re-solves a fixed sample of
 2 cases per setting (under a minute) and each stored value or plan that differs is one line.
 ``--write --bounds`` runs the baseline over every fixed case, then the DP (about 20 minutes

@@ -3,7 +3,9 @@
 At the first step of an episode it takes the cost-to-go table (``bench.oracle.mpc.start``: the
 corridor's periodic one, solved once per process) and the departure's least-cost plan on the
 fine lattice with Krauss' stop-for-red cap obeyed (the plan SUMO drives step for step when the
-ego is alone). At every step it reads
+ego is alone); for the fixed cases that plan is read from the shipped bounds
+(``bench.harness.shipped_bounds``, the same plan bit for bit) instead of being solved again. At
+every step it reads
 the ego's state (speed from the observation, position from ``info["position"]``) and the vehicle
 ahead from the occupancy grid. It keeps the first plan until the first event that says it no
 longer holds:
@@ -36,10 +38,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ecodrive_bench.bench.harness import shipped_bounds
 from ecodrive_bench.bench.harness.not_learning import NotLearning
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan
@@ -61,7 +65,9 @@ class MPCAgent(NotLearning):
     planned crossings off the start / end of each green, ``time_weight`` [Wh/s] plans with another
     phi, ``follow=False`` leaves the vehicle ahead to the safety layer, ``headway`` [s] and
     ``leader_accel`` [m/s^2] set the gap kept and the leader's prediction. The defaults are the
-    shipped method."""
+    shipped method. ``shipped``: the shipped bounds' file, whose first plans the agent takes where
+    they answer its problem (its corridor and time weight the scenario's own); None: always
+    solve."""
 
     name = NAME
     action_interface = "longitudinal"
@@ -69,7 +75,7 @@ class MPCAgent(NotLearning):
 
     def __init__(self, cfg: ScenarioConfig, margins: tuple[float, float] = GREEN_MARGINS,
                  time_weight: float | None = None, follow: bool = True, headway: float = PLAN_HEADWAY,
-                 leader_accel: float = planner.LEADER_ACCEL) -> None:
+                 leader_accel: float = planner.LEADER_ACCEL, shipped: Path | None = shipped_bounds.FILE) -> None:
         self.headway, self.leader_accel = headway, leader_accel
         self.cfg = cfg
         self.follow = follow  # keep the gap to the vehicle ahead in the plan (else: the safety layer alone)
@@ -78,6 +84,8 @@ class MPCAgent(NotLearning):
         cor = Corridor.from_config(cfg)
         self.cor = replace(cor, offsets_ms=tuple(o + start for o in cor.offsets_ms),
                            greens_ms=tuple(g - start - end for g in cor.greens_ms))
+        # the shipped first plans are the scenario's own problem: no green margins, its own phi
+        self.shipped = shipped if self.cor == cor and self.plan_cfg is cfg else None
         self.plan: Plan | None = None
         self.table: planner.Table | None = None
         self.k0 = 0  # [steps] the step the plan in force starts at
@@ -90,7 +98,9 @@ class MPCAgent(NotLearning):
 
     def start(self, depart_time: float) -> None:
         """A new episode departing at ``depart_time`` [s]."""
-        self.plan, self.table = planner.start(self.cor, self.plan_cfg, depart_time)
+        table = shipped_bounds.table(self.shipped) if self.shipped is not None else None
+        first = table.mpc_plan(self.plan_cfg, depart_time) if table is not None else None
+        self.plan, self.table = planner.start(self.cor, self.plan_cfg, depart_time, first_plan=first)
         self.k0, self.x, self.v = 0, self.plan.x, self.plan.v
         self.gaps, self.events, self.first = [], [], True
         self.counts = {"drift": 0, "leader": 0, "end": 0, "step": 0, "relaxed": 0, "lost": 0}

@@ -1,12 +1,16 @@
 """The DP's answers for the fixed cases, shipped beside them: ``bench/harness/shipped_bounds.parquet``.
 
-The bounds of ``bench.harness.bounds`` and the plans of the ``oracle`` method
-(``bench.harness.oracle``) are fixed by the case list (``cases.json``), the scenario and the DP
-(``bench.oracle.dp``). They are solved once for every fixed case on the paper's scenario of each
+The bounds of ``bench.harness.bounds``, the plans of the ``oracle`` method
+(``bench.harness.oracle``) and the first plans of the ``mpc`` method (``bench.harness.mpc``) are
+fixed by the case list (``cases.json``), the scenario and the DP (``bench.oracle.dp``,
+``bench.oracle.mpc``). They are solved once for every fixed case on the paper's scenario of each
 signal setting and kept here, so a run reads them instead of spending a DP solve (2-8 s) per case
-and bound; every profile on the fixed cases (smoke, paper, full) reads the same rows. One row per
-(signal setting, case): the ``"cost"`` bound with its plan (speed and position per step, float64,
-the DP's arrays bit for bit) and the ``"energy"`` bound under the baseline's travel time.
+and bound, and 0.1-0.3 s per mpc episode; every profile on the fixed cases (smoke, paper, full)
+reads the same rows. One row per (signal setting, case): the ``"cost"`` bound with its plan
+(speed and position per step, float64, the DP's arrays bit for bit), the ``"energy"`` bound under
+the baseline's travel time, and mpc's first plan (``bench.oracle.mpc.start`` on the periodic
+table: Krauss' red cap obeyed, so not the bound's plan; ``mpc_*``, empty where the periodic
+table does not serve the departure).
 
 A row answers a problem only if every part of its key is the problem's:
 
@@ -23,7 +27,7 @@ schema metadata) is checked on reading: an edited or damaged file is one line on
 bound is solved.
 
 Parquet, not JSON: float64 columns keep every value exactly, list columns hold the plans, zstd
-keeps the file small (65 kB for 200 rows: many cases share a departure, and so a plan).
+keeps the file small (about 100 kB for 200 rows: many cases share a departure, and so a plan).
 
 ``ecodrive cases --write --bounds`` rebuilds it (the baseline over every fixed case for the
 departures and time limits, then the DP: about 20 minutes on 2 busy cores);
@@ -48,7 +52,7 @@ from ecodrive_bench.bench.oracle import dp
 from ecodrive_bench.envs.config import SIGNALS, ScenarioConfig
 
 FILE = Path(__file__).with_name("shipped_bounds.parquet")
-FORMAT = 1  # [-] of the table's columns; another format is refused on reading
+FORMAT = 2  # [-] of the table's columns; another format is refused on reading
 META_KEY = b"ecodrive_shipped_bounds"  # parquet schema metadata: {"format", "sha256", "rows"}
 MAX_BYTES = 16 << 20  # [bytes] a larger file is refused before it is read
 REBUILD = "ecodrive cases --write --bounds"
@@ -56,8 +60,10 @@ CHECK_PER_SETTING = 2  # [cases] re-solved per signal setting by `ecodrive cases
 CHECK_SEED = 20240501  # [-] the sample's seed: the same cases on every check
 SCALARS = {"signals": str, "case": int, "scenario_digest": str, "dp_version": int, "grid": str,
            "depart_time": float, "time_limit": float, "cost_bound": float, "bound_energy": float,
-           "bound_travel_time": float, "energy_bound": float, "energy_bound_travel_time": float, "wall_s": float}
-ARRAYS = ("crossings", "speed", "x")  # [s] stop-line crossing steps, [m/s] and [m] per step of the cost plan
+           "bound_travel_time": float, "energy_bound": float, "energy_bound_travel_time": float, "wall_s": float,
+           "mpc_energy": float, "mpc_travel_time": float, "mpc_cost": float}  # mpc's first plan: NaN where none
+ARRAYS = ("crossings", "speed", "x",  # [s] stop-line crossing steps, [m/s] and [m] per step of the cost plan
+          "mpc_crossings", "mpc_speed", "mpc_x")  # the same of mpc's first plan (empty where none)
 COLUMNS = (*SCALARS, *ARRAYS)
 
 
@@ -116,6 +122,14 @@ class Table:
         i = self.cost_rows.get(_key(cfg, depart_time, grid))
         return None if i is None else row_plan(self.frame.iloc[i], cfg, self.path)
 
+    def mpc_plan(self, cfg: ScenarioConfig, depart_time: float, grid: dp.Grid | None = None) -> dp.Plan | None:
+        """mpc's first plan, ``bench.oracle.mpc.shippable_first(Corridor.from_config(cfg), cfg,
+        depart_time, grid)``; None: not shipped."""
+        i = self.cost_rows.get(_key(cfg, depart_time, grid))
+        if i is None or math.isnan(self.frame.mpc_cost.iat[i]):
+            return None
+        return row_mpc_plan(self.frame.iloc[i], cfg, self.path)
+
     def energy(self, cfg: ScenarioConfig, depart_time: float, time_limit: float,
                grid: dp.Grid | None = None) -> tuple[float, float] | None:
         """(energy [Wh], travel time [s]) of ``bound(cfg, depart_time, "energy", time_limit)``; None: not shipped."""
@@ -137,6 +151,16 @@ def row_plan(r: Any, cfg: ScenarioConfig, path: Path) -> dp.Plan:
                    a=np.diff(v) / dt, energy=float(r.bound_energy), travel_time=float(r.bound_travel_time),
                    cost=float(r.cost_bound), objective="cost", crossings=np.asarray(r.crossings, dtype=np.float64),
                    grid={"source": "shipped", "file": str(path), "wall_s": float(r.wall_s)})
+
+
+def row_mpc_plan(r: Any, cfg: ScenarioConfig, path: Path) -> dp.Plan:
+    """A row's mpc first plan as the ``Plan`` ``bench.oracle.mpc.start`` returns (times,
+    accelerations and travel time derived as ``bench.oracle.dp.refine`` derives them)."""
+    dt, v = cfg.step_length, np.asarray(r.mpc_speed, dtype=np.float64)
+    return dp.Plan(t=float(r.depart_time) + np.arange(len(v)) * dt, x=np.asarray(r.mpc_x, dtype=np.float64), v=v,
+                   a=np.diff(v) / dt, energy=float(r.mpc_energy), travel_time=float(r.mpc_travel_time),
+                   cost=float(r.mpc_cost), objective="cost", crossings=np.asarray(r.mpc_crossings, dtype=np.float64),
+                   grid={"source": "shipped", "file": str(path)})
 
 
 def read(path: Path = FILE) -> Table:
@@ -196,15 +220,20 @@ def save(frame: pd.DataFrame, path: Path = FILE) -> None:
 
 
 def entry(signals: str, case: int, cfg: ScenarioConfig, depart_time: float, time_limit: float, plan: dp.Plan,
-          energy: dp.Plan | None, wall_s: float) -> dict[str, Any]:
+          energy: dp.Plan | None, wall_s: float, mpc: dp.Plan | None = None) -> dict[str, Any]:
     """A row: the ``"cost"`` plan of a case and its ``"energy"`` bound under ``time_limit`` [s]
-    (``energy`` None: the baseline did not finish, no energy bound), solved in ``wall_s`` [s]."""
+    (``energy`` None: the baseline did not finish, no energy bound), solved in ``wall_s`` [s], and
+    mpc's first plan (None: the periodic table does not serve the departure)."""
+    none = math.nan
+    mpc_cols = {"mpc_energy": mpc.energy if mpc else none, "mpc_travel_time": mpc.travel_time if mpc else none,
+                "mpc_cost": mpc.cost if mpc else none, "mpc_crossings": mpc.crossings.tolist() if mpc else [],
+                "mpc_speed": mpc.v.tolist() if mpc else [], "mpc_x": mpc.x.tolist() if mpc else []}
     return {"signals": signals, "case": case, "scenario_digest": problem_digest(cfg), "dp_version": dp.VERSION,
             "grid": grid_key(), "depart_time": float(depart_time), "time_limit": float(time_limit),
             "cost_bound": plan.cost, "bound_energy": plan.energy, "bound_travel_time": plan.travel_time,
             "energy_bound": energy.energy if energy is not None else math.nan,
             "energy_bound_travel_time": energy.travel_time if energy is not None else math.nan, "wall_s": float(wall_s),
-            "crossings": plan.crossings.tolist(), "speed": plan.v.tolist(), "x": plan.x.tolist()}
+            "crossings": plan.crossings.tolist(), "speed": plan.v.tolist(), "x": plan.x.tolist(), **mpc_cols}
 
 
 def sample(rows: pd.DataFrame, n: int = CHECK_PER_SETTING) -> pd.DataFrame:
@@ -250,9 +279,32 @@ def check(path: Path = FILE, per_setting: int = CHECK_PER_SETTING, signals: tupl
 
 
 def compare(path: Path, signals: str, cfg: ScenarioConfig, r: Any) -> list[str]:
-    """A row's bounds solved again: one line per bound that differs from the stored one."""
+    """A row's bounds and mpc's first plan solved again: one line per one that differs from the
+    stored one."""
+    from ecodrive_bench.bench.oracle import mpc
+
     at = f"{path}: {signals} case {int(r.case)} (depart {float(r.depart_time):g} s)"
-    stored, solved = row_plan(r, cfg, path), dp.bound(cfg, float(r.depart_time), "cost")
+    diffs = _plan_diffs(row_plan(r, cfg, path), dp.bound(cfg, float(r.depart_time), "cost"))
+    out = [f"{at}: the stored cost plan is not the DP's: {'; '.join(diffs)}; rebuild: {REBUILD}"] if diffs else []
+    if not math.isnan(r.energy_bound):
+        eq = dp.bound(cfg, float(r.depart_time), "energy", time_limit=float(r.time_limit))
+        have = (float(r.energy_bound), float(r.energy_bound_travel_time))
+        if have != (eq.energy, eq.travel_time):
+            out.append(f"{at}: the stored energy bound under {float(r.time_limit):g} s is not the DP's: energy, travel time "
+                       f"{have[0]!r}, {have[1]!r} stored, {eq.energy!r}, {eq.travel_time!r} solved; rebuild: {REBUILD}")
+    first = mpc.shippable_first(dp.Corridor.from_config(cfg), cfg, float(r.depart_time))
+    if (first is None) != math.isnan(r.mpc_cost):
+        out.append(f"{at}: mpc's first plan is {'stored' if first is None else 'missing'}, but the periodic table "
+                   f"{'does not serve' if first is None else 'serves'} this departure; rebuild: {REBUILD}")
+    elif first is not None:
+        diffs = _plan_diffs(row_mpc_plan(r, cfg, path), first)
+        if diffs:
+            out.append(f"{at}: the stored mpc first plan is not the planner's: {'; '.join(diffs)}; rebuild: {REBUILD}")
+    return out
+
+
+def _plan_diffs(stored: dp.Plan, solved: dp.Plan) -> list[str]:
+    """What differs between two plans, value for value."""
     diffs = [f"{k} {getattr(stored, k)!r} stored, {getattr(solved, k)!r} solved"
              for k in ("cost", "energy", "travel_time") if getattr(stored, k) != getattr(solved, k)]
     for k in ("t", "x", "v", "a", "crossings"):
@@ -261,11 +313,4 @@ def compare(path: Path, signals: str, cfg: ScenarioConfig, r: Any) -> list[str]:
             diffs.append(f"{k} has {a.size} entries stored, {b.size} solved")
         elif not np.array_equal(a, b):
             diffs.append(f"{k} differs at {int((a != b).sum())} of {a.size} entries")
-    out = [f"{at}: the stored cost plan is not the DP's: {'; '.join(diffs)}; rebuild: {REBUILD}"] if diffs else []
-    if not math.isnan(r.energy_bound):
-        eq = dp.bound(cfg, float(r.depart_time), "energy", time_limit=float(r.time_limit))
-        have = (float(r.energy_bound), float(r.energy_bound_travel_time))
-        if have != (eq.energy, eq.travel_time):
-            out.append(f"{at}: the stored energy bound under {float(r.time_limit):g} s is not the DP's: energy, travel time "
-                       f"{have[0]!r}, {have[1]!r} stored, {eq.energy!r}, {eq.travel_time!r} solved; rebuild: {REBUILD}")
-    return out
+    return diffs

@@ -101,18 +101,25 @@ class Replan:
     states: int = 0  # [-] states the look-ahead evaluated (the rest is read from the table)
 
 
-def start(cor: Corridor, cfg: ScenarioConfig, depart_time: float, grid: Grid | None = None) -> tuple[Plan, Table]:
+def start(cor: Corridor, cfg: ScenarioConfig, depart_time: float, grid: Grid | None = None,
+          first_plan: Plan | None = None) -> tuple[Plan, Table]:
     """The first plan of a departure and its cost-to-go table. Where every junction runs one
     cycle, the table is the process's periodic one (``periodic``, solved once per corridor and
-    config) and the plan its optimum from the insertion state, on the global lattice. Otherwise
-    one global pass, ``SLACK`` steps past the certified horizon, gives both, the plan refined on
-    the fine lattice. Krauss' red cap is obeyed in both."""
+    config) and the plan its optimum from the insertion state, on the global lattice, refined on
+    the fine lattice; ``first_plan``, that plan as solved before (the one ``start`` returned for
+    the same corridor, config, departure and grid: the shipped bounds keep it for the fixed
+    cases), is taken instead of solving it again. Otherwise one global pass, ``SLACK`` steps past
+    the certified horizon, gives both (``first_plan`` is not used). Krauss' red cap is obeyed in
+    both."""
     started = time.perf_counter()
     tab = periodic(cor, cfg, grid)
     dt_ms = int(round(cfg.step_length * MS))
     depart_ms = int(round(depart_time * MS))
     if tab is not None and depart_ms % dt_ms == 0:
         view = replace(tab, offset=(depart_ms // dt_ms) % tab.period, depart_time=depart_time)
+        if first_plan is not None:
+            view.wall_s = time.perf_counter() - started
+            return first_plan, view
         first = _solve(view, 0, 0, view.lat.nv, 0, None, 0.0, 0.0, 0.0)  # the global-lattice optimum
         if first is not None:
             run = _Run(cor, cfg, depart_time, cfg.reward.phi, "numba")
@@ -133,6 +140,13 @@ def start(cor: Corridor, cfg: ScenarioConfig, depart_time: float, grid: Grid | N
                 choices=[p[2] if p is not None else None for p in sol.policy], green=green, step_cost=cost,
                 wall_s=time.perf_counter() - started)
     return plan, tab
+
+
+def shippable_first(cor: Corridor, cfg: ScenarioConfig, depart_time: float, grid: Grid | None = None) -> Plan | None:
+    """``start``'s first plan where the periodic table serves the departure (the plan
+    ``first_plan`` may stand for), else None."""
+    plan, tab = start(cor, cfg, depart_time, grid)
+    return plan if tab.period else None
 
 
 _PERIODIC: dict[tuple[Corridor, ScenarioConfig, Grid], Table | None] = {}  # per process

@@ -10,9 +10,10 @@ import pytest
 
 from ecodrive_bench.bench.harness import case_files, cases, shipped_bounds
 from ecodrive_bench.bench.harness.bounds import NO_LIMIT, SHIPPED, SOLVED, attach
+from ecodrive_bench.bench.harness.mpc import MPCAgent
 from ecodrive_bench.bench.harness.oracle import OracleAgent
 from ecodrive_bench.bench.harness.scenarios import setting
-from ecodrive_bench.bench.oracle import dp
+from ecodrive_bench.bench.oracle import dp, mpc
 
 SIGNALS = "coordinated"
 DEPART = 247.0  # [s] case 0's departure on the paper's coordinated corridor
@@ -22,13 +23,16 @@ PLAN_ARRAYS = ("t", "x", "v", "a", "crossings")
 
 @pytest.fixture(scope="module")
 def solved(tmp_path_factory):
-    """Both bounds of one case, solved, and a shipped-bounds file holding that case alone."""
+    """Both bounds of one case and mpc's first plan, solved, and a shipped-bounds file holding
+    that case alone."""
     cfg = setting(SIGNALS, None)
     plan = dp.bound(cfg, DEPART, "cost")
     eq = dp.bound(cfg, DEPART, "energy", time_limit=LIMIT)
+    first = mpc.shippable_first(dp.Corridor.from_config(cfg), cfg, DEPART)
     path = tmp_path_factory.mktemp("shipped") / "shipped_bounds.parquet"
-    shipped_bounds.save(pd.DataFrame([shipped_bounds.entry(SIGNALS, 0, cfg, DEPART, LIMIT, plan, eq, 1.5)]), path)
-    return cfg, plan, eq, path
+    shipped_bounds.save(pd.DataFrame([shipped_bounds.entry(SIGNALS, 0, cfg, DEPART, LIMIT, plan, eq, 1.5, first)]),
+                        path)
+    return cfg, plan, eq, path, first
 
 
 def results(travel_time: float = LIMIT, terminated: bool = True) -> pd.DataFrame:
@@ -50,7 +54,7 @@ def oracle_plan(cfg, path) -> dp.Plan:
 
 
 def test_a_hit_gives_the_solved_values_and_plan(solved, tmp_path):
-    cfg, plan, eq, path = solved
+    cfg, plan, eq, path, _ = solved
     table = shipped_bounds.read(path)
     same_plan(table.plan(cfg, DEPART), plan)
     assert table.energy(cfg, DEPART, LIMIT) == (eq.energy, eq.travel_time)
@@ -71,7 +75,7 @@ def test_a_hit_gives_the_solved_values_and_plan(solved, tmp_path):
 
 
 def test_a_changed_key_part_misses_and_solves(solved, tmp_path, monkeypatch):
-    cfg, plan, eq, path = solved
+    cfg, plan, eq, path, _ = solved
     table = shipped_bounds.read(path)
     assert table.plan(setting(SIGNALS, {"reward": {"phi": 0.5}}), DEPART) is None  # a scenario override
     assert table.plan(cfg, DEPART + 1.0) is None  # another departure
@@ -90,24 +94,49 @@ def test_a_changed_key_part_misses_and_solves(solved, tmp_path, monkeypatch):
     same_plan(got, plan)
 
 
-def tampered(src, dst, sha_of_edit: bool, case: int | None = None) -> int:
-    """Copy ``src`` to ``dst`` with one cost bound raised by 1e-6 Wh (``case``'s, else the first
-    row's); ``sha_of_edit``: with the content digest of the edited rows (an edit that passes the
-    digest), else the original one. Returns the edited case."""
+def test_mpc_takes_its_first_plan_from_the_file_and_drives_as_when_it_solves(solved):
+    """mpc's first plan read from the file is the planner's, bit for bit, and the agent then acts
+    exactly as one that solved it; a variant (green margins, another time weight) or another
+    departure does not read it."""
+    cfg, plan, _, path, first = solved
+    assert first is not None
+    table = shipped_bounds.read(path)
+    same_plan(table.mpc_plan(cfg, DEPART), first)
+    assert table.mpc_plan(cfg, DEPART + 1.0) is None
+    shipped, own = MPCAgent(cfg, shipped=path), MPCAgent(cfg, shipped=None)
+    for agent in (shipped, own):
+        agent.start(DEPART)
+    assert shipped.plan.grid["source"] == "shipped" and own.plan.grid.get("source") != "shipped"
+    same_plan(shipped.plan, own.plan)
+    rng = np.random.default_rng(3)
+    for k in range(0, 60, 3):  # the same re-plans from the same states
+        grid = (rng.random((60, cfg.observed_lanes)) > 0.1).astype(np.float32)
+        logic = np.zeros(cfg.observed_lanes + 4, dtype=np.float32)
+        logic[0], logic[cfg.observed_lanes + 1] = 1.0, float(first.v[k]) + rng.normal(0, 0.3)
+        obs, info = {"grid": grid, "logic": logic}, {"travel_time": k * cfg.step_length + 1e-9,
+                                                      "time": DEPART + k * cfg.step_length, "position": float(first.x[k])}
+        assert shipped.act(obs, info).tobytes() == own.act(obs, info).tobytes()
+    assert MPCAgent(cfg, margins=(1.0, 0.0), shipped=path).shipped is None
+    assert MPCAgent(cfg, time_weight=0.5, shipped=path).shipped is None
+
+
+def tampered(src, dst, sha_of_edit: bool, case: int | None = None, column: str = "cost_bound") -> int:
+    """Copy ``src`` to ``dst`` with one value of ``column`` raised by 1e-6 (``case``'s, else the
+    first row's); ``sha_of_edit``: with the content digest of the edited rows (an edit that passes
+    the digest), else the original one. Returns the edited case."""
     frame = shipped_bounds.read(src).frame.copy()
     i = 0 if case is None else int(np.flatnonzero((frame.case == case) & (frame.signals == SIGNALS))[0])
-    frame.loc[i, "cost_bound"] += 1e-6
+    frame.loc[i, column] += 1e-6
     if sha_of_edit:
         shipped_bounds.save(frame, dst)
     else:
         table = pq.read_table(src)
-        pq.write_table(table.set_column(table.schema.get_field_index("cost_bound"), "cost_bound",
-                                        [frame.cost_bound.to_numpy()]), dst)
+        pq.write_table(table.set_column(table.schema.get_field_index(column), column, [frame[column].to_numpy()]), dst)
     return int(frame.case.iloc[i])
 
 
 def test_an_edit_is_one_line_and_exit_2(solved, tmp_path, capsys):
-    _, _, _, path = solved
+    _, _, _, path, _ = solved
     bad = tmp_path / "edited.parquet"
     tampered(path, bad, sha_of_edit=False)
     assert case_files.main(["--check", "--bounds"], bounds_file=bad) == 2
@@ -118,14 +147,16 @@ def test_an_edit_is_one_line_and_exit_2(solved, tmp_path, capsys):
 
 
 @pytest.mark.skipif(not shipped_bounds.FILE.is_file(), reason="no shipped bounds in this checkout")
-def test_a_value_edited_with_its_digest_is_caught_by_the_check(tmp_path):
+@pytest.mark.parametrize("column,what", [("cost_bound", "cost plan is not the DP's"),
+                                         ("mpc_cost", "mpc first plan is not the planner's")])
+def test_a_value_edited_with_its_digest_is_caught_by_the_check(tmp_path, column, what):
     """An edit that passes the digest is still caught: the DP solves the sampled case again."""
     rows = shipped_bounds.read(shipped_bounds.FILE).frame
     case = int(shipped_bounds.sample(rows[rows.signals == SIGNALS], 1).case.iloc[0])
     bad = tmp_path / "edited.parquet"
-    assert tampered(shipped_bounds.FILE, bad, sha_of_edit=True, case=case) == case
+    assert tampered(shipped_bounds.FILE, bad, sha_of_edit=True, case=case, column=column) == case
     lines = shipped_bounds.check(bad, per_setting=1, signals=(SIGNALS,), progress=False)
-    assert len(lines) == 1 and f"{SIGNALS} case {case} " in lines[0] and "cost " in lines[0]
+    assert len(lines) == 1 and f"{SIGNALS} case {case} " in lines[0] and what in lines[0] and "cost " in lines[0]
 
 
 @pytest.mark.skipif(not shipped_bounds.FILE.is_file(), reason="no shipped bounds in this checkout")
@@ -139,6 +170,9 @@ def test_the_shipped_file_covers_every_fixed_case_of_the_current_problem():
         assert set(mine.scenario_digest) == {shipped_bounds.problem_digest(setting(s, None))}
         assert set(mine.dp_version) == {dp.VERSION} and set(mine.grid) == {shipped_bounds.grid_key()}
         assert (mine.time_limit != NO_LIMIT).all() and mine.energy_bound.notna().all()
+        assert mine.mpc_cost.notna().all()  # the periodic table serves every fixed departure
+    # mpc's first plans obey Krauss' red cap: not all are the bound's plans
+    assert any(list(a) != list(b) for a, b in zip(rows.speed, rows.mpc_speed))
     assert shipped_bounds.FILE.stat().st_size < 2 << 20
 
 
