@@ -154,7 +154,10 @@ class MPCAgent(NotLearning):
             self.first = False
             self.counts[event] += 1
             started = time.perf_counter()
-            new = planner.replan(self.table, k, x, speed, lead, headway=self.headway, leader_accel=self.leader_accel)
+            # from here on every step re-plans: the plan in force is read one step ahead and logged
+            # LOGGED_STEPS ahead, so the table's choices are not followed further
+            new = planner.replan(self.table, k, x, speed, lead, headway=self.headway, leader_accel=self.leader_accel,
+                                 length=LOGGED_STEPS + 1)
             if new is None:  # no plan arrives within the table: hold the speed limit (Krauss governs)
                 self.counts["lost"] += 1
                 self.k0, self.x, self.v = k, np.array([x, x]), np.array([speed, cfg.speed_limit])

@@ -100,6 +100,20 @@ def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int,
                 _relax_span(nxt[jn], cur[j], arg_j, arrived, hi, lo, jn, cost, c, red_low, red_top)
 
 
+@njit(nogil=True)
+def mask_gap(buf: np.ndarray, lo: int, hi: int, jlo: int, jhi: int, base: float, headway: float,
+             speeds: np.ndarray, x0: float, dx: float, eps: float) -> None:
+    """The states (rows ``lo..hi``, speeds ``jlo..jhi``) of ``buf`` [speed, row] whose front
+    bumper passes the vehicle ahead's limit ``base - headway speeds[j]`` [m] become infinite: the
+    rows above ``floor((limit - x0) / dx + eps)`` (``bench.oracle.mpc``'s gap constraint; the
+    numpy form's arithmetic, element by element, in the same order)."""
+    for j in range(jlo, jhi + 1):
+        top = np.floor((base - headway * speeds[j] - x0) / dx + eps)
+        for i in range(lo, hi + 1):
+            if i > top:
+                buf[j, i] = np.inf
+
+
 def backward_step_numpy(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
                         d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray,
                         *next_window: int) -> None:

@@ -37,7 +37,7 @@ import numpy as np
 from ecodrive_bench.envs.config import ScenarioConfig
 
 from .dp import GRID_EPS, MS, Corridor, Grid, Plan, Window, _Lattice, _Run, refine, solve
-from .kernel import backward_step, backward_step_in
+from .kernel import backward_step, backward_step_in, mask_gap
 
 LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
 SLACK = 150  # [steps] the table reaches this far past the bound's certified horizon
@@ -221,6 +221,14 @@ def leader_travel(speed: float, m: int, cfg: ScenarioConfig, accel: float | None
     return float(v.sum() * dt)
 
 
+def _travels(speed: float, steps: int, cfg: ScenarioConfig, accel: float) -> list[float]:
+    """``leader_travel(speed, m, cfg, accel)`` for m = 0..``steps`` (0 for m = 0): the speeds once,
+    each sum over its prefix (the same numbers, summed as ``leader_travel`` sums them)."""
+    dt = cfg.step_length
+    v = np.minimum(speed + accel * dt * np.arange(1, steps + 1), cfg.speed_limit)
+    return [0.0] + [float(v[:m].sum() * dt) for m in range(1, steps + 1)]
+
+
 def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
     """(row, speed cell) of a real state: position rounded up, speed to the nearest cell."""
     lat = tab.lat
@@ -230,20 +238,23 @@ def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
 
 
 def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
-           lookahead: int = LOOKAHEAD, headway: float = HEADWAY, leader_accel: float = LEADER_ACCEL) -> Replan | None:
+           lookahead: int = LOOKAHEAD, headway: float = HEADWAY, leader_accel: float = LEADER_ACCEL,
+           length: int | None = None) -> Replan | None:
     """The least-cost plan from the ego's state (``x`` [m], ``v`` [m/s]) at step ``k`` after the
     departure, keeping the gap to ``leader`` over the look-ahead; None when no plan arrives within
-    the table's horizon."""
+    the table's horizon. ``length``: only the plan's first ``length`` entries (at least 2; its
+    value is the whole plan's), without following the table's choices further; None: to the
+    arrival."""
     started = time.perf_counter()
     i0, j0 = snap(tab, x, v)
     mode = "none"
     if leader is not None:
-        plan = _solve(tab, k, i0, j0, lookahead, x + leader.gap, leader.speed, headway, leader_accel)
+        plan = _solve(tab, k, i0, j0, lookahead, x + leader.gap, leader.speed, headway, leader_accel, length)
         mode = "kept"
         if plan is None:
             mode = "relaxed"
     if leader is None or plan is None:
-        plan = _solve(tab, k, i0, j0, lookahead, None, 0.0, headway, leader_accel)
+        plan = _solve(tab, k, i0, j0, lookahead, None, 0.0, headway, leader_accel, length)
     if plan is None:
         return None
     rows, speeds, value, states = plan
@@ -253,7 +264,8 @@ def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
 
 
 def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: float | None,
-           leader_speed: float, headway: float, leader_accel: float) -> tuple[np.ndarray, np.ndarray, float, int] | None:
+           leader_speed: float, headway: float, leader_accel: float,
+           length: int | None = None) -> tuple[np.ndarray, np.ndarray, float, int] | None:
     lat, nv = tab.lat, tab.lat.nv
     if i0 >= lat.i_end:
         return np.array([i0]), np.array([j0]), 0.0, 0
@@ -282,15 +294,14 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
         else:
             nwin = (1, 0, 1, 0)
     speeds_ms = np.arange(nv + 1) * lat.dv
+    travel = _travels(leader_speed, steps, tab.cfg, leader_accel) if leader_rear is not None else []
 
     def keep_gap(buf: np.ndarray, m: int, win: Window) -> None:  # states at look-ahead step m that come too close
         lo, hi, jlo, jhi = win
         if leader_rear is None or lo > hi or jlo > jhi:
             return
-        limit = leader_rear + leader_travel(leader_speed, m, tab.cfg, leader_accel) - MIN_GAP - headway * speeds_ms[jlo:jhi + 1]
-        top = np.floor((limit - tab.cor.x0) / lat.dx + GRID_EPS).astype(np.int64)  # [row] per speed
-        block = buf[jlo:jhi + 1, lo:hi + 1]
-        block[np.arange(lo, hi + 1)[None, :] > top[:, None]] = np.inf
+        mask_gap(buf, lo, hi, jlo, jhi, leader_rear + travel[m] - MIN_GAP, headway, speeds_ms, tab.cor.x0, lat.dx,
+                 GRID_EPS)
 
     if steps == 0 and nwin[0] > nwin[1]:  # no look-ahead and a start outside the table's window
         return None
@@ -326,7 +337,7 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
         i += j
         rows.append(i)
         speeds.append(j)
-        if i >= lat.i_end:
+        if i >= lat.i_end or len(rows) == length:
             return np.array(rows), np.array(speeds), value, states
     for kk in range(k + steps, horizon):  # the table's own choices to the end
         lo, _, jlo, _ = tab.windows[tab.at(kk)]
@@ -334,6 +345,6 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
         i += j
         rows.append(i)
         speeds.append(j)
-        if i >= lat.i_end:
+        if i >= lat.i_end or len(rows) == length:
             break
     return np.array(rows), np.array(speeds), value, states

@@ -8,7 +8,7 @@ import pytest
 
 from ecodrive_bench.bench.oracle.dp import Corridor, Grid, solve
 from ecodrive_bench.bench.oracle.horizon import LeastCost
-from ecodrive_bench.bench.oracle.kernel import backward_step, backward_step_in, backward_step_numpy
+from ecodrive_bench.bench.oracle.kernel import backward_step, backward_step_in, backward_step_numpy, mask_gap
 from ecodrive_bench.envs.config import ScenarioConfig
 
 
@@ -123,3 +123,25 @@ def test_least_cost_bounds_every_solved_plan(scenario, depart):
         assert least.at(steps) <= cost, (plan.objective, steps)
     assert least.at(steps) > 0.5 * cost  # and not vacuous: it holds most of the cost
     assert least.after(steps - 1) <= least.at(steps) and least.last_steps(cost) >= steps
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_gap_mask_equals_its_numpy_form(seed):
+    """``mask_gap``: the rows past the vehicle ahead's limit become infinite, exactly those the
+    numpy form (the planner's before it) marks, limits on row boundaries included."""
+    rng = np.random.default_rng(seed)
+    nv, rows, dx, dv, x0 = 30, 400, float(rng.choice([0.5, 0.7, 1.0])), 0.5, 5.1
+    speeds = np.arange(nv + 1) * dv
+    for _ in range(50):
+        buf = rng.random((nv + 1, rows)).astype(np.float32)
+        lo, jlo = int(rng.integers(0, rows - 1)), int(rng.integers(0, nv))
+        hi, jhi = int(rng.integers(lo, rows)), int(rng.integers(jlo, nv + 1))
+        headway = float(rng.choice([0.0, 1.0, 1.7]))
+        base = x0 + dx * int(rng.integers(0, rows)) + float(rng.choice([0.0, rng.uniform(-30, 30)]))
+        want = buf.copy()
+        limit = base - headway * speeds[jlo:jhi + 1]
+        top = np.floor((limit - x0) / dx + 1e-9).astype(np.int64)
+        block = want[jlo:jhi + 1, lo:hi + 1]
+        block[np.arange(lo, hi + 1)[None, :] > top[:, None]] = np.inf
+        mask_gap(buf, lo, hi, jlo, jhi, base, headway, speeds, x0, dx, 1e-9)
+        assert np.array_equal(buf, want)

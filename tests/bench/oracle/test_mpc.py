@@ -37,6 +37,27 @@ def test_replan_from_a_state_on_the_plan_returns_the_rest_of_it(table):
         assert np.array_equal(again.x, first.x[k:]) and np.array_equal(again.v, first.v[k:]), k
 
 
+@pytest.mark.parametrize("periodic", [False, True])
+def test_a_replan_cut_to_a_length_is_the_head_of_the_whole_one(table, periodic):
+    """``length``: the first entries of the same plan (its value too), from states on and off the
+    plan, with and without a vehicle ahead, on a departure's table and on the periodic one."""
+    tab = table if periodic else mpc.start(Corridor.from_config(CFG), CFG, 240.5)[1]  # off the steps: no periodic view
+    assert bool(tab.period) == periodic
+    first = mpc.replan(tab, 0, tab.cor.x0, tab.cor.v0)
+    rng = np.random.default_rng(4)
+    for k in range(0, len(first.x) - 1, 7):
+        x, v = float(first.x[k]) + rng.uniform(-3, 3), max(0.0, float(first.v[k]) + rng.uniform(-2, 2))
+        for lead in (None, mpc.Leader(gap=rng.uniform(3, 60), speed=rng.uniform(0, 12))):
+            whole = mpc.replan(tab, k, x, v, lead)
+            for length in (2, mpc.LOOKAHEAD + 1, mpc.LOOKAHEAD + 7):
+                cut = mpc.replan(tab, k, x, v, lead, length=length)
+                if whole is None:
+                    assert cut is None
+                    continue
+                assert np.array_equal(cut.x, whole.x[:length]) and np.array_equal(cut.v, whole.v[:length])
+                assert (cut.value, cut.leader, cut.states) == (whole.value, whole.leader, whole.states)
+
+
 def test_replan_keeps_the_gap_to_a_slow_vehicle_ahead(table):
     free = mpc.replan(table, 0, table.cor.x0, table.cor.v0)
     lead = mpc.Leader(gap=25.0, speed=4.0)
