@@ -1,8 +1,9 @@
 """Ratios from one pytest-benchmark JSON file (all numbers from the same run): env step against
 raw SUMO, logging overhead, the projected training run, each learner's update against its FLOP
 floor (the update's counted FLOPs at this core's measured matmul rate), each learned method's
-greedy act against a raw SUMO step, and the DP: mpc's re-plan (median, p99) and a cold solve
-against the reference solver (numpy kernel, unpruned global pass).
+greedy act against a raw SUMO step, the main job's logged episodes of each method against SUMO's
+own time in them, and the DP: mpc's re-plan (median, p99) and a cold solve against the reference
+solver (numpy kernel, unpruned global pass).
 
     ecodrive perf .benchmarks/perf.json
 """
@@ -23,6 +24,7 @@ REPLAN_MEDIAN_MS, REPLAN_P99_MS = 20.0, 100.0  # [ms] one mpc re-plan on one cor
 COLD_SOLVE_LIMIT = 0.1  # a whole case's bound at least 10x faster than the reference solver (numpy, unpruned)
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 ACT_LIMIT_S = 0.3e-3  # [s] a greedy batch-1 act (test_greedy_act[...], one thread)
+MAIN_JOB_LIMIT = 1.3  # [-] nox -s benchmark: wall time x workers / SUMO's time (test_episode_over_floor[...])
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
     "env_step_over_sim_in_run": ("", "", 2.0, "env.step / its own simulationStep"),
@@ -75,6 +77,9 @@ def ratios(path: Path) -> dict[str, float]:
             out[f"act_over_env_step_in_episode_{m}"] = e["episode_act_s"] / e["episode_step_s"]
     if "test_env_reset" in med:
         out["reset_ms"] = med["test_env_reset"] * 1e3
+    for name, e in extra.items():  # the main job's episodes, method by method, against SUMO's own time
+        if name.startswith("test_episode_over_floor[") and "floor_ratio" in e:
+            out[f"episode_over_floor_{name[len('test_episode_over_floor['):-1]}"] = e["floor_ratio"]
     if "median_s" in extra.get("test_dp_replan", {}):  # one re-plan of mpc, against the cold solve
         out["replan_median_ms"] = extra["test_dp_replan"]["median_s"] * 1e3
         out["replan_p99_ms"] = extra["test_dp_replan"]["p99_s"] * 1e3
@@ -177,6 +182,11 @@ def main(argv: list[str] | None = None) -> int:
               f"target <= {COLD_SOLVE_LIMIT:g}x) {'ok' if good else 'MISSED'}")
     if "sumo_step_us" in r:
         print(f"{'raw SUMO step':40s} {r['sumo_step_us']:6.0f} us")
+    for key in sorted(k for k in r if k.startswith("episode_over_floor_")):  # one process: no pool overhead
+        good = r[key] <= MAIN_JOB_LIMIT
+        ok &= good
+        print(f"{key[len('episode_over_floor_'):] + ': logged episode / SUMO time':40s} {r[key]:6.3f}x  "
+              f"(the main job's target <= {MAIN_JOB_LIMIT}x) {'ok' if good else 'MISSED'}")
     for m in LEARNERS:
         if f"act_us_{m}" in r:
             good = r[f"act_us_{m}"] <= ACT_LIMIT_S * 1e6
