@@ -91,8 +91,10 @@ class ParameterizedAction(ActionType):
             spaces.Box(cfg.a_min, cfg.a_max, shape=(3,), dtype=np.float32),
         ))
         self._bounds = _bounds(self.space[1])
-        # the bounds as float32 values (as np.clip casts them for a float32 parameter), as Python floats
-        self._clip32 = (float(np.float32(cfg.a_min)), float(np.float32(cfg.a_max)))
+        # the bounds as float32 values, as Python floats: np.clip casts Python-number bounds to a float32
+        # parameter's dtype (numpy scalars it would promote instead: those keep np.clip)
+        python = all(type(b) in (int, float) for b in (cfg.a_min, cfg.a_max))
+        self._clip32 = (float(np.float32(cfg.a_min)), float(np.float32(cfg.a_max))) if python else None
 
     def contains(self, action) -> bool:
         if isinstance(action, np.ndarray) or not isinstance(action, (tuple, list)) or len(action) != 2:
@@ -102,8 +104,8 @@ class ParameterizedAction(ActionType):
     def decode(self, action) -> Command:
         k_idx, params = action
         k_idx = int(k_idx)
-        if type(params) is np.ndarray and params.dtype == np.float32:  # an agent's own array: np.clip's
-            lo, hi = self._clip32  # float32 result without its dispatch (exact: float32 -> float64 is)
+        if self._clip32 is not None and type(params) is np.ndarray and params.dtype == np.float32:
+            lo, hi = self._clip32  # an agent's own array: np.clip's float32 result without its dispatch
             return Command(min(max(float(params[k_idx]), lo), hi), LATERAL[k_idx])
         return Command(float(np.clip(params[k_idx], self.cfg.a_min, self.cfg.a_max)), LATERAL[k_idx])
 

@@ -48,7 +48,7 @@ import pandas as pd
 
 from ecodrive_bench.bench.harness.scenarios import setting
 from ecodrive_bench.bench.io import atomic_file
-from ecodrive_bench.bench.oracle import dp
+from ecodrive_bench.bench.oracle import dp, mpc
 from ecodrive_bench.envs.config import SIGNALS, ScenarioConfig
 
 FILE = Path(__file__).with_name("shipped_bounds.parquet")
@@ -61,7 +61,8 @@ CHECK_SEED = 20240501  # [-] the sample's seed: the same cases on every check
 SCALARS = {"signals": str, "case": int, "scenario_digest": str, "dp_version": int, "grid": str,
            "depart_time": float, "time_limit": float, "cost_bound": float, "bound_energy": float,
            "bound_travel_time": float, "energy_bound": float, "energy_bound_travel_time": float, "wall_s": float,
-           "mpc_energy": float, "mpc_travel_time": float, "mpc_cost": float}  # mpc's first plan: NaN where none
+           "mpc_version": int, "mpc_energy": float, "mpc_travel_time": float,  # mpc's first plan: NaN where none
+           "mpc_cost": float}
 ARRAYS = ("crossings", "speed", "x",  # [s] stop-line crossing steps, [m/s] and [m] per step of the cost plan
           "mpc_crossings", "mpc_speed", "mpc_x")  # the same of mpc's first plan (empty where none)
 COLUMNS = (*SCALARS, *ARRAYS)
@@ -126,7 +127,7 @@ class Table:
         """mpc's first plan, ``bench.oracle.mpc.shippable_first(Corridor.from_config(cfg), cfg,
         depart_time, grid)``; None: not shipped."""
         i = self.cost_rows.get(_key(cfg, depart_time, grid))
-        if i is None or math.isnan(self.frame.mpc_cost.iat[i]):
+        if i is None or math.isnan(self.frame.mpc_cost.iat[i]) or self.frame.mpc_version.iat[i] != mpc.VERSION:
             return None
         return row_mpc_plan(self.frame.iloc[i], cfg, self.path)
 
@@ -156,10 +157,10 @@ def row_plan(r: Any, cfg: ScenarioConfig, path: Path) -> dp.Plan:
 def row_mpc_plan(r: Any, cfg: ScenarioConfig, path: Path) -> dp.Plan:
     """A row's mpc first plan as the ``Plan`` ``bench.oracle.mpc.start`` returns (times,
     accelerations and travel time derived as ``bench.oracle.dp.refine`` derives them)."""
-    dt, v = cfg.step_length, np.asarray(r.mpc_speed, dtype=np.float64)
-    return dp.Plan(t=float(r.depart_time) + np.arange(len(v)) * dt, x=np.asarray(r.mpc_x, dtype=np.float64), v=v,
+    dt, v = cfg.step_length, np.array(r.mpc_speed, dtype=np.float64)  # copies: the table's cells are read-only
+    return dp.Plan(t=float(r.depart_time) + np.arange(len(v)) * dt, x=np.array(r.mpc_x, dtype=np.float64), v=v,
                    a=np.diff(v) / dt, energy=float(r.mpc_energy), travel_time=float(r.mpc_travel_time),
-                   cost=float(r.mpc_cost), objective="cost", crossings=np.asarray(r.mpc_crossings, dtype=np.float64),
+                   cost=float(r.mpc_cost), objective="cost", crossings=np.array(r.mpc_crossings, dtype=np.float64),
                    grid={"source": "shipped", "file": str(path)})
 
 
@@ -220,14 +221,15 @@ def save(frame: pd.DataFrame, path: Path = FILE) -> None:
 
 
 def entry(signals: str, case: int, cfg: ScenarioConfig, depart_time: float, time_limit: float, plan: dp.Plan,
-          energy: dp.Plan | None, wall_s: float, mpc: dp.Plan | None = None) -> dict[str, Any]:
+          energy: dp.Plan | None, wall_s: float, first: dp.Plan | None = None) -> dict[str, Any]:
     """A row: the ``"cost"`` plan of a case and its ``"energy"`` bound under ``time_limit`` [s]
     (``energy`` None: the baseline did not finish, no energy bound), solved in ``wall_s`` [s], and
-    mpc's first plan (None: the periodic table does not serve the departure)."""
-    none = math.nan
-    mpc_cols = {"mpc_energy": mpc.energy if mpc else none, "mpc_travel_time": mpc.travel_time if mpc else none,
-                "mpc_cost": mpc.cost if mpc else none, "mpc_crossings": mpc.crossings.tolist() if mpc else [],
-                "mpc_speed": mpc.v.tolist() if mpc else [], "mpc_x": mpc.x.tolist() if mpc else []}
+    mpc's first plan ``first`` (None: the periodic table does not serve the departure)."""
+    f, none = first, math.nan
+    mpc_cols = {"mpc_version": mpc.VERSION, "mpc_energy": f.energy if f else none,
+                "mpc_travel_time": f.travel_time if f else none, "mpc_cost": f.cost if f else none,
+                "mpc_crossings": f.crossings.tolist() if f else [], "mpc_speed": f.v.tolist() if f else [],
+                "mpc_x": f.x.tolist() if f else []}
     return {"signals": signals, "case": case, "scenario_digest": problem_digest(cfg), "dp_version": dp.VERSION,
             "grid": grid_key(), "depart_time": float(depart_time), "time_limit": float(time_limit),
             "cost_bound": plan.cost, "bound_energy": plan.energy, "bound_travel_time": plan.travel_time,
@@ -268,6 +270,10 @@ def check(path: Path = FILE, per_setting: int = CHECK_PER_SETTING, signals: tupl
                          f"DP version {int(r.dp_version)}, {r.grid}; now {now[0]}, {now[1]}, {now[2]}); they would miss "
                          f"and be solved; rebuild: {REBUILD}")
             continue
+        old = rows[rows.mpc_version != mpc.VERSION]
+        if len(old):
+            lines.append(f"{path}: {len(old)} of the {s} rows hold mpc first plans of planner version "
+                         f"{int(old.mpc_version.iloc[0])}, not {mpc.VERSION}; mpc would solve them; rebuild: {REBUILD}")
         missing = sorted(fixed - set(rows.case))
         if missing:
             lines.append(f"{path}: no {s} rows for {len(missing)} of the {len(fixed)} fixed cases (first: case "
@@ -281,8 +287,6 @@ def check(path: Path = FILE, per_setting: int = CHECK_PER_SETTING, signals: tupl
 def compare(path: Path, signals: str, cfg: ScenarioConfig, r: Any) -> list[str]:
     """A row's bounds and mpc's first plan solved again: one line per one that differs from the
     stored one."""
-    from ecodrive_bench.bench.oracle import mpc
-
     at = f"{path}: {signals} case {int(r.case)} (depart {float(r.depart_time):g} s)"
     diffs = _plan_diffs(row_plan(r, cfg, path), dp.bound(cfg, float(r.depart_time), "cost"))
     out = [f"{at}: the stored cost plan is not the DP's: {'; '.join(diffs)}; rebuild: {REBUILD}"] if diffs else []

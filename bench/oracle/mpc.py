@@ -39,6 +39,7 @@ from ecodrive_bench.envs.config import ScenarioConfig
 from .dp import GRID_EPS, MS, Corridor, Grid, Plan, Window, _Lattice, _Run, refine, solve
 from .kernel import backward_step, backward_step_in, mask_gap
 
+VERSION = 1  # [-] of the first plans and re-plans: bumped with any change that moves one (the shipped first plans' key)
 LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
 SLACK = 150  # [steps] the table reaches this far past the bound's certified horizon
 MIN_GAP = 2.5  # [m] SUMO's default minGap: bumper-to-bumper gap kept at standstill

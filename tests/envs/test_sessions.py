@@ -170,11 +170,13 @@ def test_action_check_agrees_with_the_space(k, params, dtype):
 @settings(max_examples=300, deadline=None, derandomize=True)
 @given(k=st.integers(0, 2), params=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=3,
                                              max_size=3),
-       bounds=st.sampled_from([(-4.0, 3.0), (-3.3, 2.6), (-0.1, 0.1)]), dtype=st.sampled_from([np.float32, np.float64]))
+       bounds=st.sampled_from([(-4.0, 3.0), (-3.3, 2.6), (-0.1, 0.1), (-4, 3), (np.float64(-3.3), np.float64(2.6))]),
+       dtype=st.sampled_from([np.float32, np.float64]))
 def test_decode_clips_as_numpy_does(k, params, bounds, dtype):
     """The parameterized action's acceleration is ``np.clip`` of the chosen parameter, value for
     value, on float32 arrays (decoded without numpy) as on others, with bounds a float32 cannot
-    hold exactly (2.6: numpy clips a float32 at float32(2.6), a float64 at 2.6)."""
+    hold exactly (2.6: numpy clips a float32 at float32(2.6), a float64 at 2.6) and bounds given as
+    numpy float64 (which numpy promotes the float32 parameter to)."""
     from ecodrive_bench.envs.action import make_action
     from ecodrive_bench.envs.config import ScenarioConfig
 

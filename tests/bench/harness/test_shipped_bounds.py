@@ -120,6 +120,17 @@ def test_mpc_takes_its_first_plan_from_the_file_and_drives_as_when_it_solves(sol
     assert MPCAgent(cfg, time_weight=0.5, shipped=path).shipped is None
 
 
+def test_mpc_first_plans_of_another_planner_version_miss_and_the_check_says_so(solved, monkeypatch):
+    cfg, _, _, path, _ = solved
+    monkeypatch.setattr(mpc, "VERSION", mpc.VERSION + 1)  # the planner changed since the file was written
+    assert shipped_bounds.read(path).mpc_plan(cfg, DEPART) is None
+    agent = MPCAgent(cfg, shipped=path)
+    agent.start(DEPART)
+    assert agent.plan.grid.get("source") != "shipped"  # solved
+    lines = shipped_bounds.check(path, signals=(SIGNALS,), progress=False)
+    assert any(f"mpc first plans of planner version {mpc.VERSION - 1}, not {mpc.VERSION}" in line for line in lines)
+
+
 def tampered(src, dst, sha_of_edit: bool, case: int | None = None, column: str = "cost_bound") -> int:
     """Copy ``src`` to ``dst`` with one value of ``column`` raised by 1e-6 (``case``'s, else the
     first row's); ``sha_of_edit``: with the content digest of the edited rows (an edit that passes
