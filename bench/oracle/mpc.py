@@ -213,21 +213,23 @@ def _buffers(tab: Table) -> tuple[np.ndarray, np.ndarray]:
     return tab.scratch
 
 
+def _leader_speeds(speed: float, m: int, cfg: ScenarioConfig, accel: float | None) -> np.ndarray:
+    """[m/s] the vehicle ahead's predicted speed after each of the next ``m`` steps."""
+    a = LEADER_ACCEL if accel is None else accel
+    return np.minimum(speed + a * cfg.step_length * np.arange(1, m + 1), cfg.speed_limit)
+
+
 def leader_travel(speed: float, m: int, cfg: ScenarioConfig, accel: float | None = None) -> float:
     """[m] the vehicle ahead covers in ``m`` steps by the prediction model: from ``speed`` [m/s]
     at ``accel`` (``LEADER_ACCEL``) up to the speed limit, SUMO's Euler update ``x' = x + v' dt``."""
-    dt = cfg.step_length
-    a = LEADER_ACCEL if accel is None else accel
-    v = np.minimum(speed + a * dt * np.arange(1, m + 1), cfg.speed_limit)
-    return float(v.sum() * dt)
+    return float(_leader_speeds(speed, m, cfg, accel).sum() * cfg.step_length)
 
 
 def _travels(speed: float, steps: int, cfg: ScenarioConfig, accel: float) -> list[float]:
     """``leader_travel(speed, m, cfg, accel)`` for m = 0..``steps`` (0 for m = 0): the speeds once,
     each sum over its prefix (the same numbers, summed as ``leader_travel`` sums them)."""
-    dt = cfg.step_length
-    v = np.minimum(speed + accel * dt * np.arange(1, steps + 1), cfg.speed_limit)
-    return [0.0] + [float(v[:m].sum() * dt) for m in range(1, steps + 1)]
+    v = _leader_speeds(speed, steps, cfg, accel)
+    return [0.0] + [float(v[:m].sum() * cfg.step_length) for m in range(1, steps + 1)]
 
 
 def snap(tab: Table, x: float, v: float) -> tuple[int, int]:

@@ -165,3 +165,13 @@ def test_dp_work_regression(table):
     reach = sum((m * (lat.d_max - lat.d_min) + 1) ** 2 * (m + 1) for m in range(mpc.LOOKAHEAD))  # rows x speeds
     assert 0 < plan.states <= reach and plan.states * 100 < cold
     assert table.cycles <= 10
+
+
+def test_a_replans_leader_travels_are_leader_travel_bit_for_bit():
+    """The re-plan's prefix sums over one speed array give ``leader_travel``'s numbers exactly."""
+    rng = np.random.default_rng(6)
+    for _ in range(500):
+        speed, accel = float(rng.uniform(0, 15)), float(rng.choice([mpc.LEADER_ACCEL, 0.7, 2.0]))
+        travel = mpc._travels(speed, mpc.LOOKAHEAD, CFG, accel)
+        assert travel[0] == 0.0
+        assert all(travel[m] == mpc.leader_travel(speed, m, CFG, accel) for m in range(1, mpc.LOOKAHEAD + 1))
