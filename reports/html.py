@@ -267,13 +267,16 @@ def warnings_section(page: Page) -> str:
 
 
 def _floor_all(man: dict) -> str:
-    """The whole job's ratio to its floor: wall time x workers / SUMO's time, over every command
-    that wrote the run folder ("" where the manifest lacks them)."""
+    """The whole job's ratio to its floor, wall time x workers / SUMO's time, over every command
+    that wrote the run folder: of the episodes' and bounds' phases, and of the whole commands
+    (start-up, checks and writing included) where recorded ("" where the manifest lacks them)."""
     wall, sumo, workers = (man.get(k) for k in ("wall_time_all_commands_s", "sumo_time_all_commands_s", "workers"))
     if not (wall and sumo and workers):
         return ""
+    whole = man.get("command_wall_all_commands_s")
     return (f" <span class='ci'>(every command: {esc(duration(sumo))}; wall time \u00d7 workers / SUMO's time = "
-            f"{wall * workers / sumo:.2f})</span>")
+            f"{wall * workers / sumo:.2f}"
+            + (f", {whole * workers / sumo:.2f} over the whole commands" if whole else "") + ")</span>")
 
 def provenance_section(page: Page) -> str:
     man = page.manifest
@@ -308,6 +311,11 @@ def provenance_section(page: Page) -> str:
               + (f" <span class='ci'>(every command that wrote the folder: "
                  f"{esc(duration(man.get('wall_time_all_commands_s')))})</span>"
                  if man.get("wall_time_all_commands_s") else "")),
+             ("Whole command", esc(duration(man.get("command_wall_s")))
+              + " <span class='ci'>(start-up included)</span>"
+              + (f" <span class='ci'>(every command that wrote the folder: "
+                 f"{esc(duration(man.get('command_wall_all_commands_s')))})</span>"
+                 if man.get("command_wall_all_commands_s") else "")),
              ("Time in SUMO (the floor)", esc(duration(man.get("sumo_time_s"))) + (
                  f" <span class='ci'>(wall time \u00d7 workers / SUMO's time = {man['floor_ratio']:.2f})</span>"
                  if man.get("floor_ratio") else "") + _floor_all(man)),

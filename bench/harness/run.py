@@ -31,7 +31,7 @@ from ecodrive_bench.bench.harness.executors import Task, run_local, run_ray
 from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
 from ecodrive_bench.bench.harness.planners import PLANNERS
 from ecodrive_bench.bench.harness.policies import check_policy, family_dir, policy_dir, shipped_seeds
-from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions
+from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions, process_age
 from ecodrive_bench.bench.harness.scenarios import Evaluation
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import episode_summary, resolve_log
@@ -143,6 +143,7 @@ def run(opts: RunOptions, progress: bool = True, checks: Preflight | None = None
     """Run (or reuse) every episode of the command and write ``results.parquet`` and the manifest;
     ``checks``: this command's ``preflight``, when the caller ran it already. The run folder is
     locked meanwhile; failed episodes are appended to ``opts.failures``."""
+    begin = time.perf_counter() - _startup()
     pre = preflight(opts) if checks is None else checks
     check_writable(opts.run_dir)
     with runlock.hold(opts.run_dir):
@@ -151,7 +152,19 @@ def run(opts: RunOptions, progress: bool = True, checks: Preflight | None = None
         todo = plan(opts, pre)
         t0 = time.perf_counter()
         rows, failed = execute(opts, todo, progress)
-        return write(opts, pre, todo, rows, failed, time.perf_counter() - t0, progress)
+        return write(opts, pre, todo, rows, failed, time.perf_counter() - t0, progress, before=t0 - begin, begin=begin)
+
+
+_STARTED: list[float] = []  # this process's start-up, charged once: to the first run of the process
+
+
+def _startup() -> float:
+    """[s] from this process's start to now on its first call (the interpreter, the imports and
+    the command line before the first run), 0 on later calls (a family's next variant)."""
+    if _STARTED:
+        return 0.0
+    _STARTED.append(process_age() or 0.0)
+    return _STARTED[0]
 
 
 def plan(opts: RunOptions, pre: Preflight) -> Plan:
@@ -193,9 +206,11 @@ def execute(opts: RunOptions, todo: Plan, progress: bool = True) -> tuple[list[d
 
 
 def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any]], failed: failures.Failures,
-          wall: float, progress: bool = True) -> pd.DataFrame:
+          wall: float, progress: bool = True, before: float = 0.0, begin: float | None = None) -> pd.DataFrame:
     """``results.parquet`` (this command's rows, the earlier commands' kept rows, the bounds) and
-    ``manifest.json``, each replaced atomically; returns the table."""
+    ``manifest.json``, each replaced atomically; returns the table. ``wall``: the episodes' phase
+    [s]; ``before``: what preceded it (start-up, checks, plan); ``begin``: the ``perf_counter``
+    reading the command's wall time counts from."""
     run_dir = opts.run_dir
     df = pd.DataFrame(todo.reused + rows).rename(columns={"return_": "return", "case_index": "case", "sumo_seed": "seed"})
     df = df if len(df) else pd.DataFrame(columns=[*KEEP, "episode_wall_s"])  # every episode failed
@@ -226,7 +241,7 @@ def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any
         "episodes_run": int(len(ran)), "episodes_reused": int(len(df) - len(ran) - len(kept)),
         "episodes_kept_from_earlier_commands": int(len(kept)),
         "wall_time_s": round(wall + bounds_s, 2), "episode_time_sum_s": round(float(ran.sum()), 2),
-        "phases_s": {"episodes": round(wall, 2), "bounds": round(bounds_s, 2)},
+        "phases_s": {"before": round(before, 2), "episodes": round(wall, 2), "bounds": round(bounds_s, 2)},
         "sumo_time_s": round(sumo_s, 2),  # the floor: SUMO's own time for the episodes run now
         # wall time x workers over SUMO's time: 1 would be SUMO alone on every worker all along
         "floor_ratio": round((wall + bounds_s) * min(opts.workers, max(len(ran), 1)) / sumo_s, 3) if sumo_s > 0 else None,
@@ -240,6 +255,9 @@ def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any
     if opts.bounds:  # the DP's per-case time, as measured in this run's workers
         manifest["bound_wall_s_median"] = round(float(pd.read_parquet(run_dir / "bounds.parquet").bound_wall_s.median()), 3)
     kept_keys = {policy_key(m, s, sd) for m, s, sd in zip(kept.method, kept.signals, kept.train_seed)}
+    if begin is not None:  # the whole command: start-up, checks, episodes, bounds, the tables written
+        manifest["command_wall_s"] = round(time.perf_counter() - begin, 2)
+        manifest["phases_s"]["after"] = round(manifest["command_wall_s"] - before - wall - bounds_s, 2)
     atomic_json(carry_forward(manifest, run_dir / "manifest.json", kept_keys), run_dir / "manifest.json")
     return df
 

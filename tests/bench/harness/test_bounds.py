@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.provenance import process_age
 from ecodrive_bench.bench.harness.run import run
 
 
@@ -71,9 +72,15 @@ def test_bounds_are_written_case_by_case_so_a_kill_keeps_the_finished_ones(tmp_p
     assert solved == [2] and out.cost_bound.notna().all()
 
 
-def test_the_manifest_measures_the_floor_and_every_commands_wall_time(tmp_path):
+def test_the_manifest_measures_the_floor_and_every_commands_wall_time(tmp_path, monkeypatch):
     """Every episode run records its seconds inside SUMO; the manifest has the phase times, SUMO's
-    time, their ratio, and the wall time summed over every command that wrote the folder."""
+    time, their ratio, and the wall time summed over every command that wrote the folder, of the
+    episodes' and bounds' phases and of the whole commands (this process's start-up charged to its
+    first run only)."""
+    from ecodrive_bench.bench.harness import run as run_module
+
+    monkeypatch.setattr(run_module, "_STARTED", [])  # as in a fresh process: no run before these
+    age = process_age()  # [s] this process's start-up so far
     common = ["--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline", "--workers", "2"]
     run(parse([*common, "--signals", "coordinated"]), progress=False)
     df = run(parse([*common, "--signals", "uncoordinated"]), progress=False)
@@ -82,6 +89,14 @@ def test_the_manifest_measures_the_floor_and_every_commands_wall_time(tmp_path):
     assert (new.sumo_s > 0).all() and (new.sumo_s < 60).all()
     assert df[df.signals == "coordinated"].sumo_s.isna().all()  # kept from the first command: not run now
     assert man["sumo_time_s"] == pytest.approx(new.sumo_s.sum(), abs=0.01)
-    assert man["floor_ratio"] > 1 and set(man["phases_s"]) == {"episodes", "bounds"}
+    assert man["floor_ratio"] > 1 and set(man["phases_s"]) == {"before", "episodes", "bounds", "after"}
     assert man["wall_time_all_commands_s"] == pytest.approx(sum(c["wall_time_s"] for c in man["commands"]), abs=0.02)
     assert len(man["commands"]) == 2 and man["wall_time_all_commands_s"] > man["wall_time_s"]
+    first, second = man["commands"]
+    for c in (first, second):  # the whole command is its phases
+        assert c["command_wall_s"] == pytest.approx(sum(c["phases_s"].values()), abs=0.05)
+        assert c["command_wall_s"] > c["wall_time_s"] and min(c["phases_s"].values()) >= 0
+    # the process started before the first run (pytest, the imports): charged to the first only
+    assert first["phases_s"]["before"] >= age > second["phases_s"]["before"]
+    assert man["command_wall_all_commands_s"] == pytest.approx(first["command_wall_s"] + second["command_wall_s"],
+                                                               abs=0.02)
