@@ -29,10 +29,10 @@ from .nets import (
     ConvPass,
     Dense,
     Head,
+    LazyAdam,
     ObsScaler,
     OUNoise,
     Workspace,
-    adam,
     clipped_adam_step,
     first_layer_backward,
     load_adam_state,
@@ -87,6 +87,9 @@ class DDPGAgent(OnDevice):
     env_overrides: dict[str, Any] = {"reward": {"lane_change_penalty": 0.0}}
     NETS = ("actor", "critic", "actor_target", "critic_target")
     OPTS = ("opt_actor", "opt_critic")
+    # built on first use (an acting agent never builds them)
+    opt_actor = LazyAdam(lambda a: a.actor.parameters(), "lr_actor")
+    opt_critic = LazyAdam(lambda a: a.critic.parameters(), "lr_critic")
     numpy_greedy = True  # greedy ``act`` on the CPU runs ``inference.NumpyNets``; False: torch's forward
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Box, cfg: DDPGConfig | None = None):
@@ -102,8 +105,6 @@ class DDPGAgent(OnDevice):
             self.critic_target = Head(grid_shape, logic.shape[0], 1, (256, 64), 1)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
-        self.opt_actor = adam(self.actor.parameters(), lr=cfg.lr_actor)
-        self.opt_critic = adam(self.critic.parameters(), lr=cfg.lr_critic)
         zero_grads(self.actor, self.critic)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
         self._numpy = NumpyNets([self.actor], grid_shape)

@@ -56,7 +56,9 @@ class OnDevice:
             if net is not None:
                 net.to(device)  # parameters and their .grad, in place (the optimizers keep them)
         for name in self.OPTS:
-            for state in getattr(self, name).state.values():
+            lazy = getattr(type(self), name, None)
+            opt = lazy.built(self) if hasattr(lazy, "built") else getattr(self, name)  # none built: nothing to move
+            for state in (opt.state.values() if opt is not None else ()):
                 for k, v in state.items():
                     if torch.is_tensor(v):
                         state[k] = v.to(device)

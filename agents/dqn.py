@@ -22,9 +22,9 @@ from .nets import (
     ConvPass,
     Dense,
     Head,
+    LazyAdam,
     ObsScaler,
     Workspace,
-    adam,
     clipped_adam_step,
     first_layer_backward,
     linear_epsilon,
@@ -78,6 +78,7 @@ class DQNAgent(OnDevice):
     env_overrides: dict[str, Any] = {}
     NETS = ("q", "q_target")
     OPTS = ("opt",)
+    opt = LazyAdam(lambda a: a.q.parameters(), "lr")  # built on first use (an acting agent never builds it)
     numpy_greedy = True  # greedy ``act`` on the CPU runs ``inference.NumpyNets``; False: torch's forward
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Discrete, cfg: DQNConfig | None = None):
@@ -90,7 +91,6 @@ class DQNAgent(OnDevice):
             self.q = Head(grid_shape, logic.shape[0], 0, (256, 64), self.n)
             self.q_target = Head(grid_shape, logic.shape[0], 0, (256, 64), self.n)
         self.q_target.load_state_dict(self.q.state_dict())
-        self.opt = adam(self.q.parameters(), lr=cfg.lr)
         zero_grads(self.q)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
         self._params, self._target_params = [*self.q.parameters()], [*self.q_target.parameters()]

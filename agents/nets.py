@@ -7,6 +7,9 @@ never reach the features; ceil mode keeps it.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
+from typing import Any
+
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -370,6 +373,32 @@ def soft_update_(targets: list[torch.Tensor], sources: list[torch.Tensor], tau: 
 def adam(params, lr: float) -> torch.optim.Adam:
     """Adam with the fused CPU kernel (one pass over each tensor instead of ~10 ops)."""
     return torch.optim.Adam(params, lr=lr, fused=True)
+
+
+class LazyAdam:
+    """An agent's ``adam`` optimizer, as a class attribute built on first use for each agent, over
+    ``params(agent)`` at the config's learning rate ``lr`` (a field name): an agent that only acts
+    (the harness's, a worker's) never builds one. The first optimizer of a process imports
+    ``torch._dynamo``, about 1.2 s on these machines, which every worker of a run paid once for
+    nothing. Adam starts with empty state and draws nothing, so building it later changes no number.
+    The built optimizer is kept under ``_<name>``; ``built`` reads it without building."""
+
+    def __init__(self, params: Callable[[Any], Iterable[torch.Tensor]], lr: str) -> None:
+        self.params, self.lr, self.slot = params, lr, ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.slot = f"_{name}"
+
+    def __get__(self, agent: Any, owner: type | None = None) -> Any:
+        if agent is None:
+            return self
+        opt = agent.__dict__.get(self.slot)
+        if opt is None:
+            opt = agent.__dict__[self.slot] = adam(self.params(agent), lr=getattr(agent.cfg, self.lr))
+        return opt
+
+    def built(self, agent: Any) -> torch.optim.Adam | None:
+        return agent.__dict__.get(self.slot)
 
 
 def load_adam_state(opt: torch.optim.Adam, state: dict) -> None:

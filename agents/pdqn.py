@@ -28,10 +28,10 @@ from .nets import (
     ConvPass,
     Dense,
     Head,
+    LazyAdam,
     ObsScaler,
     OUNoise,
     Workspace,
-    adam,
     clipped_adam_step,
     features,
     first_layer_backward,
@@ -99,6 +99,9 @@ class PDQNAgent(OnDevice):
     env_overrides: dict[str, Any] = {}
     NETS = ("q", "param", "q_target", "param_target", "q2", "q2_target")
     OPTS = ("opt_q", "opt_param")
+    # built on first use (an acting agent never builds them); the critics' in the order [q, q2]
+    opt_q = LazyAdam(lambda a: [p for c in (a.q, a.q2) if c is not None for p in c.parameters()], "lr_q")
+    opt_param = LazyAdam(lambda a: a.param.parameters(), "lr_param")
     numpy_greedy = True  # greedy ``act`` on the CPU runs ``inference.NumpyNets``; False: torch's forward
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Tuple, cfg: PDQNConfig | None = None):
@@ -123,8 +126,6 @@ class PDQNAgent(OnDevice):
         critics = [self.q] + ([self.q2] if cfg.twin_q else [])
         if cfg.twin_q:
             self.q2_target.load_state_dict(self.q2.state_dict())
-        self.opt_q = adam([p for c in critics for p in c.parameters()], lr=cfg.lr_q)
-        self.opt_param = adam(self.param.parameters(), lr=cfg.lr_param)
         zero_grads(*critics, self.param)
         self._nf, self._nl = trunk_dim(grid_shape), logic.shape[0]
         self._numpy = NumpyNets([self.q, self.param], grid_shape)
