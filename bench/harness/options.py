@@ -23,7 +23,7 @@ from ecodrive_bench.envs.config import SIGNALS
 RUN_DOC = """The benchmark harness: every method over the fixed test cases, one MCAP per episode.
 
     ecodrive run [--profile smoke|paper|full|generalisation] [--executor local|ray] [--address ADDR]
-                        [--workers N] [--methods ...] [--signals ...] [--run-id ID] [--logs DIR]
+                        [--workers N] [--methods ...] [--planners] [--signals ...] [--run-id ID] [--logs DIR]
                         [--agent MODULE:FACTORY | --sb3 MODEL.zip --sb3-algo ALGO] [--name NAME]
                         [--scenario FILE.json] [--set FIELD=VALUE ...] [--transfer] [--variants NAME ...]
 
@@ -54,6 +54,7 @@ class RunOptions:
 
     profile: str = "paper"  # smoke | paper | full | generalisation (PROFILES: cases per setting)
     methods: list[str] | None = None  # the methods asked for; None: every method with a shipped policy
+    planners: bool = False  # also the planners (oracle, mpc), in the same pool as the methods
     signals: list[str] = field(default_factory=lambda: list(SIGNALS))  # signal settings to run
     executor: str = "local"  # local process pool, or ray
     address: str | None = None  # Ray cluster address (executor ray); None: a local Ray
@@ -97,6 +98,9 @@ def parser() -> Parser:
                          f"policy; {ORACLE} (the energy-optimal plan replayed, a DP solve per case), {MPC} (re-plans "
                          "on the DP in closed loop, a few s per case) and installed "
                          f"agents of the entry-point group {GROUP} run when named)")
+    ap.add_argument("--planners", action="store_true",
+                    help=f"also run the planners, {ORACLE} and {MPC}, besides the methods (the default ones or "
+                         "--methods), in the same pool: one command for the main job (nox -s benchmark)")
     ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
                     help="also evaluate your own agent: factory(observation_space, action_space) -> ecodrive_bench.agents.base.Agent")
     ap.add_argument("--sb3", type=Path, default=None, metavar="MODEL.zip",

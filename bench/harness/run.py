@@ -72,13 +72,15 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
 
     Without ``--methods``, a learning method runs in each setting it has a policy for, every
     shipped seed (or those of ``--train-seeds``); named in ``--methods``, a missing policy is an
-    error."""
+    error. ``--planners`` adds the planners to either."""
     explicit = opts.methods is not None
     wanted = opts.train_seeds
     runs, skipped = [], []
     factories = opts.factories
     default = [*METHODS, *PLANNERS] if opts.profile == "generalisation" else METHODS
     named = [m for m in (opts.methods if explicit else default) if m not in factories]
+    if opts.planners:
+        named += [p for p in PLANNERS if p not in named]
     for m in [*named, *factories]:
         for s in opts.signals:
             if m not in LEARNING:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -193,3 +194,33 @@ def test_ecodrive_run_with_a_bad_case_list_is_one_line_and_writes_nothing(tmp_pa
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is also case" in err[0] and str(bad) in err[0]
     assert not logs.exists()
+
+
+def test_planners_join_the_default_methods_or_the_named_ones_in_one_command(tmp_path):
+    """``--planners`` adds oracle and mpc, once, to the methods with a shipped policy or to those
+    named; without it they run only when named (``--profile generalisation`` always has them)."""
+    from ecodrive_bench.bench.harness.options import parse
+    from ecodrive_bench.bench.harness.run import resolve_methods
+
+    def methods(*argv: str) -> list[str]:
+        runs, _ = resolve_methods(parse([*argv, "--logs", str(tmp_path)]))
+        return list(dict.fromkeys(m for m, _, _ in runs))
+
+    plain, with_planners = methods(), methods("--planners")
+    assert "oracle" not in plain and "mpc" not in plain and {"prl", "baseline"} <= set(plain)
+    assert with_planners == [*plain, "oracle", "mpc"]
+    assert methods("--methods", "baseline", "--planners") == ["baseline", "oracle", "mpc"]
+    assert methods("--methods", "mpc", "baseline", "--planners") == ["mpc", "baseline", "oracle"]
+
+
+def test_the_benchmark_session_adds_the_planners_unless_methods_are_named():
+    """``nox -s benchmark`` runs the planners in its one ``ecodrive run`` unless ``--methods`` is
+    given (abbreviated too); options it cannot read are left to ``ecodrive run`` to refuse."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("noxfile", Path(__file__).parents[3] / "noxfile.py")
+    noxfile = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(noxfile)
+    assert not noxfile._names_methods([]) and not noxfile._names_methods(["--profile", "smoke", "--workers", "2"])
+    for given in (["--methods", "prl"], ["--meth", "prl"], ["--methods=prl"], ["--methods"]):
+        assert noxfile._names_methods(given), given
