@@ -34,6 +34,8 @@ class Unwritable(OSError):
 def writable_dir(path: Path) -> Path:
     """Create ``path`` (with its parents) and prove it writable with a probe file, so that a run
     fails before any work, with one line, rather than in the middle of it."""
+    if path.exists() and not path.is_dir():
+        raise Unwritable(f"{path} is a file, not a folder; give a folder (a new one or an existing one)")
     try:
         path.mkdir(parents=True, exist_ok=True)
         probe = path / f".write-test-{os.getpid()}"

@@ -7,8 +7,9 @@ an edit compiles (a second or a few) and every later one, the harness's workers 
 included, loads it in a fraction of that. numba keys the cache by the source file's path and
 modification time, not by the options below: after changing them, delete the cached files
 (`find . -name "*.nb[ic]" -delete`). Where no folder is writable, each process compiles. A pool
-compiles in its parent before it starts its workers (``bench.harness.executors.compile_kernels``),
-so the workers only load the cache.
+compiles in its parent (``bench.harness.executors.run_local``: the grid's before it starts its
+workers, the act's beside them while the learning methods' episodes wait), so the workers only
+load the cache.
 """
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail
-from ecodrive_bench.bench.io import atomic_csv, atomic_text, refuse_links
+from ecodrive_bench.bench.io import atomic_csv, atomic_text, refuse_links, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
@@ -56,7 +56,7 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
         raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
                        f"`ecodrive run`?)")
     refuse_links(out, "report folder")  # an Unwritable (OSError): one line, nothing written
-    out.mkdir(parents=True, exist_ok=True)
+    writable_dir(out)  # a file under its name, no permission: an Unwritable naming the folder
     page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
         md, warnings = _single_vehicle(run_dir, out, page, progress)
@@ -199,7 +199,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
     page.experiments_md = _gaps(results, manifest, out) + _headroom(results, manifest, out, page, run_dir)
     md += page.experiments_md
-    warnings = dropped + unfinished_warnings(results)
+    warnings = dropped + case_set_warnings(results) + unfinished_warnings(results)
     parts, partial = _return_parts(results, run_dir, warnings, progress)
     if partial:
         md += [f"**{partial} step log(s) are partial** (cut short after the results were written); they are left "
@@ -280,6 +280,22 @@ def _trajectory(run_dir: Path, out: Path, sub: pd.DataFrame, compare: str, signa
     p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
     page.trajectories.append(Figure(p[0], _trajectory_caption(list(trajs), signals, case), f"{signals} case {case}"))
     return [f"![{name}](figures/{p[0].name})", ""]
+
+
+def case_set_warnings(results: pd.DataFrame) -> list[str]:
+    """One warning per setting whose methods (each training seed apart) drove different cases:
+    its means and improvements would compare different trips. ``ecodrive run`` refuses to mix
+    case sets in a run folder; a table put together otherwise gets this warning."""
+    out = []
+    seed = results.train_seed if "train_seed" in results else pd.Series(-1, index=results.index)
+    for signals, g in results.assign(train_seed=seed).groupby("signals"):
+        sets = {(m, int(sd)): frozenset(c.case) for (m, sd), c in g.groupby(["method", "train_seed"])}
+        if len(set(sets.values())) > 1:
+            parts = [f"{m}{'' if sd < 0 else f' s{sd}'}: {len(cs)} cases, {min(cs)}-{max(cs)}"
+                     for (m, sd), cs in sorted(sets.items())]
+            out.append(f"{signals}: the methods drove different cases ({'; '.join(parts)}): its means and improvements "
+                       "compare different trips; run every method on the same cases")
+    return out
 
 
 def unfinished_warnings(results: pd.DataFrame) -> list[str]:

@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import re
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -159,24 +160,48 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
               on_failure: Callable[[Failure], None] | None = None,
               skip: Callable[[Any], bool] | None = None) -> Iterator[dict[str, Any]]:
     """Rows of ``fn(task)`` on a pool of ``workers`` processes, as they finish; a dead worker is
-    replaced and its task rerun up to ``RETRIES`` times (``bench.harness.pool``). With more than
-    one worker the step's compiled kernels are compiled here first (``compile_kernels``)."""
-    if workers > 1:
-        compile_kernels()
-    return run_pool(tasks, workers, fn, on_failure, skip)
+    replaced and its task rerun up to ``RETRIES`` times (``bench.harness.pool``).
+
+    With more than one worker the step's numba kernels are compiled here, so that the workers
+    load numba's disk cache rather than all compile at once (and numba's cache is not written
+    safely by several processes at a time): the occupancy grid's before the workers start (every
+    episode needs it), the greedy act's (seconds on a fresh install) in a thread beside them,
+    while the learning methods' episodes are held back and the others run."""
+    if workers <= 1:
+        return run_pool(tasks, workers, fn, on_failure, skip)
+    from ecodrive_bench.agents.registry import LEARNING
+
+    compile_grid()
+    compiled = threading.Event()
+
+    def compile_act() -> None:
+        try:
+            compile_greedy()
+        finally:  # on an error the workers compile for themselves (and report it if it recurs)
+            compiled.set()
+
+    threading.Thread(target=compile_act, name="compile-greedy-act", daemon=True).start()
+
+    def hold(task: Any) -> bool:
+        return not compiled.is_set() and getattr(task, "method", None) in LEARNING
+
+    return run_pool(tasks, workers, fn, on_failure, skip, hold=hold)
 
 
-def compile_kernels() -> None:
-    """The greedy act's and the occupancy grid's numba kernels compiled (or loaded from the disk
-    cache) in this process, so that workers started after it load the cache rather than all
-    compile at once, each for seconds (and numba's cache is not written safely by several
-    processes at a time)."""
-    from ecodrive_bench.agents.inference import compile_kernels as greedy
+def compile_grid() -> None:
+    """The occupancy grid's numba kernels compiled (or loaded from the disk cache) here."""
     from ecodrive_bench.envs.config import ScenarioConfig
     from ecodrive_bench.envs.observation import occupancy_grid
 
-    greedy()
     occupancy_grid(0.0, [(5.0, -1.6, 90.0, 5.0)], (-4.8, -1.6), ScenarioConfig(lanes=2))
+
+
+def compile_greedy() -> None:
+    """The greedy act's numba kernels compiled (or loaded from the disk cache) here."""
+    from ecodrive_bench.agents.inference import compile_kernels as greedy
+
+    greedy()
+
 
 
 def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callable[[Any], dict] = run_task,

@@ -135,6 +135,9 @@ def parse(argv: list[str]) -> RunOptions:
     check_options(ap, ns)
     opts = vars(ns)
     opts["run_id"] = opts["run_id"] or opts["profile"]
+    if opts["models"] != MODELS and not opts["models"].is_dir():  # a typo would drop every learning method
+        ap.error(f"--models {opts['models']}: {'not a folder' if opts['models'].exists() else 'no such folder'} "
+                 "(expected a folder of policies, <method>-<signals>/s<seed>/; default: the shipped models/)")
     users = registered()
     opts["factories"] = {m: users[m] for m in opts["methods"] or [] if m in users}
     if opts["sb3"] or opts["sb3_algo"]:

@@ -23,6 +23,7 @@ from multiprocessing.connection import wait
 from typing import Any
 
 RETRIES = 2  # a task whose worker died is run at most 1 + RETRIES times
+HOLD_POLL = 0.05  # [s] how often held-back tasks are asked again while a worker waits for them
 SPAWN_DEATHS = 5  # workers that die this many times in a row before taking any task: give up
 
 
@@ -141,11 +142,20 @@ class _Slot:
         self.conn.close()
 
 
+def _next(todo: deque, hold: Callable[[Any], bool] | None) -> int | None:
+    """The position in ``todo`` of the first task not held back, or None."""
+    if hold is None:
+        return 0 if todo else None
+    return next((i for i, (_, task) in enumerate(todo) if not hold(task)), None)
+
+
 def run_pool(tasks: Iterable[Any], workers: int, fn: Callable[[Any], Any],
              on_failure: Callable[[Failure], None] | None = None, skip: Callable[[Any], bool] | None = None,
-             retries: int = RETRIES) -> Iterator[Any]:
+             retries: int = RETRIES, hold: Callable[[Any], bool] | None = None) -> Iterator[Any]:
     """``fn(task)`` for every task on ``workers`` spawned processes, results as they finish; a
-    task for which ``skip(task)`` is true when its turn comes is dropped."""
+    task for which ``skip(task)`` is true when its turn comes is dropped. A task for which
+    ``hold(task)`` is true waits while it is, the tasks behind it going first (``hold`` is asked
+    again at least every ``HOLD_POLL`` seconds while a worker is idle)."""
     ctx = mp.get_context("spawn")  # a fresh interpreter per worker: no libsumo state is inherited
     todo = deque(enumerate(tasks))
     items = dict(todo)
@@ -154,9 +164,15 @@ def run_pool(tasks: Iterable[Any], workers: int, fn: Callable[[Any], Any],
     idle_deaths, clean = 0, False
     try:
         while True:
+            held = False
             for s in slots:
                 while s.ready and s.tid is None and todo:
-                    tid, task = todo.popleft()
+                    i = _next(todo, hold)
+                    if i is None:  # every task left is held back
+                        held = True
+                        break
+                    tid, task = todo[i]
+                    del todo[i]
                     if skip is not None and skip(task):
                         items.pop(tid)
                         continue
@@ -164,7 +180,8 @@ def run_pool(tasks: Iterable[Any], workers: int, fn: Callable[[Any], Any],
                     s.conn.send((tid, task))
             if not todo and all(s.tid is None for s in slots):
                 break
-            ready = set(wait([s.conn for s in slots] + [s.proc.sentinel for s in slots]))
+            ready = set(wait([s.conn for s in slots] + [s.proc.sentinel for s in slots],
+                             timeout=HOLD_POLL if held else None))
             for i, s in enumerate(slots):
                 if s.conn not in ready and s.proc.sentinel not in ready:
                     continue

@@ -138,6 +138,7 @@ def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
     check_policies(pdirs, checked)
     one_scenario(opts.run_dir, {s: c.digest() for s, c in evals.items()})
     cases = opts.cases or load()[: PROFILES[opts.profile]]  # a variant's own (generalisation)
+    one_case_set(opts.run_dir, opts.signals, {c.index for c in cases})
     return Preflight(runs, skipped, pdirs, where, evals, cases)
 
 
@@ -311,6 +312,37 @@ def one_scenario(run_dir: Path, hashes: dict[str, str]) -> None:
         if other:
             raise UsageError(f"{run_dir} holds {signals} episodes of another scenario (eval_scenario_hash "
                              f"{', '.join(other)}, this command's is {want}); use another --run-id")
+
+
+def one_case_set(run_dir: Path, signals: list[str], cases: set[int]) -> None:
+    """A run folder's methods drive the same cases in each setting (the report compares them case
+    by case and over the whole set): a command on another case set (another profile, a user's
+    case list) is refused before it writes anything, as ``one_scenario``."""
+    path = run_dir / "results.parquet"
+    try:
+        old = pd.read_parquet(path, columns=["signals", "case"]) if path.is_file() else None
+    except Exception:  # earlier_rows reports an unreadable table
+        return
+    if old is None:
+        return
+    for s in signals:
+        have = {int(c) for c in old.case[old.signals == s]}
+        if have and have != cases:
+            raise UsageError(f"{run_dir} holds {s} episodes on cases {_ranges(have)} from an earlier command; this "
+                             f"command runs cases {_ranges(cases)}: every method of a run folder drives the same "
+                             "cases; use another --run-id")
+
+
+def _ranges(ints: set[int]) -> str:
+    """``{0, 1, 2, 5}`` as "0-2, 5"."""
+    out, run = [], []
+    for i in sorted(ints):
+        if run and i != run[-1] + 1:
+            out.append(run)
+            run = []
+        run.append(i)
+    out.append(run)
+    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 1 else f"{r[0]}" for r in out if r)
 
 
 def _relative(run_dir: Path, mcap: str) -> str:

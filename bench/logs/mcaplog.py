@@ -184,6 +184,10 @@ def read_log(path: str | Path) -> LogData:
     path = Path(path)
     if not path.exists():
         raise LogError(f"{path}: no such log file")
+    if path.is_dir():
+        raise LogError(f"{path}: a folder; expected a step log file (.mcap)")
+    if path.stat().st_size == 0:
+        raise LogError(f"{path}: an empty file; expected a step log (.mcap)")
     data = LogData(path)
     channels: dict[int, str] = {}
     footer = False

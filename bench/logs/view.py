@@ -145,6 +145,14 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
     return len(steps), data.warning
 
 
+def has_display() -> bool:
+    """Whether a viewer window can open: on Linux an X or Wayland display must be named (without
+    one Rerun's viewer fails to start and the recording waits for it); elsewhere assumed."""
+    if not sys.platform.startswith("linux"):
+        return True
+    return any(os.environ.get(k) for k in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("mcap", type=Path, help="a step log (.mcap, or a killed run's .mcap.part)")
@@ -161,6 +169,9 @@ def main(argv: list[str] | None = None) -> int:
             writable_dir(args.save.parent)
     except (LogError, Unwritable) as e:
         return fail(ap.prog, str(e))
+    if args.save is None and not has_display():
+        return fail(ap.prog, "no display to open the viewer on (DISPLAY and WAYLAND_DISPLAY are unset); write a "
+                             "recording instead, --save out.rrd, and open it with `rerun out.rrd` where there is one")
     rec = rr.RecordingStream("ecodrive")
     part = None if args.save is None else args.save.with_name(f".{args.save.name}.part")
     done = False

@@ -51,3 +51,17 @@ def test_the_report_states_the_whole_jobs_ratio_to_its_floor():
     assert "= 1.50" in _floor_all(man) and "whole commands" not in _floor_all(man)
     assert "= 1.50, 1.60 over the whole commands" in _floor_all({**man, "command_wall_all_commands_s": 640.0})
     assert _floor_all({"workers": 2}) == ""
+
+
+def test_the_report_warns_of_methods_on_different_cases():
+    import pandas as pd
+
+    from ecodrive_bench.reports.build import case_set_warnings
+
+    rows = [("baseline", -1, c) for c in range(5)] + [("prl", 0, c) for c in range(3)] + [("prl", 1, c) for c in range(5)]
+    df = pd.DataFrame(rows, columns=["method", "train_seed", "case"]).assign(signals="coordinated")
+    (warning,) = case_set_warnings(df)
+    assert warning.startswith("coordinated: the methods drove different cases") and "prl s0: 3 cases, 0-2" in warning
+    assert case_set_warnings(df[df.case < 3]) == []
+    both = pd.concat([df[df.case < 3], df[df.case < 3].assign(signals="uncoordinated", case=df.case[df.case < 3] + 10)])
+    assert case_set_warnings(both) == []  # each setting its own cases

@@ -256,3 +256,13 @@ def test_a_planted_link_under_a_reports_file_name_is_replaced(smoke_report, tmp_
     (tmp_path / "table4.csv").symlink_to(victim)
     atomic_csv(pd.DataFrame({"a": [1]}), tmp_path / "table4.csv")
     assert victim.read_text() == "precious\n" and pd.read_csv(tmp_path / "table4.csv").a.tolist() == [1]
+
+
+def test_a_file_given_as_the_report_folder_is_one_line_and_kept(smoke, tmp_path, capsys):
+    """``--out`` naming an existing file: one line saying it is a file, exit 2, the file as it was."""
+    target = tmp_path / "a-file"
+    target.write_text("precious\n")
+    assert main([str(smoke), "--out", str(target)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{target} is a file, not a folder" in err[0]
+    assert target.read_text() == "precious\n"

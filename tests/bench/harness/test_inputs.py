@@ -224,3 +224,39 @@ def test_the_benchmark_session_adds_the_planners_unless_methods_are_named():
     assert not noxfile._names_methods([]) and not noxfile._names_methods(["--profile", "smoke", "--workers", "2"])
     for given in (["--methods", "prl"], ["--meth", "prl"], ["--methods=prl"], ["--methods"]):
         assert noxfile._names_methods(given), given
+
+
+def test_a_run_folder_keeps_one_case_set(tmp_path, capsys):
+    """A command on other cases than the episodes already in the run folder (another profile into
+    the same --run-id) is refused in one line naming both sets, before anything is written."""
+    import pandas as pd
+
+    from ecodrive_bench.bench.harness.run_command import main
+
+    run_dir = tmp_path / "mine"
+    run_dir.mkdir()
+    table = pd.DataFrame({"signals": ["coordinated"] * 3 + ["uncoordinated"], "case": [0, 1, 2, 7]})
+    table.to_parquet(run_dir / "results.parquet")
+    before = sorted(p.name for p in run_dir.iterdir())
+    rc = main(["--profile", "paper", "--run-id", "mine", "--methods", "baseline", "--signals", "coordinated",
+               "--logs", str(tmp_path), "--workers", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "cases 0-2 from an earlier command" in err[0] and "cases 0-99" in err[0]
+    assert sorted(p.name for p in run_dir.iterdir()) == before
+    rc = main(["--profile", "smoke", "--run-id", "mine", "--methods", "baseline", "--signals", "uncoordinated",
+               "--logs", str(tmp_path), "--workers", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and "uncoordinated episodes on cases 7" in err[0] and "cases 0-2:" in err[0]
+
+
+def test_a_models_folder_that_is_not_there_is_refused(tmp_path, capsys):
+    """A typo in --models would silently drop every learning method: one line, exit 2."""
+    from ecodrive_bench.bench.harness.run_command import main
+
+    (tmp_path / "a-file").write_text("")
+    for path, why in ((tmp_path / "nope", "no such folder"), (tmp_path / "a-file", "not a folder")):
+        with pytest.raises(SystemExit) as e:
+            main(["--profile", "smoke", "--models", str(path), "--logs", str(tmp_path / "logs")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert e.value.code == 2 and len(err) == 1 and f"--models {path}: {why}" in err[0]
+    assert not (tmp_path / "logs").exists()

@@ -84,3 +84,32 @@ def test_ray_retries_a_task_whose_worker_died(ray_cluster, tmp_path):
     rows = list(run_ray([(str(tmp_path), n) for n in NAMES], None, 2, flaky, on_failure=failed.append))
     _check(rows, failed, tmp_path)
     assert "WorkerCrashedError" in next(f.reason for f in failed if f.error is None)
+
+
+def stamp(task: int) -> tuple[int, float]:
+    """(task, when it started [s, time.time()])."""
+    return task, time.time()
+
+
+def test_held_tasks_wait_while_held_and_the_others_go_first():
+    """A task held back (``hold``) is not started while held; the tasks behind it run meanwhile,
+    and it runs once released, by another thread while the pool's workers wait for it (the pool
+    asks again every ``HOLD_POLL``)."""
+    import threading
+
+    from ecodrive_bench.bench.harness.pool import run_pool
+
+    released, held, rows, release = threading.Event(), {0, 1, 5}, [], []
+
+    def release_later() -> None:
+        time.sleep(0.3)
+        release.append(time.time())
+        released.set()
+
+    for task, start in run_pool(range(8), 2, stamp, hold=lambda t: t in held and not released.is_set()):
+        rows.append((task, start))
+        if sum(t not in held for t, _ in rows) == 5:  # every other task is done: the workers now wait
+            threading.Thread(target=release_later).start()
+    order = [t for t, _ in rows]
+    assert sorted(order) == list(range(8)) and set(order[:5]) == set(range(8)) - held
+    assert min(start for t, start in rows if t in held) >= release[0]

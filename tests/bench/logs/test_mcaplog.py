@@ -72,6 +72,12 @@ def test_garbage_is_a_clear_error(tmp_path):
         read_log(bad)
     with pytest.raises(LogError, match="no such log file"):
         read_log(tmp_path / "missing.mcap")
+    (tmp_path / "folder.mcap").mkdir()
+    with pytest.raises(LogError, match="folder.mcap: a folder; expected a step log file"):
+        read_log(tmp_path / "folder.mcap")
+    (tmp_path / "empty.mcap").write_bytes(b"")
+    with pytest.raises(LogError, match="empty.mcap: an empty file"):
+        read_log(tmp_path / "empty.mcap")
 
 
 def test_killed_run_leaves_readable_part(tmp_path, cases):

@@ -220,6 +220,18 @@ def test_an_existing_save_path_is_refused_and_kept(log, tmp_path):
     assert out.returncode == 2 and "Traceback" not in out.stderr and folder.is_dir()
 
 
+def test_without_a_display_the_viewer_is_refused_in_one_line(log):
+    """On a machine with no display, spawning Rerun's viewer cannot work: one line naming the way
+    out (--save), exit 2, at once instead of a wait for a viewer that never starts."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")}
+    out = subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.logs.view", str(log[0])], capture_output=True,
+                         text=True, timeout=120, env=env)
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1 and "no display" in lines[0] and "--save out.rrd" in lines[0]
+
+
 def test_a_refused_log_leaves_no_recording(tmp_path):
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 10)
