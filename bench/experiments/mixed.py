@@ -225,7 +225,8 @@ def write_table(rows: dict[str, dict[str, Any]], table: Path) -> pd.DataFrame:
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap = Parser(description=__doc__)
-    ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS))
+    ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS),
+                    help="signal settings (default: both)")
     ap.add_argument("--mpr", nargs="+", type=float_in(0, 1), default=list(MPRS), help="CV market-penetration rates, each in [0, 1]")
     ap.add_argument("--demand", nargs="+", type=float_in(0, 1000, lo_open=True), default=list(DEMANDS), help="arterial demands [veh/h/lane], each in (0, 1000]")
     ap.add_argument("--reps", type=int_in(1), default=REPS, help="repetitions (traffic draws) per cell (>= 1)")

@@ -108,7 +108,7 @@ def describe(df: pd.DataFrame) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__.split("\n")[0])
-    ap.add_argument("--signals", default="coordinated", choices=SIGNALS)
+    ap.add_argument("--signals", default="coordinated", choices=SIGNALS, help="signal setting (default: coordinated)")
     ap.add_argument("--mpr", type=float_in(0, 1, lo_open=True), default=1.0, help="CV share in (0, 1]")
     ap.add_argument("--demand", type=float_in(0, 1000, lo_open=True), default=CI_DEMAND, help="veh/h/lane in (0, 1000]")
     ap.add_argument("--duration", type=float_in(10, 7200), default=CI_DURATION, help="simulated seconds (10-7200)")

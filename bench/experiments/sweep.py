@@ -307,9 +307,10 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--signals", default="uncoordinated", help=f"one of {', '.join(SIGNALS)}")
     ap.add_argument("--forms", nargs="+", default=list(REWARDS), help=f"reward study: forms among {', '.join(REWARDS)}")
     ap.add_argument("--phi", nargs="+", type=float_in(*accepted_range(RewardConfig, "phi")), default=list(PHIS),
-                    help="reward study: phi values [Wh/s]")
+                    help="reward study: phi values [Wh/s], each in [{}, {}]".format(*accepted_range(RewardConfig, "phi")))
     ap.add_argument("--values", nargs="+", type=float_in(*accepted_range(RewardConfig, "speed_penalty")),
-                    default=list(HEATMAP_VALUES), help="heatmap: |r_p^s| = |r_p^j| grid")
+                    default=list(HEATMAP_VALUES),
+                    help="heatmap: |r_p^s| = |r_p^j| grid, each in [{}, {}]".format(*accepted_range(RewardConfig, "speed_penalty")))
     ap.add_argument("--seeds", nargs="+", type=int_in(0), default=None, help="training seeds (reward: 0 1 2; heatmap: 0)")
     ap.add_argument("--episodes", type=int_in(1, 100_000), default=None,
                     help="training episodes per job (1-100000; default: PRL's recipe's, or 1000 with --paper)")

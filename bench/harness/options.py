@@ -114,7 +114,7 @@ def parser() -> Parser:
                          "name; sb3-<algo> for --sb3)")
     ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS), help="signal settings")
     add_options(ap)
-    ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, help="parallel episodes (>= 1)")
+    ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, help="parallel episodes (>= 1; default: this machine's CPUs)")
     ap.add_argument("--run-id", type=name, default=None,
                     help="run folder under --logs: letters, digits, '.', '_', '-' (default: the profile)")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
