@@ -290,10 +290,10 @@ def earlier_rows(run_dir: Path, df: pd.DataFrame, shas: dict[str, str] | None = 
     if not set(KEEP) <= set(old.columns):
         return pd.DataFrame(columns=list(KEEP))
     now = set(zip(df.signals, df.method, df.train_seed, df.case))
-    rows = [r for r in old.itertuples(index=False) if (r.signals, r.method, r.train_seed, r.case) not in now]
-    keep = [r._asdict() for r in rows if episode_summary(
-        resolve_log(run_dir, r.mcap), agent_sha256=shas.get(policy_key(r.method, r.signals, r.train_seed))) is not None]
-    return pd.DataFrame(keep, columns=list(KEEP))
+    old = old[[k not in now for k in zip(old.signals, old.method, old.train_seed, old.case)]]
+    complete = [episode_summary(resolve_log(run_dir, mcap), agent_sha256=shas.get(policy_key(m, s, sd))) is not None
+                for mcap, m, s, sd in zip(old.mcap, old.method, old.signals, old.train_seed)]
+    return old[complete][list(KEEP)].reset_index(drop=True)  # columns by name: "return" is no identifier
 
 
 def one_scenario(run_dir: Path, hashes: dict[str, str]) -> None:

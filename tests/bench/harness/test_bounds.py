@@ -82,8 +82,11 @@ def test_the_manifest_measures_the_floor_and_every_commands_wall_time(tmp_path, 
     monkeypatch.setattr(run_module, "_STARTED", [])  # as in a fresh process: no run before these
     age = process_age()  # [s] this process's start-up so far
     common = ["--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline", "--workers", "2"]
-    run(parse([*common, "--signals", "coordinated"]), progress=False)
+    first = run(parse([*common, "--signals", "coordinated"]), progress=False)
     df = run(parse([*common, "--signals", "uncoordinated"]), progress=False)
+    kept = df[df.signals == "coordinated"].drop(columns="sumo_s").reset_index(drop=True)
+    pd.testing.assert_frame_equal(kept, first.drop(columns="sumo_s").reset_index(drop=True), check_dtype=False)
+    assert kept["return"].notna().all()  # every column kept, "return" (no Python identifier) too
     man = json.loads((tmp_path / "smoke" / "manifest.json").read_text())
     new = df[df.signals == "uncoordinated"]
     assert (new.sumo_s > 0).all() and (new.sumo_s < 60).all()
