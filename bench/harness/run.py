@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
@@ -138,7 +139,7 @@ def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
     check_policies(pdirs, checked)
     one_scenario(opts.run_dir, {s: c.digest() for s, c in evals.items()})
     cases = opts.cases or load()[: PROFILES[opts.profile]]  # a variant's own (generalisation)
-    one_case_set(opts.run_dir, opts.signals, {c.index for c in cases})
+    one_case_set(opts.run_dir, runs, {c.index for c in cases})
     return Preflight(runs, skipped, pdirs, where, evals, cases)
 
 
@@ -290,10 +291,10 @@ def earlier_rows(run_dir: Path, df: pd.DataFrame, shas: dict[str, str] | None = 
     if not set(KEEP) <= set(old.columns):
         return pd.DataFrame(columns=list(KEEP))
     now = set(zip(df.signals, df.method, df.train_seed, df.case))
-    old = old[[k not in now for k in zip(old.signals, old.method, old.train_seed, old.case)]]
+    old = old.loc[np.array([k not in now for k in zip(old.signals, old.method, old.train_seed, old.case)], dtype=bool)]
     complete = [episode_summary(resolve_log(run_dir, mcap), agent_sha256=shas.get(policy_key(m, s, sd))) is not None
                 for mcap, m, s, sd in zip(old.mcap, old.method, old.signals, old.train_seed)]
-    return old[complete][list(KEEP)].reset_index(drop=True)  # columns by name: "return" is no identifier
+    return old.loc[np.array(complete, dtype=bool), list(KEEP)].reset_index(drop=True)  # by name: "return" is no identifier
 
 
 def one_scenario(run_dir: Path, hashes: dict[str, str]) -> None:
@@ -314,23 +315,31 @@ def one_scenario(run_dir: Path, hashes: dict[str, str]) -> None:
                              f"{', '.join(other)}, this command's is {want}); use another --run-id")
 
 
-def one_case_set(run_dir: Path, signals: list[str], cases: set[int]) -> None:
+def one_case_set(run_dir: Path, runs: list[tuple[str, str, int]], cases: set[int]) -> None:
     """A run folder's methods drive the same cases in each setting (the report compares them case
-    by case and over the whole set): a command on another case set (another profile, a user's
-    case list) is refused before it writes anything, as ``one_scenario``."""
+    by case and over the whole set): a command after which they would not (another profile or case
+    list for some of them) is refused before it writes anything, as ``one_scenario``. Rerunning
+    some cases of methods that have them all is allowed."""
     path = run_dir / "results.parquet"
     try:
-        old = pd.read_parquet(path, columns=["signals", "case"]) if path.is_file() else None
+        old = pd.read_parquet(path) if path.is_file() else None
     except Exception:  # earlier_rows reports an unreadable table
         return
-    if old is None:
+    if old is None or not {"signals", "method", "case"} <= set(old.columns):
         return
-    for s in signals:
-        have = {int(c) for c in old.case[old.signals == s]}
-        if have and have != cases:
-            raise UsageError(f"{run_dir} holds {s} episodes on cases {_ranges(have)} from an earlier command; this "
-                             f"command runs cases {_ranges(cases)}: every method of a run folder drives the same "
-                             "cases; use another --run-id")
+    seeds = old.train_seed if "train_seed" in old.columns else pd.Series(-1, index=old.index)
+    for s in sorted({r[1] for r in runs}):
+        rows = old.signals == s
+        final = {(m, int(sd)): {int(c) for c in g} for (m, sd), g in
+                 old.case[rows].groupby([old.method[rows], seeds[rows]])}
+        for m, _, sd in (r for r in runs if r[1] == s):
+            final[(m, sd)] = final.get((m, sd), set()) | cases
+        if len({frozenset(v) for v in final.values()}) > 1:
+            parts = [f"{m}{'' if sd < 0 else f' s{sd}'} {_ranges(v)}" for (m, sd), v in sorted(final.items())]
+            shown = "; ".join(parts[:4]) + ("; ..." if len(parts) > 4 else "")
+            raise UsageError(f"{run_dir}: after this command (cases {_ranges(cases)}) its {s} methods would drive "
+                             f"different cases ({shown}): every method of a run folder drives the same cases; run "
+                             "them all on these cases, or use another --run-id")
 
 
 def _ranges(ints: set[int]) -> str:

@@ -120,6 +120,7 @@ def test_bad_input_is_one_line_and_touches_nothing(args, words, tmp_path):
     keep = tmp_path / "smoke" / "coordinated" / "baseline" / "case-000.mcap"
     keep.parent.mkdir(parents=True)
     keep.write_bytes(b"existing")
+    (tmp_path / "no-models").mkdir()  # a policies folder with no policy in it
     cmd = [sys.executable, "-m", "ecodrive_bench.bench.harness.run_command", "--logs", str(tmp_path), "--models", str(tmp_path / "no-models"), *args]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     err = [line for line in out.stderr.splitlines() if "pyarrow" not in line and "Try to uninstall" not in line]
