@@ -22,36 +22,30 @@ def tests(session: nox.Session) -> None:
     session.run("python", "-m", "pytest", "-q", *session.posargs)
 
 
-def _given(posargs: list[str]) -> argparse.Namespace:
-    """The ``ecodrive run`` options this session reuses, as given (None where not given). Read
-    here, not imported: nox's interpreter need not have the package; ``ecodrive run`` has already
-    checked them by the time they are read."""
-    ap = argparse.ArgumentParser(add_help=False)
+def _given(posargs: list[str]) -> argparse.Namespace | None:
+    """The ``ecodrive run`` options this session reuses, as given (None where not given), read as
+    ``ecodrive run`` reads them (abbreviations too). Read here, not imported: nox's interpreter
+    need not have the package. Options it cannot read give None: ``ecodrive run`` refuses them in
+    one line."""
+    ap = argparse.ArgumentParser(add_help=False, exit_on_error=False)
     for flag in ("--profile", "--executor", "--address", "--workers", "--run-id", "--logs"):
         ap.add_argument(flag, default=None)
     ap.add_argument("--methods", nargs="+", default=None)
     ap.add_argument("--signals", nargs="+", default=None)
-    return ap.parse_known_args(posargs)[0]
-
-
-def _names_methods(posargs: list[str]) -> bool:
-    """Whether the options name ``--methods`` (as ``ecodrive run`` reads them, abbreviations too);
-    options it cannot read count as named, so that ``ecodrive run`` refuses them in one line."""
-    ap = argparse.ArgumentParser(add_help=False, exit_on_error=False)
-    ap.add_argument("--methods", nargs="+", default=None)
     try:
-        return ap.parse_known_args(list(posargs))[0].methods is not None
+        return ap.parse_known_args(list(posargs))[0]
     except argparse.ArgumentError:
-        return True
+        return None
 
 
 @nox.session
 def benchmark(session: nox.Session) -> None:
     """The main job: every available method over the fixed cases, MCAP logs, results, report."""
-    # and the planners, in the same command and pool: the bound's plan replayed, the closed-loop mpc (docs/mpc.md)
-    session.run("ecodrive", "run", "--bounds", *session.posargs, *([] if _names_methods(session.posargs) else
-                                                                   ["--planners"]))
     opts = _given(list(session.posargs))
+    # and the planners, in the same command and pool: the bound's plan replayed, the closed-loop mpc (docs/mpc.md)
+    planners = ["--planners"] if opts is not None and opts.methods is None else []
+    session.run("ecodrive", "run", "--bounds", *session.posargs, *planners)
+    assert opts is not None  # ecodrive run has refused options it could not read
     profile = opts.profile or "paper"
     run_id, logs = opts.run_id or profile, Path(opts.logs or "logs")
     if profile == "full":  # section 5's further experiments, into the same run folder

@@ -397,7 +397,11 @@ class LazyAdam:
             opt = agent.__dict__[self.slot] = adam(self.params(agent), lr=getattr(agent.cfg, self.lr))
         return opt
 
-    def built(self, agent: Any) -> torch.optim.Adam | None:
+    def __set__(self, agent: Any, opt: torch.optim.Optimizer) -> None:
+        """An optimizer assigned in its place (a test's plain Adam, say) is the one used and moved."""
+        agent.__dict__[self.slot] = opt
+
+    def built(self, agent: Any) -> torch.optim.Optimizer | None:
         return agent.__dict__.get(self.slot)
 
 

@@ -311,11 +311,14 @@ def provenance_section(page: Page) -> str:
               + (f" <span class='ci'>(every command that wrote the folder: "
                  f"{esc(duration(man.get('wall_time_all_commands_s')))})</span>"
                  if man.get("wall_time_all_commands_s") else "")),
-             ("Whole command", esc(duration(man.get("command_wall_s")))
-              + " <span class='ci'>(start-up included)</span>"
-              + (f" <span class='ci'>(every command that wrote the folder: "
-                 f"{esc(duration(man.get('command_wall_all_commands_s')))})</span>"
-                 if man.get("command_wall_all_commands_s") else "")),
+             *([("Whole command", esc(duration(man.get("command_wall_s")))
+                 + " <span class='ci'>(start-up included)</span>"
+                 + (f" <span class='ci'>(every command that wrote the folder: "
+                    f"{esc(duration(man.get('command_wall_all_commands_s')))}"
+                    + ("" if all(isinstance(c, dict) and c.get("command_wall_s") for c in commands or [])
+                       else "; earlier commands that did not record it count their episodes' time")
+                    + ")</span>" if man.get("command_wall_all_commands_s") else ""))]
+               if man.get("command_wall_s") else []),
              ("Time in SUMO (the floor)", esc(duration(man.get("sumo_time_s"))) + (
                  f" <span class='ci'>(wall time \u00d7 workers / SUMO's time = {man['floor_ratio']:.2f})</span>"
                  if man.get("floor_ratio") else "") + _floor_all(man)),

@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import re
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -171,16 +172,23 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
         return run_pool(tasks, workers, fn, on_failure, skip)
     from ecodrive_bench.agents.registry import LEARNING
 
+    tasks = list(tasks)
     compile_grid()
     compiled = threading.Event()
+    if not any(getattr(t, "method", None) in LEARNING for t in tasks):
+        compiled.set()  # no act to compile (the bounds, the rule-based methods, the planners)
 
     def compile_act() -> None:
         try:
             compile_greedy()
-        finally:  # on an error the workers compile for themselves (and report it if it recurs)
+        except Exception as e:  # the workers compile for themselves, and report it if it recurs
+            print(f"warning: compiling the greedy act's kernels failed here ({type(e).__name__}: {e}); "
+                  "each worker compiles them", file=sys.stderr)
+        finally:
             compiled.set()
 
-    threading.Thread(target=compile_act, name="compile-greedy-act", daemon=True).start()
+    if not compiled.is_set():
+        threading.Thread(target=compile_act, name="compile-greedy-act", daemon=True).start()
 
     def hold(task: Any) -> bool:
         return not compiled.is_set() and getattr(task, "method", None) in LEARNING

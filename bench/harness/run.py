@@ -228,6 +228,13 @@ def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any
     cols = [*KEEP, "sumo_s"]  # sumo_s: NaN for rows reused or kept from earlier commands
     df = pd.concat([df[cols], kept], ignore_index=True) if len(kept) else df[cols]
     df = df.sort_values(["signals", "method", "train_seed", "case"], ignore_index=True)
+    # a replaced policy's rows dropped on cases this command did not run, say (not its own failed or
+    # skipped episodes: those are reported on their own and rerun by the same command)
+    planned = pd.DataFrame([(t.signals, t.method, t.train_seed, t.case.index) for t in todo.tasks],
+                           columns=["signals", "method", "train_seed", "case"])
+    gaps = case_set_gaps(pd.concat([df[["signals", "method", "train_seed", "case"]], planned], ignore_index=True))
+    for gap in gaps:
+        print(f"warning: {run_dir}: {gap}; the report warns of it too", file=sys.stderr)
     df["mcap"] = [_relative(run_dir, m) for m in df.mcap]  # the run folder moves as a whole
     t_bounds = time.perf_counter()
     if opts.bounds:
@@ -252,6 +259,8 @@ def write(opts: RunOptions, pre: Preflight, todo: Plan, rows: list[dict[str, Any
         "harness_overhead": round(float(wall * min(opts.workers, max(len(ran), 1)) / ran.sum() - 1), 4)
         if len(ran) else None,
     }
+    if gaps:
+        manifest["mixed_case_sets"] = gaps
     manifest["scenario"] = {s: c.to_dict() for s, c in pre.evals.items()}  # eval_scenario_hash: their digests
     trained = {ev.train_hash: ev.train for ev in pre.where.values() if ev.train_hash}
     manifest.update(scenario_overrides=opts.scenario, transfer=opts.transfer, train_scenarios=trained,
@@ -317,29 +326,48 @@ def one_scenario(run_dir: Path, hashes: dict[str, str]) -> None:
 
 def one_case_set(run_dir: Path, runs: list[tuple[str, str, int]], cases: set[int]) -> None:
     """A run folder's methods drive the same cases in each setting (the report compares them case
-    by case and over the whole set): a command after which they would not (another profile or case
-    list for some of them) is refused before it writes anything, as ``one_scenario``. Rerunning
-    some cases of methods that have them all is allowed."""
+    by case and over the whole set). Against the cases the folder's table has in a setting, a
+    command is refused before it writes anything, as ``one_scenario``, if it runs other cases, more
+    cases while some method of the folder is not rerun, or fewer cases with a method the folder
+    does not have yet; rerunning some cases of methods the folder has is allowed. What a command
+    cannot see here (rows dropped later for a replaced policy) is caught by ``case_set_gaps``."""
     path = run_dir / "results.parquet"
     try:
         old = pd.read_parquet(path) if path.is_file() else None
     except Exception:  # earlier_rows reports an unreadable table
         return
-    if old is None or not {"signals", "method", "case"} <= set(old.columns):
+    if old is None or not set(KEEP) - set(SCENARIO_COLUMNS) <= set(old.columns):  # one earlier_rows would not keep
         return
-    seeds = old.train_seed if "train_seed" in old.columns else pd.Series(-1, index=old.index)
     for s in sorted({r[1] for r in runs}):
-        rows = old.signals == s
-        final = {(m, int(sd)): {int(c) for c in g} for (m, sd), g in
-                 old.case[rows].groupby([old.method[rows], seeds[rows]])}
-        for m, _, sd in (r for r in runs if r[1] == s):
-            final[(m, sd)] = final.get((m, sd), set()) | cases
-        if len({frozenset(v) for v in final.values()}) > 1:
-            parts = [f"{m}{'' if sd < 0 else f' s{sd}'} {_ranges(v)}" for (m, sd), v in sorted(final.items())]
-            shown = "; ".join(parts[:4]) + ("; ..." if len(parts) > 4 else "")
-            raise UsageError(f"{run_dir}: after this command (cases {_ranges(cases)}) its {s} methods would drive "
-                             f"different cases ({shown}): every method of a run folder drives the same cases; run "
-                             "them all on these cases, or use another --run-id")
+        rows = old[old.signals == s]
+        have = {int(c) for c in rows.case}
+        if not have or have == cases:
+            continue
+        there = set(zip(rows.method, rows.train_seed.astype(int)))
+        mine = {(m, sd) for m, ss, sd in runs if ss == s}
+        left = sorted(there - mine) if cases > have else sorted(mine - there) if cases < have else []
+        if cases > have or cases < have:
+            if not left:
+                continue
+            who = ", ".join(f"{m}{'' if sd < 0 else f' s{sd}'}" for m, sd in left[:4]) + (", ..." if len(left) > 4 else "")
+            why = (f"{who} would keep only those" if cases > have else f"{who} would drive only these")
+        else:
+            why = "neither set holds the other"
+        raise UsageError(f"{run_dir} holds {s} episodes on cases {_ranges(have)}; this command runs cases "
+                         f"{_ranges(cases)} ({why}): every method of a run folder drives the same cases; "
+                         "run them all on one set, or use another --run-id")
+
+
+def case_set_gaps(df: pd.DataFrame) -> list[str]:
+    """One line per setting of ``df`` (a results table) whose methods, each training seed apart,
+    drove different cases."""
+    out = []
+    for s, g in df.groupby("signals"):
+        sets = {(m, int(sd)): {int(c) for c in c_} for (m, sd), c_ in g.case.groupby([g.method, g.train_seed])}
+        if len({frozenset(v) for v in sets.values()}) > 1:
+            parts = [f"{m}{'' if sd < 0 else f' s{sd}'} {_ranges(v)}" for (m, sd), v in sorted(sets.items())]
+            out.append(f"{s}: the methods drove different cases ({'; '.join(parts[:6])}{'; ...' if len(parts) > 6 else ''})")
+    return out
 
 
 def _ranges(ints: set[int]) -> str:

@@ -33,3 +33,19 @@ def test_policy_agents_act_without_building_an_optimizer():
     lines = out.stdout.splitlines()
     assert lines[:4] == [f"{m} built: []" for m in ("prl", "mpdqn", "dqn", "ddpg")]
     assert lines[4:] == ["dynamo imported: False", "after first use: True"]
+
+
+def test_an_optimizer_assigned_in_place_of_the_lazy_one_is_the_one_used():
+    import torch
+
+    from ecodrive_bench.agents.ddpg import DDPGAgent
+    from ecodrive_bench.bench.harness.episode import make_env
+
+    env = make_env("ddpg", "uncoordinated")
+    agent = DDPGAgent(env.observation_space, env.action_space)
+    assert type(agent).opt_actor.built(agent) is None
+    mine = torch.optim.Adam(agent.actor.parameters(), lr=1e-3)
+    agent.opt_actor = mine
+    assert agent.opt_actor is mine and type(agent).opt_actor.built(agent) is mine
+    assert agent.opt_critic is type(agent).opt_critic.built(agent) is not None  # built on first use
+    env.close()

@@ -14,6 +14,7 @@ from ecodrive_bench.bench.args import MAX_JSON_BYTES, InputError
 from ecodrive_bench.bench.harness import cases as cases_mod
 from ecodrive_bench.bench.harness import generalisation
 from ecodrive_bench.bench.harness.cases import CaseError, check_cases, load
+from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.generalisation import FamilyError
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.scenarios import parse_overrides
@@ -221,38 +222,48 @@ def test_the_benchmark_session_adds_the_planners_unless_methods_are_named():
     spec = importlib.util.spec_from_file_location("noxfile", Path(__file__).parents[3] / "noxfile.py")
     noxfile = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(noxfile)
-    assert not noxfile._names_methods([]) and not noxfile._names_methods(["--profile", "smoke", "--workers", "2"])
-    for given in (["--methods", "prl"], ["--meth", "prl"], ["--methods=prl"], ["--methods"]):
-        assert noxfile._names_methods(given), given
+    assert noxfile._given([]).methods is None
+    assert noxfile._given(["--profile", "smoke", "--workers", "2"]).methods is None
+    for given in (["--methods", "prl"], ["--meth", "prl"], ["--methods=prl"]):
+        assert noxfile._given(given).methods == ["prl"], given
+    assert noxfile._given(["--methods"]) is None  # ecodrive run refuses it
 
 
 def test_a_run_folder_keeps_one_case_set(tmp_path, capsys):
-    """A command on other cases than the episodes already in the run folder (another profile into
-    the same --run-id) is refused in one line naming both sets, before anything is written."""
+    """A command after which a run folder's methods would drive different cases (another profile
+    into the same --run-id; a method added on fewer cases) is refused in one line naming both sets,
+    before anything is written; rerunning some cases of a method the folder has is allowed, and a
+    table the harness would not keep (no train_seed column: written before it) is no reason."""
     import pandas as pd
 
+    from ecodrive_bench.bench.harness.run import KEEP, SCENARIO_COLUMNS, one_case_set
     from ecodrive_bench.bench.harness.run_command import main
 
     run_dir = tmp_path / "mine"
     run_dir.mkdir()
-    table = pd.DataFrame({"signals": ["coordinated"] * 3 + ["uncoordinated"], "case": [0, 1, 2, 7],
-                          "method": ["glosa"] * 4, "train_seed": [-1] * 4})
+    rows = [("coordinated", c) for c in (0, 1, 2)] + [("uncoordinated", 7)]
+    table = pd.DataFrame([{**{k: 0 for k in KEEP if k not in SCENARIO_COLUMNS}, "method": "glosa", "train_seed": -1,
+                           "signals": s, "case": c} for s, c in rows])  # the default scenario, as a table before
+                                                                       # its scenario columns
     table.to_parquet(run_dir / "results.parquet")
     before = sorted(p.name for p in run_dir.iterdir())
-    rc = main(["--profile", "paper", "--run-id", "mine", "--methods", "baseline", "--signals", "coordinated",
-               "--logs", str(tmp_path), "--workers", "1"])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and len(err) == 1 and "(cases 0-99) its coordinated methods would drive different cases" in err[0]
-    assert "baseline 0-99; glosa 0-2" in err[0]
-    assert sorted(p.name for p in run_dir.iterdir()) == before
-    rc = main(["--profile", "smoke", "--run-id", "mine", "--methods", "baseline", "--signals", "uncoordinated",
-               "--logs", str(tmp_path), "--workers", "1"])
-    err = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and "baseline 0-2; glosa 7" in err[0]
-    # glosa again on some of its own cases: allowed (it fails later here, on the table's missing columns)
-    from ecodrive_bench.bench.harness.run import one_case_set
 
-    one_case_set(run_dir, [("glosa", "coordinated", -1)], {1})
+    def refused(*argv: str) -> str:
+        rc = main([*argv, "--run-id", "mine", "--logs", str(tmp_path), "--workers", "1"])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2 and len(err) == 1 and sorted(p.name for p in run_dir.iterdir()) == before
+        return err[0]
+
+    err = refused("--profile", "paper", "--methods", "baseline", "--signals", "coordinated")
+    assert "holds coordinated episodes on cases 0-2; this command runs cases 0-99 (glosa would keep only those)" in err
+    err = refused("--profile", "smoke", "--methods", "baseline", "--signals", "uncoordinated")
+    assert "on cases 7; this command runs cases 0-2 (neither set holds the other)" in err
+    with pytest.raises(UsageError, match=r"runs cases 1 \(baseline would drive only these\)"):
+        one_case_set(run_dir, [("baseline", "coordinated", -1)], {1})
+    one_case_set(run_dir, [("glosa", "coordinated", -1)], {1})  # some cases of a method it has: allowed
+    one_case_set(run_dir, [("glosa", "coordinated", -1), ("baseline", "coordinated", -1)], set(range(100)))
+    table.drop(columns="train_seed").to_parquet(run_dir / "results.parquet")
+    one_case_set(run_dir, [("baseline", "coordinated", -1)], set(range(100)))
 
 
 def test_a_models_folder_that_is_not_there_is_refused(tmp_path, capsys):

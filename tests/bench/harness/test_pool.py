@@ -3,6 +3,7 @@ fresh process, a task that dies every time is reported as failed, the others' re
 back, and a task's own exception is not retried. Local pool and Ray, with real processes killed."""
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import time
@@ -113,3 +114,31 @@ def test_held_tasks_wait_while_held_and_the_others_go_first():
     order = [t for t, _ in rows]
     assert sorted(order) == list(range(8)) and set(order[:5]) == set(range(8)) - held
     assert min(start for t, start in rows if t in held) >= release[0]
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    method: str
+    n: int
+
+
+def job_stamp(job: Job) -> tuple[int, float]:
+    return job.n, time.time()
+
+
+def test_the_act_is_compiled_beside_the_workers_for_learning_methods_only(monkeypatch):
+    """``run_local`` compiles the greedy act's kernels in the parent only when a task needs them
+    (a learning method's), and holds those tasks until it has."""
+    from ecodrive_bench.bench.harness import executors
+
+    calls: list[float] = []
+
+    def slow_compile() -> None:
+        time.sleep(1.0)
+        calls.append(time.time())
+
+    monkeypatch.setattr(executors, "compile_greedy", slow_compile)
+    assert sorted(n for n, _ in run_local([Job("baseline", i) for i in range(3)], 2, job_stamp)) == [0, 1, 2]
+    assert calls == []
+    rows = dict(run_local([Job("prl", 0), Job("baseline", 1), Job("dqn", 2)], 2, job_stamp))
+    assert len(calls) == 1 and rows[0] >= calls[0] and rows[2] >= calls[0]
