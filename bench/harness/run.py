@@ -349,7 +349,7 @@ def one_case_set(run_dir: Path, runs: list[tuple[str, str, int]], cases: set[int
         if cases > have or cases < have:
             if not left:
                 continue
-            who = ", ".join(f"{m}{'' if sd < 0 else f' s{sd}'}" for m, sd in left[:4]) + (", ..." if len(left) > 4 else "")
+            who = ", ".join(_who(m, sd) for m, sd in left[:4]) + (", ..." if len(left) > 4 else "")
             why = (f"{who} would keep only those" if cases > have else f"{who} would drive only these")
         else:
             why = "neither set holds the other"
@@ -365,9 +365,14 @@ def case_set_gaps(df: pd.DataFrame) -> list[str]:
     for s, g in df.groupby("signals"):
         sets = {(m, int(sd)): {int(c) for c in c_} for (m, sd), c_ in g.case.groupby([g.method, g.train_seed])}
         if len({frozenset(v) for v in sets.values()}) > 1:
-            parts = [f"{m}{'' if sd < 0 else f' s{sd}'} {_ranges(v)}" for (m, sd), v in sorted(sets.items())]
+            parts = [f"{_who(m, sd)} {_ranges(v)}" for (m, sd), v in sorted(sets.items())]
             out.append(f"{s}: the methods drove different cases ({'; '.join(parts[:6])}{'; ...' if len(parts) > 6 else ''})")
     return out
+
+
+def _who(method: str, seed: int) -> str:
+    """A method with its training seed, as the messages name it ("prl s0", "baseline")."""
+    return method if seed < 0 else f"{method} s{seed}"
 
 
 def _ranges(ints: set[int]) -> str:
