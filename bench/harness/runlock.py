@@ -9,11 +9,13 @@ ends (a SIGKILL included); the file stays. Windows has no ``fcntl``: there, no l
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 LOCK = ".lock"
+PID_TRIES = 50  # reads of an empty lock file, 10 ms apart, before its holder is "unknown"
 
 
 class InUse(Exception):
@@ -36,7 +38,13 @@ def hold(run_dir: Path) -> Iterator[None]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            holder = ""
+            for _ in range(PID_TRIES):  # the holder writes its pid just after it locks: an empty file is that moment
+                holder = os.pread(fd, 32, 0).decode(errors="replace").strip()
+                if holder:
+                    break
+                time.sleep(0.01)
+            holder = holder or "unknown"
             raise InUse(f"run folder {run_dir} is in use by another ecodrive command (pid {holder}); wait for it "
                         f"to finish, or use another --run-id") from None
         os.ftruncate(fd, 0)
