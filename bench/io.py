@@ -9,6 +9,8 @@
   ``exclusive_open``: whatever stands under that name (a stale ``.part``, a planted link) is
   removed first, and the open refuses to follow a link.
 - ``refuse_links`` refuses a run or output folder that is, or holds, a symbolic link.
+- ``file_stamps`` and ``prune_unwritten`` let a command that rebuilds a folder (a report) remove
+  its previous run's files that it did not write again, and nothing else.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ import hashlib
 import io
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
@@ -125,3 +128,38 @@ def atomic_torch_save(obj: Any, path: Path) -> None:
     buf = io.BytesIO()
     torch.save(obj, buf)
     atomic_bytes(buf.getvalue(), path)
+
+
+def file_stamps(out: Path) -> dict[str, tuple[int, int]]:
+    """Every regular file below ``out``, no link followed: path relative to ``out`` -> (inode,
+    modification time [ns]). A file written since has another pair (atomic writes make a new inode)."""
+    found: dict[str, tuple[int, int]] = {}
+    for root, _, names in os.walk(out):
+        for n in names:
+            st = (Path(root) / n).lstat()
+            if stat.S_ISREG(st.st_mode):
+                found[(Path(root) / n).relative_to(out).as_posix()] = (st.st_ino, st.st_mtime_ns)
+    return found
+
+
+def prune_unwritten(out: Path, before: dict[str, tuple[int, int]], record: str) -> list[str]:
+    """After a command rewrote its output folder ``out`` (``before``: ``file_stamps`` taken before it
+    wrote): remove the files that the previous command listed in ``out/record`` and this one did
+    not write again, then list this one's files there; the removed paths. Files never listed (a
+    user's notes) are kept, and nothing is removed through a link."""
+    after = file_stamps(out)
+    written = sorted(k for k, v in after.items() if before.get(k) != v and k != record)
+    try:
+        listed = json.loads((out / record).read_text()) if record in before else []
+    except (OSError, ValueError):  # a damaged record: nothing is removed
+        listed = []
+    root = out.resolve()
+    stale = [k for k in listed if isinstance(k, str) and k in before and after.get(k) == before[k]]
+    for k in stale:
+        p = out / k
+        if p.parent.resolve() == (root / k).parent:  # no folder on the way became a link
+            p.unlink()
+            if p.parent != out and not any(p.parent.iterdir()):
+                p.parent.rmdir()
+    atomic_text(json.dumps(written, indent=0) + "\n", out / record)
+    return stale

@@ -8,7 +8,10 @@ paper run's report gains it, with the in-distribution change beside it, with ``-
 (``reports.generalisation``).
 
 Reads only ``results.parquet``, ``manifest.json`` and the step logs; writes ``index.md`` and
-``index.html`` (which shows the figures) plus the tables and figures.
+``index.html`` (which shows the figures) plus the tables and figures. A report built into a folder
+that holds an earlier one removes the earlier one's files that it did not write again (a figure of
+a method or case no longer in the run), listed in ``.report-files.json``; files it never wrote are
+left alone.
 """
 from __future__ import annotations
 
@@ -21,7 +24,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail
-from ecodrive_bench.bench.io import atomic_csv, atomic_text, refuse_links, writable_dir
+from ecodrive_bench.bench.io import atomic_csv, atomic_text, file_stamps, prune_unwritten, refuse_links, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
@@ -35,6 +38,7 @@ METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn",
 LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
+RECORD = ".report-files.json"  # the files the last report wrote into its folder (paths relative to it)
 
 
 def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool = True) -> tuple[Path, list[str]]:
@@ -57,6 +61,7 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
                        f"`ecodrive run`?)")
     refuse_links(out, "report folder")  # an Unwritable (OSError): one line, nothing written
     writable_dir(out)  # a file under its name, no permission: an Unwritable naming the folder
+    before = file_stamps(out)
     page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
         md, warnings = _single_vehicle(run_dir, out, page, progress)
@@ -77,6 +82,7 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
     page.mixed_claims = _mixed_claims(run_dir)
     page.warnings = warnings
     atomic_text(render(page), out / "index.html")
+    prune_unwritten(out, before, RECORD)
     return out / "index.md", warnings
 
 

@@ -2,6 +2,7 @@
 episode, the working directory does not matter, and bad input is one line with nothing left."""
 from __future__ import annotations
 
+import json
 import shutil
 
 import pandas as pd
@@ -266,3 +267,35 @@ def test_a_file_given_as_the_report_folder_is_one_line_and_kept(smoke, tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{target} is a file, not a folder" in err[0]
     assert target.read_text() == "precious\n"
+
+
+def test_a_report_rebuilt_in_its_folder_removes_only_its_earlier_files(smoke_report, tmp_path):
+    """A report of fewer signal settings, built over a report of more: the figures and tables of
+    the setting no longer in the run go, the user's own file and a file no report listed stay."""
+    run_dir = tmp_path / "run"
+    shutil.copytree(smoke_report["run"], run_dir)
+    out = tmp_path / "report"
+    build(run_dir, out, progress=False)
+    first = set(json.loads((out / ".report-files.json").read_text()))
+    assert {"index.md", "index.html", "table4.csv", "figures/violin-uncoordinated.png"} <= first
+    (out / "notes.txt").write_text("mine\n")
+    (out / "figures" / "sketch.png").write_bytes(b"mine")
+    results = pd.read_parquet(run_dir / "results.parquet")
+    results[results.signals == "coordinated"].to_parquet(run_dir / "results.parquet", index=False)
+    build(run_dir, out, progress=False)
+    second = set(json.loads((out / ".report-files.json").read_text()))
+    left = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()}
+    assert not any("uncoordinated" in f for f in second | left), sorted(left)
+    assert "figures/violin-coordinated.png" in second and left == second | {
+        ".report-files.json", "notes.txt", "figures/sketch.png"}
+    assert (out / "notes.txt").read_text() == "mine\n"
+
+
+def test_a_damaged_file_list_removes_nothing(smoke_report, tmp_path):
+    out = tmp_path / "report"
+    build(smoke_report["run"], out, progress=False)
+    (out / "figures" / "old.png").write_bytes(b"an earlier report's")
+    (out / ".report-files.json").write_text("[not json")
+    build(smoke_report["run"], out, progress=False)
+    assert (out / "figures" / "old.png").is_file()
+    assert "figures/old.png" not in json.loads((out / ".report-files.json").read_text())
