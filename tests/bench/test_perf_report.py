@@ -162,3 +162,20 @@ def test_dp_replan_and_cold_solve_lines(tmp_path, capsys):
     assert main([str(path)]) == 1  # the re-plan meets its goal, the cold solve misses 10x
     out = capsys.readouterr().out
     assert "mpc re-plan" in out and "ok" in out.splitlines()[0] and "MISSED" in out.splitlines()[1]
+
+
+def test_episode_floor_lines_give_the_ratio_with_a_free_act(tmp_path, capsys):
+    data = {"benchmarks": [
+        _bench("test_episode_over_floor[prl]", 1.0, floor_ratio=1.48, floor_ratio_without_act=1.34),
+        _bench("test_episode_over_floor[baseline]", 1.0, floor_ratio=1.29),  # an older file: no act's share
+    ]}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    r = ratios(path)
+    assert r["episode_over_floor_prl"] == 1.48 and r["without_act_over_floor_prl"] == 1.34
+    assert "without_act_over_floor_baseline" not in r
+    assert main([str(path)]) == 1  # prl misses 1.3x
+    out = capsys.readouterr().out.splitlines()
+    prl = next(line for line in out if line.startswith("prl: logged episode"))
+    base = next(line for line in out if line.startswith("baseline: logged episode"))
+    assert "MISSED; 1.340x with a free act" in prl and "ok" in base and "free act" not in base
