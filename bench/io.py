@@ -9,8 +9,8 @@
   ``exclusive_open``: whatever stands under that name (a stale ``.part``, a planted link) is
   removed first, and the open refuses to follow a link.
 - ``refuse_links`` refuses a run or output folder that is, or holds, a symbolic link.
-- ``file_stamps`` and ``prune_unwritten`` let a command that rebuilds a folder (a report) remove
-  its previous run's files that it did not write again, and nothing else.
+- ``written_files`` and ``prune_unwritten`` let a command that rebuilds a folder (a report)
+  remove the files its previous run wrote there and this one did not, and nothing else.
 """
 from __future__ import annotations
 
@@ -22,9 +22,11 @@ import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
+from contextvars import ContextVar
 from pathlib import Path
 from typing import IO, Any
 
+_WRITTEN: ContextVar[list[Path] | None] = ContextVar("written", default=None)  # an open ``written_files`` block
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 FILE_MODE = 0o666 & ~_UMASK  # what open() would give a new file
@@ -80,6 +82,9 @@ def atomic_file(path: Path, mode: str = "wb", **kw: Any) -> Iterator[IO[Any]]:
         with os.fdopen(fd, mode, **kw) as f:
             yield f
         os.replace(tmp, path)
+        written = _WRITTEN.get()
+        if written is not None:
+            written.append(path)
     except BaseException as e:
         with suppress(FileNotFoundError):
             os.unlink(tmp)
@@ -130,36 +135,40 @@ def atomic_torch_save(obj: Any, path: Path) -> None:
     atomic_bytes(buf.getvalue(), path)
 
 
-def file_stamps(out: Path) -> dict[str, tuple[int, int]]:
-    """Every regular file below ``out``, no link followed: path relative to ``out`` -> (inode,
-    modification time [ns]). A file written since has another pair (atomic writes make a new inode)."""
-    found: dict[str, tuple[int, int]] = {}
-    for root, _, names in os.walk(out):
-        for n in names:
-            st = (Path(root) / n).lstat()
-            if stat.S_ISREG(st.st_mode):
-                found[(Path(root) / n).relative_to(out).as_posix()] = (st.st_ino, st.st_mtime_ns)
-    return found
-
-
-def prune_unwritten(out: Path, before: dict[str, tuple[int, int]], record: str) -> list[str]:
-    """After a command rewrote its output folder ``out`` (``before``: ``file_stamps`` taken before it
-    wrote): remove the files that the previous command listed in ``out/record`` and this one did
-    not write again, then list this one's files there; the removed paths. Files never listed (a
-    user's notes) are kept, and nothing is removed through a link."""
-    after = file_stamps(out)
-    written = sorted(k for k, v in after.items() if before.get(k) != v and k != record)
+@contextmanager
+def written_files() -> Iterator[list[Path]]:
+    """The paths that ``atomic_file`` publishes inside this block (in this thread or task), in order."""
+    written: list[Path] = []
+    token = _WRITTEN.set(written)
     try:
-        listed = json.loads((out / record).read_text()) if record in before else []
+        yield written
+    finally:
+        _WRITTEN.reset(token)
+
+
+def prune_unwritten(out: Path, written: list[Path], record: str) -> list[str]:
+    """After a command rebuilt its output folder ``out`` (``written``: what it wrote, from
+    ``written_files``): remove the files that the previous command listed in ``out/record`` and
+    this one did not write again, then list this one's files there; the removed paths (relative to
+    ``out``). Files never listed (a user's notes) are kept, and nothing is removed through a link."""
+    root = out.resolve()
+    mine = sorted({p.resolve().relative_to(root).as_posix() for p in written if p.resolve().is_relative_to(root)})
+    try:
+        listed = json.loads((out / record).read_text()) if (out / record).is_file() else []
     except (OSError, ValueError):  # a damaged record: nothing is removed
         listed = []
-    root = out.resolve()
-    stale = [k for k in listed if isinstance(k, str) and k in before and after.get(k) == before[k]]
-    for k in stale:
-        p = out / k
-        if p.parent.resolve() == (root / k).parent:  # no folder on the way became a link
-            p.unlink()
-            if p.parent != out and not any(p.parent.iterdir()):
-                p.parent.rmdir()
-    atomic_text(json.dumps(written, indent=0) + "\n", out / record)
+    stale = []
+    for k in listed if isinstance(listed, list) else []:
+        if not isinstance(k, str) or k in mine or k == record:
+            continue
+        p = root / k
+        if p.parent.resolve() != p.parent or not p.parent.is_relative_to(root):  # "..", or a link on the way
+            continue
+        with suppress(FileNotFoundError):
+            if stat.S_ISREG(p.lstat().st_mode):
+                p.unlink()
+                stale.append(k)
+                if p.parent != root and not any(p.parent.iterdir()):
+                    p.parent.rmdir()
+    atomic_text(json.dumps(mine, indent=0) + "\n", out / record)
     return stale

@@ -24,7 +24,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail
-from ecodrive_bench.bench.io import atomic_csv, atomic_text, file_stamps, prune_unwritten, refuse_links, writable_dir
+from ecodrive_bench.bench.io import atomic_csv, atomic_text, prune_unwritten, refuse_links, writable_dir, written_files
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
@@ -61,7 +61,14 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
                        f"`ecodrive run`?)")
     refuse_links(out, "report folder")  # an Unwritable (OSError): one line, nothing written
     writable_dir(out)  # a file under its name, no permission: an Unwritable naming the folder
-    before = file_stamps(out)
+    with written_files() as written:
+        index, warnings = _write(run_dir, out, gen_dir, progress)
+    prune_unwritten(out, written, RECORD)  # the earlier report's files that this one has not
+    return index, warnings
+
+
+def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool) -> tuple[Path, list[str]]:
+    """``build``'s writing, after its checks."""
     page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
         md, warnings = _single_vehicle(run_dir, out, page, progress)
@@ -82,7 +89,6 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
     page.mixed_claims = _mixed_claims(run_dir)
     page.warnings = warnings
     atomic_text(render(page), out / "index.html")
-    prune_unwritten(out, before, RECORD)
     return out / "index.md", warnings
 
 

@@ -124,3 +124,35 @@ def test_a_file_size_limit_is_one_line_naming_the_file_and_keeps_the_table(tmp_p
     assert len(lines) == 1 and str(table) in lines[0] and "File too large" in lines[0], p.stderr
     assert table.read_bytes() == before
     assert not [q for q in (logs / "r").iterdir() if q.name.endswith(".tmp")]
+
+
+def test_a_rebuilt_folder_loses_only_the_files_its_last_build_wrote(tmp_path, victim):
+    """``prune_unwritten`` removes what the previous build listed and this one did not write: not a
+    file some other writer changed meanwhile, not a listed name that now is a link or leads out."""
+    import json
+
+    from ecodrive_bench.bench.io import atomic_text, prune_unwritten, written_files
+
+    out = tmp_path / "report"
+    (out / "figures").mkdir(parents=True)
+    with written_files() as first:
+        for name in ("index.md", "figures/a.png", "figures/b.png", "old.csv"):
+            atomic_text(name, out / name)
+    assert first == [out / n for n in ("index.md", "figures/a.png", "figures/b.png", "old.csv")]
+    assert prune_unwritten(out, first, ".files.json") == []
+    atomic_text("not the build's", out / "notes.txt")  # outside a written_files block: not recorded
+    (out / "elsewhere.txt").symlink_to(victim)
+    listed = json.loads((out / ".files.json").read_text())
+    (out / ".files.json").write_text(json.dumps([*listed, "../outside.txt", "elsewhere.txt"]))
+    (tmp_path / "outside.txt").write_text("keep\n")
+    with written_files() as second:
+        atomic_text("again", out / "index.md")
+        atomic_text("again", out / "figures" / "a.png")
+    assert sorted(prune_unwritten(out, second, ".files.json")) == ["figures/b.png", "old.csv"]
+    assert json.loads((out / ".files.json").read_text()) == ["figures/a.png", "index.md"]
+    assert (out / "notes.txt").is_file() and (tmp_path / "outside.txt").is_file()
+    assert (out / "elsewhere.txt").is_symlink() and victim.read_text() == "precious\n"
+    with written_files() as third:
+        atomic_text("again", out / "index.md")
+    assert prune_unwritten(out, third, ".files.json") == ["figures/a.png"]
+    assert not (out / "figures").exists()  # emptied by the prune
