@@ -51,7 +51,7 @@ from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog
 from ecodrive_bench.bench.experiments import store
 from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local
 from ecodrive_bench.bench.harness.policies import CheckpointError
-from ecodrive_bench.bench.io import atomic_json, atomic_parquet
+from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import episode_summary
 from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, recipe
 from ecodrive_bench.envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig, accepted_range
@@ -316,7 +316,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
                     help="training episodes per job (1-100000; default: PRL's recipe's, or 1000 with --paper)")
     ap.add_argument("--paper", action="store_true",
                     help="train by the paper's Table 2 and 1000 episodes instead of PRL's recipe")
-    ap.add_argument("--cases", type=int_in(0, 100), default=100, help="fixed test cases evaluated per job (0-100)")
+    ap.add_argument("--cases", type=int_in(1, 100), default=100, help="fixed test cases evaluated per job (1-100)")
     ap.add_argument("--validation-cases", type=int_in(1, 100), default=VALIDATION_CASES, help="validation cases per training checkpoint (1-100)")
     ap.add_argument("--max-episode-time", type=float_in(*accepted_range(ScenarioConfig, "max_episode_time")),
                     default=None, help="episode truncation [s] (default: the scenario's)")
@@ -344,6 +344,10 @@ def main(argv: list[str] | None = None) -> int:
         todo = jobs(args.study, args)
     except ConfigError as e:
         return fail(prog_name(), str(e))
+    try:
+        writable_dir(args.store)  # before any training: a job's results go there when it finishes
+    except Unwritable as e:
+        return fail(prog_name(), f"--store: {e}")
     root = Path(args.logs) / args.run_id / args.study
     try:
         root.mkdir(parents=True, exist_ok=True)
@@ -377,7 +381,7 @@ def _sweep(args: argparse.Namespace, todo: list[Job], root: Path) -> int:
         from ecodrive_bench.bench.experiments.sweep_ray import run_jobs
 
         it = run_jobs(todo, args.address, args.workers, run_job)
-    for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
+    for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job", disable=None):  # no bar off a terminal
         rows.update(finished(root))  # and what a sweep running beside this one finished meanwhile
         rows[row["log_dir"]] = row
         _store(args.store, by_dir[row["log_dir"]])

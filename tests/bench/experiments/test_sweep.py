@@ -258,7 +258,7 @@ def test_a_stored_job_is_restored_not_trained(tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("flag, value, accepted", [
     ("--seeds", "nan", "0.."), ("--seeds", "-1", "0.."),
     ("--episodes", "0", "1..100000"), ("--episodes", "nan", "1..100000"),
-    ("--cases", "101", "0..100"), ("--validation-cases", "0", "1..100"),
+    ("--cases", "101", "1..100"), ("--validation-cases", "0", "1..100"),
     # the reward and scenario configs' own ranges
     ("--phi", "abc", "[0.0, 100.0]"), ("--phi", "-1", "[0.0, 100.0]"), ("--values", "2000", "[0.0, 1000.0]"),
     ("--max-episode-time", "nan", "[10.0, 7200.0]"),
@@ -345,3 +345,35 @@ def test_the_table_gives_older_jobs_their_share_of_finished_trips(tmp_path):
     table = sweep.write_tables(tmp_path, rows).set_index("config")
     assert table.loc["r1-phi1", "finished"] == 0.25 and table.loc["r-phi1", "finished"] == 1.0
     assert "finished" not in rows[str(old)]  # the job's own row is left as it was
+
+
+def test_bad_cases_or_store_are_one_line_before_any_training(tmp_path, monkeypatch, capsys):
+    """``--cases 0`` (a job with nothing to evaluate) and a ``--store`` that is a file are refused
+    in one line, exit 2, before a job trains or a run folder is made."""
+    monkeypatch.setattr(sweep, "run_job", lambda job: pytest.fail("a job ran"))
+    argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--logs", str(tmp_path / "logs"), "--run-id", "t"]
+    with pytest.raises(SystemExit) as e:
+        sweep.main([*argv, "--cases", "0"])
+    assert e.value.code == 2 and "--cases: '0' is out of range; accepted: 1..100" in capsys.readouterr().err
+    afile = tmp_path / "afile"
+    afile.write_text("precious\n")
+    assert sweep.main([*argv, "--store", str(afile)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"--store: {afile} is a file, not a folder" in err[0]
+    assert afile.read_text() == "precious\n" and not (tmp_path / "logs").exists()
+
+
+def test_a_sweep_writes_no_bar_to_a_log(tmp_path, monkeypatch, capsys):
+    argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--logs", str(tmp_path), "--run-id", "t"]
+
+    def run_job(job):
+        row = {"config": job.name, "seed": 0, "selected_episode": 1, "energy": 1.0, "travel_time": 1.0,
+               "collisions": 0, "log_dir": job.log_dir}
+        Path(job.log_dir).mkdir(parents=True)
+        (Path(job.log_dir) / "job.json").write_text(json.dumps({"job": {}, "row": row}))
+        return row
+
+    monkeypatch.setattr(sweep, "run_job", run_job)
+    monkeypatch.setattr(sweep, "run_local", lambda todo, workers, fn: (fn(t) for t in todo))
+    assert sweep.main(argv) == 0
+    assert "reward jobs" not in capsys.readouterr().err  # pytest's captured stderr is no terminal
