@@ -12,6 +12,7 @@ on the worker, ``land`` on the driver), so no node needs the driver's disk.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import re
@@ -53,10 +54,14 @@ def add_options(ap: argparse.ArgumentParser, ray: str = "") -> None:
 
 
 def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """An ``--address`` is for ``--executor ray``: otherwise one line, exit 2."""
+    """An ``--address`` is for ``--executor ray``, and ``--executor ray`` needs Ray installed:
+    otherwise one line, exit 2, before anything is written."""
     if args.address is not None and args.executor != "ray":
         ap.error(f"--address {args.address} is for --executor ray (got --executor {args.executor}); "
                  f"add --executor ray or drop --address")
+    if args.executor == "ray" and importlib.util.find_spec("ray") is None:
+        ap.error("--executor ray needs Ray, which is not installed here: pip install '.[distributed]', "
+                 "or use --executor local")
 
 
 @dataclass(frozen=True)

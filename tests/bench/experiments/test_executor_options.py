@@ -65,3 +65,26 @@ def test_landed_files_come_in_whole_the_marker_last(tmp_path, monkeypatch):
         with pytest.raises(ValueError, match="not a plain file name"):
             land({"ok": b"", bad: b""}, tmp_path / "other")
         assert not (tmp_path / "other").exists()
+
+
+@pytest.mark.parametrize("command, main, argv", [
+    ("ecodrive sweep", sweep.main, ["reward", "--logs"]), ("ecodrive train-all", train_all.main, ["--models"]),
+    ("ecodrive run", None, ["--profile", "smoke", "--logs"]),
+])
+def test_ray_missing_is_one_line_before_anything_is_written(command, main, argv, tmp_path, monkeypatch, capsys):
+    """Where Ray is not installed, ``--executor ray`` is refused at parsing: exit 2, nothing made."""
+    import importlib.util
+
+    from ecodrive_bench.bench.harness import executors
+    from ecodrive_bench.bench.harness.run_command import main as run_main
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(executors.importlib.util, "find_spec", lambda name, *a: None if name == "ray" else real(name, *a))
+    monkeypatch.setattr(sys, "argv", [command])
+    with pytest.raises(SystemExit) as e:
+        (main or run_main)([*argv, str(tmp_path / "out"), "--executor", "ray"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"{command}: error: --executor ray needs Ray, which is not installed here: pip install "
+                   f"'.[distributed]', or use --executor local"]
+    assert not (tmp_path / "out").exists()
