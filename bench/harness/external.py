@@ -114,7 +114,9 @@ def build(spec: str, observation_space, action_space) -> Agent:
         raise AgentError(f"agent from {spec!r} does not satisfy agents.base.Agent: missing {', '.join(missing)}")
     if agent.action_interface != interface_of(factory):
         raise AgentError(f"agent from {spec!r}: its action_interface {agent.action_interface!r} differs from the "
-                         f"factory's {interface_of(factory)!r}")
+                         f"factory's {interface_of(factory)!r}, which picks the env's action type before the agent "
+                         f"is built: set the factory's action_interface = {agent.action_interface!r} too, or give "
+                         f"the agent's class as the factory")
     return Checked(agent, action_space, spec)
 
 

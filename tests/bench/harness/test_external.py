@@ -121,3 +121,26 @@ def test_an_installed_entry_point_runs_by_name(user_module, tmp_path):
                "--workers", "2"]), progress=False)
     table = pd.read_parquet(logs / "smoke" / "results.parquet")
     assert set(table.method) == {"cruise2"} and len(table) == 3
+
+
+def test_the_documented_agent_builds_under_each_action_interface(tmp_path, monkeypatch):
+    """docs/your-agent.md's example, as printed, and with the class's ``action_interface`` changed
+    as its comment suggests: the factory follows it, and an interface set on the class alone is
+    one message that says where to set it."""
+    import re
+    from pathlib import Path
+
+    from ecodrive_bench.bench.harness.external import interface_of
+
+    doc = (Path(__file__).parents[3] / "docs" / "your-agent.md").read_text()
+    code = re.search(r"```python\n(# myagents.py.*?)```", doc, re.S).group(1)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for i, interface in enumerate(("parameterized", "longitudinal", "discrete27")):
+        (tmp_path / f"doc{i}.py").write_text(code.replace('action_interface = "parameterized"',
+                                                          f'action_interface = "{interface}"', 1))
+        factory = load_factory(f"doc{i}:make")
+        assert interface_of(factory) == interface and interface_of(load_factory(f"doc{i}:Cruise")) == interface
+    (tmp_path / "bare.py").write_text(code.replace('action_interface = "parameterized"', 'action_interface = "longitudinal"', 1)
+                                      .replace("make.action_interface = Cruise.action_interface", ""))
+    with pytest.raises(AgentError, match="set the factory's action_interface = 'longitudinal' too"):
+        build("bare:make", None, None)
