@@ -87,8 +87,8 @@ $header
 $nav
 $body
 <footer>Written by <code>ecodrive report</code> from the run folder's <code>results.parquet</code>,
-<code>manifest.json</code> and step logs; the same content as <code>index.md</code>, with the tables and figures
-beside it (<code>table4.csv</code>, <code>statistics.csv</code>, <code>seeds.csv</code>, <code>figures/*.pdf</code>).
+<code>manifest.json</code> and step logs; <code>index.md</code> has the same sections as text, without the
+provenance table (<code>manifest.json</code> holds it), with the tables and figures beside it (<code>table4.csv</code>, <code>statistics.csv</code>, <code>seeds.csv</code>, <code>figures/*.pdf</code>).
 Self-contained: no script, nothing fetched.</footer>
 </main>
 </body>

@@ -299,3 +299,32 @@ def test_a_damaged_file_list_removes_nothing(smoke_report, tmp_path):
     build(smoke_report["run"], out, progress=False)
     assert (out / "figures" / "old.png").is_file()
     assert "figures/old.png" not in json.loads((out / ".report-files.json").read_text())
+
+
+def test_a_run_on_another_corridor_is_not_judged_by_the_papers_claims(smoke_report, tmp_path):
+    """A run evaluated with scenario overrides (``--scenario``/``--set``): the report says so at the top
+    and under Warnings, and every paper claim is NOT CHECKED, in index.md as in index.html."""
+    run_dir = tmp_path / "run"
+    shutil.copytree(smoke_report["run"], run_dir)
+    manifest = json.loads((run_dir / "manifest.json").read_text())
+    manifest["scenario_overrides"] = {"lanes": 3, "ev": {"mass": 1500.0}}
+    (run_dir / "manifest.json").write_text(json.dumps(manifest))
+    index, warnings = build(run_dir, tmp_path / "report", progress=False)
+    md, html = index.read_text(), (tmp_path / "report" / "index.html").read_text()
+    assert "Corridor: **not the paper's**: evaluated with `lanes=3, ev.mass=1500.0`" in md
+    assert any("corridor is not the paper's (lanes=3, ev.mass=1500.0)" in w for w in warnings)
+    section = md.split("## Does the paper hold on this run?")[1].split("\n## ")[0]
+    rows = [line for line in section.splitlines() if line.startswith("| ") and "claim" not in line]
+    assert rows and all("| NOT CHECKED |" in r for r in rows)
+    assert "PASS" not in section and "FAIL" not in section
+    claims_html = html.split("id='claims'")[1].split("</section>")[0]
+    assert "<tr class='absent'>" in claims_html and "<tr class='pass'>" not in claims_html
+    assert "<tr class='fail'>" not in claims_html
+
+
+def test_the_paper_corridors_claims_are_in_index_md(smoke_report):
+    """index.md carries the claims table that index.html shows, with the same statuses."""
+    md = smoke_report["md"]
+    assert "Corridor: the paper's." in md
+    section = md.split("## Does the paper hold on this run?")[1].split("\n## ")[0]
+    assert "| PASS |" in section or "| FAIL |" in section
