@@ -17,6 +17,7 @@ from ecodrive_bench.bench.args import InputError, read_json
 MASTER_SEED = 20240501  # documented master seed of the protocol
 CASES_PER_SETTING = 100  # section 5.3
 SEED_GROUPS = 10  # independent groups for the violin figure
+MAX_GROUPS = 1000  # [-] most seed groups a case list may declare
 INSERT_RANGE = (150.0, 300.0)  # [s] U(150, 300); a stored case's insert_time must lie in it
 SEED_BOUND = 2**31 - 1  # [-] SUMO seeds are drawn from [0, SEED_BOUND)
 CASE_KEYS = ("index", "sumo_seed", "insert_time", "group")  # every key of a stored case, no other
@@ -34,7 +35,7 @@ class Case:
     index: int
     sumo_seed: int
     insert_time: float  # [s], rounded to 0.1 s
-    group: int  # seed group in [0, SEED_GROUPS)
+    group: int  # seed group in [0, the list's groups)
 
     def options(self) -> dict[str, float]:
         return {"sumo_seed": self.sumo_seed, "insert_time": self.insert_time}
@@ -61,7 +62,26 @@ def load(path: Path = CASES_FILE) -> list[Case]:
     if not isinstance(data, dict) or data.get("version") != VERSION:
         got = data.get("version") if isinstance(data, dict) else None
         raise CaseError(f"{path}: cases version {_shown(got)} is not the supported {VERSION}")
-    return check_cases(data.get("cases"), path, groups=SEED_GROUPS)
+    return check_cases(data.get("cases"), path, groups=check_header(data, path))
+
+
+def check_header(data: dict, where: str | Path) -> int:
+    """The case list's ``groups`` after its header is checked: ``groups`` an integer in [1,
+    ``MAX_GROUPS``], ``master_seed`` a non-negative integer (it documents how the list was drawn),
+    ``insert_range_s`` the protocol's ``INSERT_RANGE``; otherwise a one-line ``CaseError``."""
+    groups = data.get("groups")
+    if isinstance(groups, bool) or not isinstance(groups, int) or not 1 <= groups <= MAX_GROUPS:
+        raise CaseError(f"{where}: groups={_shown(groups)}; accepted: an integer in [1, {MAX_GROUPS}] (the seed "
+                        f"groups of the violin figure; each case's group lies in [0, groups))")
+    seed = data.get("master_seed")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise CaseError(f"{where}: master_seed={_shown(seed)}; accepted: a non-negative integer")
+    span = data.get("insert_range_s")
+    if not (isinstance(span, list) and len(span) == 2 and all(type(x) in (int, float) for x in span)
+            and tuple(float(x) for x in span) == INSERT_RANGE):
+        raise CaseError(f"{where}: insert_range_s={_shown(span)}; accepted: [{INSERT_RANGE[0]}, {INSERT_RANGE[1]}], "
+                        f"the protocol's insertion window [s]")
+    return groups
 
 
 def check_cases(raw: Any, where: str | Path, groups: int) -> list[Case]:

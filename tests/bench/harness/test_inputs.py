@@ -71,6 +71,34 @@ def test_a_bad_case_is_one_line_naming_the_file_the_case_and_the_range(edit, wor
     assert isinstance(e.value, InputError) and isinstance(e.value, ValueError)  # the commands' exit 2
 
 
+@pytest.mark.parametrize("key, value, words", [
+    ("groups", 3, ["case #3 (index 3)", "group=3", "[0, 3)"]),  # the header's groups bounds each case's group
+    ("groups", -1, ["groups=-1", "an integer in [1, 1000]"]),
+    ("groups", None, ["groups=None", "an integer in [1, 1000]"]),
+    ("groups", 1.5, ["groups=1.5", "an integer in [1, 1000]"]),
+    ("groups", "ten", ["groups='ten'", "an integer in [1, 1000]"]),
+    ("insert_range_s", [0, 1], ["insert_range_s=[0, 1]", "accepted: [150.0, 300.0]"]),
+    ("insert_range_s", None, ["insert_range_s=None", "accepted: [150.0, 300.0]"]),
+    ("master_seed", "abc", ["master_seed='abc'", "a non-negative integer"]),
+])
+def test_a_bad_case_list_header_is_one_line(key, value, words, tmp_path):
+    data = cases_mod.generate()
+    data[key] = value
+    path = tmp_path / "cases.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(CaseError) as e:
+        load(path)
+    msg = str(e.value)
+    assert "\n" not in msg and str(path) in msg and all(w in msg for w in words), msg
+
+
+def test_a_case_list_of_fewer_groups_loads(tmp_path):
+    data = cases_mod.generate(groups=4)
+    path = tmp_path / "cases.json"
+    path.write_text(json.dumps(data))
+    assert {c.group for c in load(path)} == {0, 1, 2, 3}
+
+
 def test_the_stored_cases_load_and_check_cleanly(tmp_path):
     got = load()
     assert [c.index for c in got] == list(range(100)) and got == check_cases(cases_mod.generate()["cases"], "x", 10)
