@@ -10,6 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .config import ScenarioConfig
+from .validation import ConfigError
 
 LATERAL = (-1, 0, 1)  # paper's k; index i of a mask or a P-DQN head is LATERAL[i]
 DQN_LON_FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.0)  # of a_max, then (0.25, .5, .75, 1) of a_min
@@ -172,5 +173,5 @@ ACTION_TYPES: dict[str, type[ActionType]] = {
 
 def make_action(name: str, cfg: ScenarioConfig) -> ActionType:
     if name not in ACTION_TYPES:
-        raise ValueError(f"action={name!r} is not accepted; choose one of {', '.join(ACTION_TYPES)}")
+        raise ConfigError(f"action={name!r} is not accepted; choose one of {', '.join(ACTION_TYPES)}")
     return ACTION_TYPES[name](cfg)

@@ -339,4 +339,9 @@ def _from_dict(cls: type, data: Mapping[str, Any], prefix: str) -> Any:
         if sub is not None and not isinstance(value, sub):
             value = _from_dict(sub, value, f"{prefix}{name}.")
         kwargs[name] = value
-    return cls(**kwargs)
+    try:
+        return cls(**kwargs)
+    except ConfigError as e:  # a nested field's message names it in full (ev.mass=-1, not mass=-1)
+        if prefix and not str(e).startswith(prefix):
+            raise ConfigError(f"{prefix}{e}") from None
+        raise

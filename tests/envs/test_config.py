@@ -25,10 +25,10 @@ def test_green_wave_offsets():
     ({"signals": "green"}, ["signals='green'", "coordinated, uncoordinated"]),
     ({"nope": 1}, ["nope", "accepted"]),
     ({"lanes": 2.5}, ["lanes=2.5", "integer", "[1, 6]"]),
-    ({"ev": {"mass": "heavy"}}, ["mass='heavy'", "number", "[500, 3500]"]),
+    ({"ev": {"mass": "heavy"}}, ["ev.mass='heavy'", "number", "[500, 3500]"]),
     ({"junction_offsets": [0, "x"]}, ["junction_offsets[1]='x'", "number"]),
-    ({"ev": {"mass": 0}}, ["mass=0", "[500, 3500]"]),
-    ({"reward": {"form": "r3"}}, ["form='r3'", "r1, r2, r"]),
+    ({"ev": {"mass": 0}}, ["ev.mass=0", "[500, 3500]"]),
+    ({"reward": {"form": "r3"}}, ["reward.form='r3'", "r1, r2, r"]),
     ({"insert_min": 300, "insert_max": 150}, ["insert_min=300"]),
     ({"step_length": 0}, ["step_length=0", "(0.05"]),
     # netconvert makes a 2-phase plan for a 0 s yellow (a RuntimeError at the build before)
@@ -39,7 +39,7 @@ def test_green_wave_offsets():
     ({"junction_greens": [42, 42, 42, 42, 83.5]}, ["junction_greens[4]=83.5", "must be < cycle=90.0 (J5)"]),
     # an integer beyond a float's range was an OverflowError, not a ConfigError
     ({"spacing": 10**400}, ["spacing=<an integer of about 401 digits>", "[100.0, 2000.0]"]),
-    ({"ev": {"mass": -(10**30)}}, ["mass=-1000000000000000000000000000000", "[500, 3500]"]),
+    ({"ev": {"mass": -(10**30)}}, ["ev.mass=-1000000000000000000000000000000", "[500, 3500]"]),
 ])
 def test_bad_config_is_a_clear_error(bad, words):
     with pytest.raises(ConfigError) as e:
@@ -73,3 +73,10 @@ def test_every_config_field_is_declared_with_its_meaning_unit_and_range():
             assert "choices" in meta or "lo" in meta or f.type == "bool", f"{cls.__name__}.{f.name} has no range"
             assert "choices" in meta or f.type == "bool" or meta.get("unit"), f"{cls.__name__}.{f.name} has no unit"
         assert len(describe(cls)) == len(dataclasses.fields(cls))
+
+
+def test_a_bad_action_type_is_a_config_error_like_the_other_options():
+    from ecodrive_bench.envs.action import make_action
+
+    with pytest.raises(ConfigError, match="action='nope' is not accepted; choose one of parameterized"):
+        make_action("nope", ScenarioConfig())
