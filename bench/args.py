@@ -34,6 +34,20 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
 
+    def add_argument(self, *args: Any, **kw: Any) -> argparse.Action:
+        if kw.get("type") is Path:  # every path option refuses "" (it would mean the current folder)
+            kw["type"] = path
+        return super().add_argument(*args, **kw)
+
+
+def path(value: str) -> Path:
+    """A file or folder given on the command line; an empty one is refused, since ``Path("")`` is
+    the current folder (``--out ''`` would write the report into it)."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError(f"{value!r} is not accepted; give a file or folder name ('.' for the "
+                                         f"current folder)")
+    return Path(value)
+
 
 def name(value: str) -> str:
     """A run id or job name: it becomes a folder name under the logs root, never a path."""

@@ -159,6 +159,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--save", type=Path, default=None,
                     help="write an .rrd (a new path: an existing file is never overwritten) instead of spawning the viewer")
     args = ap.parse_args(argv)
+    if args.save is not None and args.save.suffix != ".rrd":
+        return fail(ap.prog, f"--save {args.save}: a recording is written as an .rrd file; accepted: a path ending in "
+                             f".rrd (e.g. {args.save.with_suffix('.rrd')})")
     import rerun as rr
 
     try:

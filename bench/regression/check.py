@@ -170,22 +170,22 @@ def main(argv: list[str] | None = None) -> int:
     ap = Parser(description=__doc__)
     ap.add_argument("--write-reference", action="store_true", help=f"write bench/regression/reference/{REFERENCE.name} from this run")
     ap.add_argument("--no-mixed", action="store_true", help="skip the mixed-traffic cells (reported NOT CHECKED)")
-    ap.add_argument("--logs", default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
+    ap.add_argument("--logs", type=Path, default=None, help="log root (default: a fresh temporary folder, so no old log is reused)")
     args = ap.parse_args(argv)
     import ecodrive_bench.bench.harness.options as br
     from ecodrive_bench.bench.experiments.mixed import CellMismatch
     from ecodrive_bench.bench.regression import mixed as regression_mixed
 
-    logs = args.logs or tempfile.mkdtemp(prefix="ecodrive-regression-")
+    logs = str(args.logs) if args.logs is not None else tempfile.mkdtemp(prefix="ecodrive-regression-")
     br.PROFILES["regression"] = CI_CASES  # for this run only: `ecodrive run` offers no such profile
     try:
         opts = parse(["--profile", "regression", "--logs", logs])
         checks = preflight(opts)  # a refused command prints its one error line only
-        if not args.logs:  # every episode and cell is written there as it finishes: a kill keeps them
+        if args.logs is None:  # every episode and cell is written there as it finishes: a kill keeps them
             print(f"regression: logs in {logs} (after a kill, --logs {logs} reuses what finished)", file=sys.stderr)
         df = run(opts, checks=checks)  # progress bars on stderr where it is a terminal
     except (UsageError, CheckpointError, AgentError) as e:  # a shipped policy that cannot drive included
-        if not args.logs:
+        if args.logs is None:
             _drop_if_empty(Path(logs))
         return fail(ap.prog, str(e))
     finally:

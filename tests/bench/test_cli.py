@@ -76,3 +76,20 @@ def test_an_unwritable_or_wrong_folder_is_one_line(command, args, tmp_path, monk
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "error" in err[0] and str(blocker) in err[0]
     assert blocker.read_bytes() == b"keep"
+
+
+@pytest.mark.parametrize("command, args", [
+    ("run", ["--profile", "smoke", "--logs", ""]), ("report", ["somewhere", "--out", ""]), ("report", [""]),
+    ("sweep", ["reward", "--store", ""]), ("mixed", ["--logs", " "]), ("train", ["--out", ""]),
+    ("stalls", ["--out", ""]), ("regress", ["--logs", ""]),
+])
+def test_an_empty_path_is_refused_not_taken_for_the_current_folder(command, args, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["ecodrive"])
+    try:
+        rc = main([command, *args])
+    except SystemExit as e:
+        rc = e.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "is not accepted; give a file or folder name" in err[0], err
+    assert not any(tmp_path.iterdir())

@@ -76,6 +76,23 @@ def test_garbage_is_a_clear_error(tmp_path):
     assert "Traceback" not in out.stderr
 
 
+@pytest.mark.parametrize("save, words", [
+    ("out.txt", ["--save out.txt: a recording is written as an .rrd file", "accepted: a path ending in .rrd"]),
+    ("", ["argument --save: '' is not accepted"]),
+])
+def test_a_save_path_that_is_no_rrd_is_one_line(save, words, log, tmp_path, monkeypatch, capsys):
+    from ecodrive_bench.bench.logs.view import main
+
+    monkeypatch.chdir(tmp_path)
+    try:
+        rc = main([str(log), "--save", save])
+    except SystemExit as e:  # refused by the parser
+        rc = e.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and all(w in err[0] for w in words), err
+    assert not any(tmp_path.iterdir())
+
+
 @pytest.fixture(scope="module")
 def oracle(tmp_path_factory, cases):
     """An oracle episode alone on the corridor (its log carries the plan) and its saved recording."""
