@@ -216,9 +216,10 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
            "25% trimmed mean; P(improve) = chance the method uses less than the baseline on the same case (per case "
            "over its training seeds, averaged over the cases; CI by resampling cases and seeds).",
            "", tables.stats_markdown(st), "## Across training seeds", "",
-           "Each learning method's shipped training seeds, evaluated on the same cases: the mean over seeds and "
-           f"cases with a {int(stats.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
-           "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed has no CI.",
+           "Each method's runs on the same cases, a learning method's shipped training seeds: the mean over seeds "
+           f"and cases with a {int(stats.CI_LEVEL * 100)}% stratified bootstrap CI over seeds (seeds resampled per "
+           "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed (a "
+           "rule-based method or an agent of your own runs once) has no CI.",
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
     page.experiments_md = _gaps(results, manifest, out) + _headroom(results, manifest, out, page, run_dir)
     md += page.experiments_md

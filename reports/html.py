@@ -49,7 +49,8 @@ def header(page: Page) -> str:
                   ("Settings", esc(", ".join(settings_of(res)))),
                   ("Methods", esc(", ".join(dict.fromkeys(res.method))))]
     sha = man.get("git_sha")
-    facts += [("Git", f"<code>{esc(sha[:12] if sha else DASH)}</code>"), ("Wall time", esc(duration(man.get("wall_time_s"))))]
+    wall = man.get("wall_time_all_commands_s") or man.get("wall_time_s")  # a rerun that reused every log took ~0 s
+    facts += [("Git", f"<code>{esc(sha[:12] if sha else DASH)}</code>"), ("Wall time", esc(duration(wall)))]
     cells = "".join(f"<div class='fact'><span>{k}</span><b>{v}</b></div>" for k, v in facts)
     return f"<header><h1>Eco-driving benchmark: <code>{esc(page.run_name)}</code></h1><div class='facts'>{cells}</div></header>"
 
@@ -185,10 +186,11 @@ def seeds_table(page: Page) -> str:
     if sd is None or sd.empty:
         return ""
     out = ["<h3 id='seeds'>Across training seeds</h3>",
-           "<p>Each learning method's shipped training seeds, evaluated on the same cases: the mean over seeds and "
-           "cases with a 95% stratified bootstrap CI over seeds (seeds resampled per case, as rliable does), the "
-           "IQM over all seed \u00d7 case runs, and the range of the per-seed means. With one seed (and for the "
-           "rule-based methods, which have none) there is no spread to resample: <i>one seed</i>.</p>"]
+           "<p>Each method's runs on the same cases, a learning method's shipped training seeds: the mean over "
+           "seeds and cases with a 95% stratified bootstrap CI over seeds (seeds resampled per case, as rliable "
+           "does), the IQM over all seed \u00d7 case runs, and the range of the per-seed means. With one seed (and "
+           "for the rule-based methods and an agent of your own, which run once) there is no spread to resample: "
+           "<i>one seed</i>.</p>"]
     for signals in settings_of(sd):
         sub = sd[sd.signals == signals]
         rows = []

@@ -89,6 +89,8 @@ def check_cases(raw: Any, where: str | Path, groups: int) -> list[Case]:
     ``CASE_KEYS``; index a non-negative integer, unique; sumo_seed an integer in [0, 2**31-1);
     insert_time a number in ``INSERT_RANGE``; group an integer in [0, groups). Otherwise a
     ``CaseError`` of one line naming ``where``, the case and the bad value with the accepted range."""
+    if raw is None:
+        raise CaseError(f"{where}: no 'cases' list (missing or null); accepted: a non-empty list of case objects")
     if not isinstance(raw, list) or not raw:
         raise CaseError(f"{where}: 'cases' is {_shown(raw)}; accepted: a non-empty list of case objects")
     out, seen = [], {}

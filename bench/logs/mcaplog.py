@@ -223,7 +223,8 @@ def read_log(path: str | Path) -> LogData:
                         data.metadata = msg
     except (McapError, struct.error, ValueError, EOFError, OSError) as e:  # truncated or corrupt tail
         if data.metadata is None and not data.steps:
-            raise LogError(f"{path}: not a readable MCAP step log ({type(e).__name__}: {e})") from None
+            raise LogError(f"{path}: not a readable MCAP step log ({type(e).__name__}: "
+                           f"{str(e).strip() or 'the file ends before its first record is complete'})") from None
         data.warning = f"{path}: log is truncated or corrupt after {len(data.steps)} steps ({type(e).__name__})"
     except Exception as e:  # decoder errors from a damaged message
         if data.metadata is None and not data.steps:

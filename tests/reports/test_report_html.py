@@ -330,3 +330,15 @@ def test_the_claims_speak_one_status_vocabulary():
     assert got <= set(STATUSES) and NOT_CHECKED in got and "PASS" in got
     for module in (html, experiments, claims):
         assert "NOT IN THIS RUN" not in inspect.getsource(module)
+
+
+def test_the_header_wall_time_counts_every_command_of_the_folder(smoke_report):
+    """A rerun that reused every log took no time itself: the header gives the folder's whole time."""
+    from ecodrive_bench.reports.html import header
+    from ecodrive_bench.reports.html_parts import Page
+
+    man = {**smoke_report["manifest"], "wall_time_s": 0.0, "wall_time_all_commands_s": 100.0}
+    text = header(Page(run_name="x", manifest=man, results=smoke_report["results"]))
+    assert "1 min 40 s (100 s)" in text and "0.0 s" not in text
+    older = {k: v for k, v in man.items() if k != "wall_time_all_commands_s"}  # a manifest from before the sum
+    assert "0.0 s" in header(Page(run_name="x", manifest=older, results=smoke_report["results"]))

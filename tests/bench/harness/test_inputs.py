@@ -92,6 +92,15 @@ def test_a_bad_case_list_header_is_one_line(key, value, words, tmp_path):
     assert "\n" not in msg and str(path) in msg and all(w in msg for w in words), msg
 
 
+def test_a_case_list_without_cases_says_so(tmp_path):
+    data = cases_mod.generate()
+    del data["cases"]
+    path = tmp_path / "cases.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(CaseError, match="no 'cases' list \\(missing or null\\)"):
+        load(path)
+
+
 def test_a_case_list_of_fewer_groups_loads(tmp_path):
     data = cases_mod.generate(groups=4)
     path = tmp_path / "cases.json"

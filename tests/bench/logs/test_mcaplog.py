@@ -191,3 +191,12 @@ def test_an_agent_that_changes_its_observation_in_place_does_not_change_the_log(
     a = read_log(logged[0] / "run0" / "case-000.mcap")
     b = read_log(tmp_path / "case-000.mcap")
     assert [s.SerializeToString() for s in a.steps] == [s.SerializeToString() for s in b.steps]
+
+
+def test_a_log_that_ends_in_its_magic_says_why_it_is_unreadable(tmp_path):
+    from ecodrive_bench.bench.logs.mcaplog import LogError, read_log
+
+    tiny = tmp_path / "tiny.mcap"
+    tiny.write_bytes(b"\x89MCAP0\r\n")
+    with pytest.raises(LogError, match=r"not a readable MCAP step log \(\w+: the file ends before its first record"):
+        read_log(tiny)
