@@ -31,13 +31,21 @@ from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 from . import claims, experiments, figures, generalisation, headline, metrics, mpc_goal, stats, tables
 from .html import render
 from .html_markdown import experiment_caption
-from .html_parts import Figure, Page, esc, label
-from .load import RunError, component_sums, load_plan, load_run, load_steps, stop_lines
+from .html_parts import BOUND_LABEL, Figure, Page, trajectory_caption, violin_caption
+from .load import (
+    RunError,
+    case_set_warnings,
+    component_sums,
+    load_plan,
+    load_run,
+    load_steps,
+    stop_lines,
+    unfinished_warnings,
+)
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle", "mpc")
 LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
-BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
 RECORD = ".report-files.json"  # the files the last report wrote into its folder (paths relative to it)
 
 
@@ -256,7 +264,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
               disable=None if progress else True) as bar:  # None: off where stderr is no terminal
         for signals in settings:
             p = figures.violins(groups, methods, signals, out / "figures")
-            page.violins.append(Figure(p[0], _violin_caption(groups, results, methods, signals), f"violin, {signals}"))
+            page.violins.append(Figure(p[0], violin_caption(groups, results, methods, signals), f"violin, {signals}"))
             md += [f"![violin {signals}](figures/{p[0].name})", ""]
             bar.update(1)
         if drawn:
@@ -305,39 +313,8 @@ def _trajectory(run_dir: Path, out: Path, sub: pd.DataFrame, compare: str, signa
         return []
     name = f"compare-{signals}-case{case:03d}"
     p = figures.trajectories(trajs, bands, f"{signals}, case {case}", out / "figures", name)
-    page.trajectories.append(Figure(p[0], _trajectory_caption(list(trajs), signals, case), f"{signals} case {case}"))
+    page.trajectories.append(Figure(p[0], trajectory_caption(list(trajs), signals, case), f"{signals} case {case}"))
     return [f"![{name}](figures/{p[0].name})", ""]
-
-
-def case_set_warnings(results: pd.DataFrame) -> list[str]:
-    """One warning per setting whose methods (each training seed apart) drove different cases:
-    its means and improvements would compare different trips. ``ecodrive run`` refuses to mix
-    case sets in a run folder; a table put together otherwise gets this warning."""
-    out = []
-    seed = results.train_seed if "train_seed" in results else pd.Series(-1, index=results.index)
-    for signals, g in results.assign(train_seed=seed).groupby("signals"):
-        sets = {(m, int(sd)): frozenset(c.case) for (m, sd), c in g.groupby(["method", "train_seed"])}
-        if len(set(sets.values())) > 1:
-            parts = [f"{m}{'' if sd < 0 else f' s{sd}'}: {len(cs)} cases, {min(cs)}-{max(cs)}"
-                     for (m, sd), cs in sorted(sets.items())]
-            out.append(f"{signals}: the methods drove different cases ({'; '.join(parts)}): its means and improvements "
-                       "compare different trips; run every method on the same cases")
-    return out
-
-
-def unfinished_warnings(results: pd.DataFrame) -> list[str]:
-    """One warning per method and setting with episodes that did not reach the corridor's end
-    (truncated at the scenario's ``max_episode_time``): their energy counts trips that never
-    arrived, so a method that crawls would otherwise read as a saving in Table 4."""
-    if "terminated" not in results:
-        return []
-    out = []
-    for (method, signals), g in results.groupby(["method", "signals"]):
-        left = int((~g.terminated.astype(bool)).sum())
-        if left:
-            out.append(f"{method}, {signals}: {left} of {len(g)} episodes did not reach the corridor's end "
-                       "(truncated); their energy counts trips that never arrived, so it is no saving")
-    return out
 
 
 def _bound_plan(run_dir: Path, sub: pd.DataFrame, case: int, warnings: list[str]) -> pd.DataFrame | None:
@@ -350,26 +327,6 @@ def _bound_plan(run_dir: Path, sub: pd.DataFrame, case: int, warnings: list[str]
     except LogError as e:
         warnings.append(str(e))
         return None
-
-
-def _violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[str], signals: str) -> str:
-    g = groups[groups.signals == signals]
-    cases = results[results.signals == signals].groupby("method").size()
-    n = f"{cases.min()}" if cases.min() == cases.max() else f"{cases.min()}\u2013{cases.max()}"
-    return (f"<b>fig:rwd_bar, {esc(signals)} signals.</b> Energy consumption [Wh] (left) and travel time [s] (right) "
-            f"per method: each violin is the distribution of the seed-group means ({g.group.nunique()} groups: the "
-            f"test cases grouped by case index mod 10, {n} cases per method in all); the middle bar is the median, "
-            f"the whiskers the extremes. Methods: {esc(', '.join(label(m) for m in methods))}.")
-
-
-def _trajectory_caption(drawn: list[str], signals: str, case: int) -> str:
-    who = esc(" and ".join(label(m) for m in drawn))
-    plan = (" The dashed line is the energy-optimal plan, the trajectory of the case's bound (the ego alone on "
-            "the corridor; no energy curve)." if BOUND_LABEL in drawn else "")
-    return (f"<b>fig:compare, {esc(signals)} signals, test case {case}</b> ({who}). Left: distance travelled [m] against "
-            "time since entry [s], with the signal state at each stop line as green and red bars at its position; "
-            "middle: speed [m/s]; right: cumulative battery energy [Wh] (it falls where braking recovers energy)."
-            + plan)
 
 
 def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str],

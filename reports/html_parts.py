@@ -142,3 +142,26 @@ def figure(fig: Figure, fig_id: str) -> str:
 
 def settings_of(df: pd.DataFrame) -> list[str]:
     return sorted(set(df.signals))
+
+
+BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
+
+
+def violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[str], signals: str) -> str:
+    g = groups[groups.signals == signals]
+    cases = results[results.signals == signals].groupby("method").size()
+    n = f"{cases.min()}" if cases.min() == cases.max() else f"{cases.min()}\u2013{cases.max()}"
+    return (f"<b>fig:rwd_bar, {esc(signals)} signals.</b> Energy consumption [Wh] (left) and travel time [s] (right) "
+            f"per method: each violin is the distribution of the seed-group means ({g.group.nunique()} groups: the "
+            f"test cases grouped by case index mod 10, {n} cases per method in all); the middle bar is the median, "
+            f"the whiskers the extremes. Methods: {esc(', '.join(label(m) for m in methods))}.")
+
+
+def trajectory_caption(drawn: list[str], signals: str, case: int) -> str:
+    who = esc(" and ".join(label(m) for m in drawn))
+    plan = (" The dashed line is the energy-optimal plan, the trajectory of the case's bound (the ego alone on "
+            "the corridor; no energy curve)." if BOUND_LABEL in drawn else "")
+    return (f"<b>fig:compare, {esc(signals)} signals, test case {case}</b> ({who}). Left: distance travelled [m] against "
+            "time since entry [s], with the signal state at each stop line as green and red bars at its position; "
+            "middle: speed [m/s]; right: cumulative battery energy [Wh] (it falls where braking recovers energy)."
+            + plan)

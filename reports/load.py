@@ -205,3 +205,34 @@ def stop_lines(steps: pd.DataFrame) -> tuple[dict[str, float], dict[str, int]]:
     links = {tls: int(g.link.mode().iloc[0]) for tls, g in seen.groupby("tls")}
     order = sorted(xs, key=xs.get)
     return {t: xs[t] for t in order}, links
+
+
+def case_set_warnings(results: pd.DataFrame) -> list[str]:
+    """One warning per setting whose methods (each training seed apart) drove different cases:
+    its means and improvements would compare different trips. ``ecodrive run`` refuses to mix
+    case sets in a run folder; a table put together otherwise gets this warning."""
+    out = []
+    seed = results.train_seed if "train_seed" in results else pd.Series(-1, index=results.index)
+    for signals, g in results.assign(train_seed=seed).groupby("signals"):
+        sets = {(m, int(sd)): frozenset(c.case) for (m, sd), c in g.groupby(["method", "train_seed"])}
+        if len(set(sets.values())) > 1:
+            parts = [f"{m}{'' if sd < 0 else f' s{sd}'}: {len(cs)} cases, {min(cs)}-{max(cs)}"
+                     for (m, sd), cs in sorted(sets.items())]
+            out.append(f"{signals}: the methods drove different cases ({'; '.join(parts)}): its means and improvements "
+                       "compare different trips; run every method on the same cases")
+    return out
+
+
+def unfinished_warnings(results: pd.DataFrame) -> list[str]:
+    """One warning per method and setting with episodes that did not reach the corridor's end
+    (truncated at the scenario's ``max_episode_time``): their energy counts trips that never
+    arrived, so a method that crawls would otherwise read as a saving in Table 4."""
+    if "terminated" not in results:
+        return []
+    out = []
+    for (method, signals), g in results.groupby(["method", "signals"]):
+        left = int((~g.terminated.astype(bool)).sum())
+        if left:
+            out.append(f"{method}, {signals}: {left} of {len(g)} episodes did not reach the corridor's end "
+                       "(truncated); their energy counts trips that never arrived, so it is no saving")
+    return out

@@ -56,7 +56,7 @@ def test_the_report_states_the_whole_jobs_ratio_to_its_floor():
 def test_the_report_warns_of_methods_on_different_cases():
     import pandas as pd
 
-    from ecodrive_bench.reports.build import case_set_warnings
+    from ecodrive_bench.reports.load import case_set_warnings
 
     rows = [("baseline", -1, c) for c in range(5)] + [("prl", 0, c) for c in range(3)] + [("prl", 1, c) for c in range(5)]
     df = pd.DataFrame(rows, columns=["method", "train_seed", "case"]).assign(signals="coordinated")

@@ -121,7 +121,7 @@ def test_a_method_whose_trips_do_not_finish_is_warned_about(smoke_report, tmp_pa
     under Warnings instead of letting its energy pass for a saving."""
     import shutil
 
-    from ecodrive_bench.reports.build import unfinished_warnings
+    from ecodrive_bench.reports.load import unfinished_warnings
 
     run_dir = tmp_path / "run"
     shutil.copytree(smoke_report["run"], run_dir)
