@@ -23,7 +23,7 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from contextvars import ContextVar
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import IO, Any
 
 _WRITTEN: ContextVar[list[Path] | None] = ContextVar("written", default=None)  # an open ``written_files`` block
@@ -146,29 +146,61 @@ def written_files() -> Iterator[list[Path]]:
         _WRITTEN.reset(token)
 
 
-def prune_unwritten(out: Path, written: list[Path], record: str) -> list[str]:
+def prune_unwritten(out: Path, written: list[Path], record: str, remove: bool = True) -> list[str]:
     """After a command rebuilt its output folder ``out`` (``written``: what it wrote, from
     ``written_files``): remove the files that the previous command listed in ``out/record`` and
     this one did not write again, then list this one's files there; the removed paths (relative to
-    ``out``). Files never listed (a user's notes) are kept, and nothing is removed through a link."""
+    ``out``). Files never listed (a user's notes) are kept; a listed name that is not a plain
+    relative path inside ``out``, or leads through a link, is skipped, and so is one that cannot
+    be removed. ``remove=False`` (a command that failed part-way) removes nothing and lists the
+    earlier files and this one's, so that the next complete build removes what neither rewrote.
+    The caller holds the folder (``bench.runlock``): two builds at once would prune each other."""
     root = out.resolve()
-    mine = sorted({p.resolve().relative_to(root).as_posix() for p in written if p.resolve().is_relative_to(root)})
+    mine = {p.resolve().relative_to(root).as_posix() for p in written if p.resolve().is_relative_to(root)}
     try:
-        listed = json.loads((out / record).read_text()) if (out / record).is_file() else []
+        raw = json.loads((out / record).read_text()) if (out / record).is_file() else []
     except (OSError, ValueError):  # a damaged record: nothing is removed
-        listed = []
+        raw = []
+    listed = {c for c in map(_relative, raw if isinstance(raw, list) else []) if c is not None and c != record}
     stale = []
-    for k in listed if isinstance(listed, list) else []:
-        if not isinstance(k, str) or k in mine or k == record:
+    for rel in sorted(listed - mine) if remove else []:
+        try:
+            if _unlink_inside(root, rel):
+                stale.append(rel)
+        except (OSError, ValueError):  # gone, a folder, a link on the way, no permission: left as it is
             continue
-        p = root / k
-        if p.parent.resolve() != p.parent or not p.parent.is_relative_to(root):  # "..", or a link on the way
-            continue
-        with suppress(FileNotFoundError):
-            if stat.S_ISREG(p.lstat().st_mode):
-                p.unlink()
-                stale.append(k)
-                if p.parent != root and not any(p.parent.iterdir()):
-                    p.parent.rmdir()
-    atomic_text(json.dumps(mine, indent=0) + "\n", out / record)
+    atomic_text(json.dumps(sorted(mine if remove else mine | listed), indent=0) + "\n", out / record)
     return stale
+
+
+def _relative(name: Any) -> str | None:
+    """``name`` as a clean relative POSIX path ("a/b"), or None where it is not one (absolute, empty,
+    with "..", a NUL, not text)."""
+    if not isinstance(name, str) or not name or "\0" in name:
+        return None
+    parts = PurePosixPath(name).parts  # "a//b" and "./a" are tidied here
+    if not parts or parts[0] == "/" or ".." in parts:
+        return None
+    return "/".join(parts)
+
+
+def _unlink_inside(root: Path, rel: str) -> bool:
+    """Remove the regular file ``root/rel`` through folder descriptors opened without following a
+    link, then its emptied folders up to ``root``; whether a file was removed."""
+    *folders, name = rel.split("/")
+    fds = [os.open(root, os.O_RDONLY | os.O_DIRECTORY)]
+    try:
+        for part in folders:
+            fds.append(os.open(part, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=fds[-1]))
+        if not stat.S_ISREG(os.stat(name, dir_fd=fds[-1], follow_symlinks=False).st_mode):
+            return False
+        os.unlink(name, dir_fd=fds[-1])
+        for part, parent in zip(reversed(folders), reversed(fds[:-1])):
+            try:
+                os.rmdir(part, dir_fd=parent)  # only an empty one goes
+            except OSError:
+                break
+        return True
+    finally:
+        for fd in fds:
+            os.close(fd)

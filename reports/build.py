@@ -27,6 +27,7 @@ from ecodrive_bench.bench.args import Parser, fail
 from ecodrive_bench.bench.io import atomic_csv, atomic_text, prune_unwritten, refuse_links, writable_dir, written_files
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
+from ecodrive_bench.bench.runlock import InUse, hold_folder
 
 from . import claims, experiments, figures, generalisation, headline, metrics, mpc_goal, stats, tables
 from .html import render
@@ -69,9 +70,14 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
                        f"`ecodrive run`?)")
     refuse_links(out, "report folder")  # an Unwritable (OSError): one line, nothing written
     writable_dir(out)  # a file under its name, no permission: an Unwritable naming the folder
-    with written_files() as written:
-        index, warnings = _write(run_dir, out, gen_dir, progress)
-    prune_unwritten(out, written, RECORD)  # the earlier report's files that this one has not
+    with hold_folder(out, "report folder", "another --out"), written_files() as written:
+        try:
+            index, warnings = _write(run_dir, out, gen_dir, progress)
+        except BaseException:
+            if written:  # the next whole build removes them
+                prune_unwritten(out, written, RECORD, remove=False)
+            raise
+        prune_unwritten(out, written, RECORD)  # the earlier report's files that this one has not
     return index, warnings
 
 
@@ -368,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="add the generalisation section of this `ecodrive run --profile generalisation` folder, "
                          "each method's change on the held-out corridors beside its change in this run")
     args = ap.parse_args(argv)
-    out = args.out or Path("reports") / args.run_dir.name
+    out = args.out or Path("reports") / args.run_dir.resolve().name  # "..": the folder's own name, not ""
     if args.readme is not None:
         if not args.readme.is_file():
             return fail(ap.prog, f"--readme {args.readme}: no such file")
@@ -381,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
     created = not out.exists()
     try:
         index, warnings = build(args.run_dir, out, args.generalisation)
-    except (RunError, LogError, OSError) as e:
+    except (RunError, LogError, OSError, InUse) as e:
         if created and out.exists():  # nothing is left behind
             shutil.rmtree(out)
         return fail(ap.prog, str(e))

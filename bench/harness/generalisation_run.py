@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ecodrive_bench.bench.harness import runlock
+from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
 from ecodrive_bench.bench.harness.options import RunOptions
@@ -41,7 +41,7 @@ def run_family(opts: RunOptions, progress: bool = True) -> pd.DataFrame:
     checked: set[str] = set()  # each policy is loaded once, for all variants
     checks = [preflight(o, checked) for o in variants]  # every variant is checked before anything is written
     check_writable(root)
-    with runlock.hold(root):  # one command per folder (bench.harness.runlock); each variant's run locks its own
+    with runlock.hold(root):  # one command per folder (bench.runlock); each variant's run locks its own
         return _run_variants(opts, root, variants, checks, progress)
 
 

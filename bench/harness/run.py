@@ -9,7 +9,7 @@
 - ``write``: ``results.parquet`` (with the rows of earlier commands kept, and the bounds) and the
   manifest.
 
-``run`` does the four under the run folder's lock (``bench.harness.runlock``).
+``run`` does the four under the run folder's lock (``bench.runlock``).
 """
 from __future__ import annotations
 
@@ -24,7 +24,8 @@ import pandas as pd
 from tqdm import tqdm
 
 from ecodrive_bench.agents.registry import LEARNING, METHODS
-from ecodrive_bench.bench.harness import external, failures, runlock, scenarios
+from ecodrive_bench.bench import runlock
+from ecodrive_bench.bench.harness import external, failures, scenarios
 from ecodrive_bench.bench.harness.bounds import attach
 from ecodrive_bench.bench.harness.cases import Case, load
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError

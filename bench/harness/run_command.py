@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import sys
 
+from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.args import InputError, fail
-from ecodrive_bench.bench.harness import failures, runlock
+from ecodrive_bench.bench.harness import failures
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError
 from ecodrive_bench.bench.harness.generalisation_run import run_family
 from ecodrive_bench.bench.harness.options import parse, parser

@@ -328,3 +328,18 @@ def test_the_paper_corridors_claims_are_in_index_md(smoke_report):
     assert "Corridor: the paper's." in md
     section = md.split("## Does the paper hold on this run?")[1].split("\n## ")[0]
     assert "| PASS |" in section or "| FAIL |" in section
+
+
+def test_a_second_report_into_a_folder_being_written_is_one_line(smoke_report, tmp_path, capsys):
+    """Two reports into one folder would prune each other's files: the second is refused while the
+    first holds the folder, and the first's files stay."""
+    from ecodrive_bench.bench.runlock import hold_folder
+
+    out = tmp_path / "report"
+    build(smoke_report["run"], out, progress=False)
+    before = sorted(p.name for p in out.rglob("*"))
+    with hold_folder(out, "report folder", "another --out"):  # the first report, still writing
+        assert main([str(smoke_report["run"]), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"report folder {out} is in use by another ecodrive command; wait" in err[0]
+    assert "or use another --out" in err[0] and sorted(p.name for p in out.rglob("*")) == before

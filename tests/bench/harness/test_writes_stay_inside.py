@@ -128,13 +128,16 @@ def test_a_file_size_limit_is_one_line_naming_the_file_and_keeps_the_table(tmp_p
 
 def test_a_rebuilt_folder_loses_only_the_files_its_last_build_wrote(tmp_path, victim):
     """``prune_unwritten`` removes what the previous build listed and this one did not write: not a
-    file some other writer changed meanwhile, not a listed name that now is a link or leads out."""
+    file some other writer changed meanwhile, not a listed name that leads out, through a link or
+    nowhere, and never a file this build wrote under another spelling of its name."""
     import json
 
     from ecodrive_bench.bench.io import atomic_text, prune_unwritten, written_files
 
     out = tmp_path / "report"
     (out / "figures").mkdir(parents=True)
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "x.png").write_text("keep\n")
     with written_files() as first:
         for name in ("index.md", "figures/a.png", "figures/b.png", "old.csv"):
             atomic_text(name, out / name)
@@ -142,17 +145,41 @@ def test_a_rebuilt_folder_loses_only_the_files_its_last_build_wrote(tmp_path, vi
     assert prune_unwritten(out, first, ".files.json") == []
     atomic_text("not the build's", out / "notes.txt")  # outside a written_files block: not recorded
     (out / "elsewhere.txt").symlink_to(victim)
+    (out / "linked").symlink_to(tmp_path / "elsewhere", target_is_directory=True)
     listed = json.loads((out / ".files.json").read_text())
-    (out / ".files.json").write_text(json.dumps([*listed, "../outside.txt", "elsewhere.txt"]))
+    (out / ".files.json").write_text(json.dumps([
+        *listed, "../outside.txt", "elsewhere.txt", "linked/x.png", str(victim), "", "a\u0000b", "index.md/x",
+        "x" * 300, 7, None, "./index.md", "figures//a.png", "figures/./a.png"]))
     (tmp_path / "outside.txt").write_text("keep\n")
     with written_files() as second:
         atomic_text("again", out / "index.md")
         atomic_text("again", out / "figures" / "a.png")
     assert sorted(prune_unwritten(out, second, ".files.json")) == ["figures/b.png", "old.csv"]
     assert json.loads((out / ".files.json").read_text()) == ["figures/a.png", "index.md"]
+    assert (out / "index.md").read_text() == "again" and (out / "figures" / "a.png").read_text() == "again"
     assert (out / "notes.txt").is_file() and (tmp_path / "outside.txt").is_file()
     assert (out / "elsewhere.txt").is_symlink() and victim.read_text() == "precious\n"
+    assert (tmp_path / "elsewhere" / "x.png").read_text() == "keep\n"
     with written_files() as third:
         atomic_text("again", out / "index.md")
     assert prune_unwritten(out, third, ".files.json") == ["figures/a.png"]
     assert not (out / "figures").exists()  # emptied by the prune
+
+
+def test_a_build_that_failed_part_way_removes_nothing_and_lists_both(tmp_path):
+    import json
+
+    from ecodrive_bench.bench.io import atomic_text, prune_unwritten, written_files
+
+    out = tmp_path / "report"
+    out.mkdir()
+    with written_files() as first:
+        atomic_text("1", out / "a.csv")
+    prune_unwritten(out, first, ".files.json")
+    with written_files() as second:
+        atomic_text("2", out / "b.csv")  # then the build fails
+    assert prune_unwritten(out, second, ".files.json", remove=False) == []
+    assert (out / "a.csv").is_file() and json.loads((out / ".files.json").read_text()) == ["a.csv", "b.csv"]
+    with written_files() as third:
+        atomic_text("3", out / "c.csv")
+    assert sorted(prune_unwritten(out, third, ".files.json")) == ["a.csv", "b.csv"]

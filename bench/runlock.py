@@ -1,10 +1,12 @@
-"""One ``ecodrive run`` per run folder at a time.
+"""One command per folder at a time: an ``ecodrive run`` on its run folder, a report on its
+output folder.
 
-The command holds an advisory ``fcntl.flock`` on ``<run>/.lock`` (holding its pid) from the
-moment it reads the folder's finished logs until its results table and manifest are written; a
-second command on the same folder is refused at once with one line naming that pid (exit code 2)
-instead of writing ``results.parquet`` beside it. The lock goes with the process, however it
-ends (a SIGKILL included); the file stays. Windows has no ``fcntl``: there, no lock is taken.
+``ecodrive run`` holds an advisory ``fcntl.flock`` on ``<run>/.lock`` (holding its pid) from the
+moment it reads the folder's finished logs until its results table and manifest are written
+(``hold``); ``ecodrive report`` holds one on its output folder itself while it writes and prunes it
+(``hold_folder``: no file is added to the folder). A second command on the same folder is refused
+at once with one line (exit code 2) instead of writing beside it. A lock goes with the process,
+however it ends (a SIGKILL included). Windows has no ``fcntl``: there, no lock is taken.
 """
 from __future__ import annotations
 
@@ -19,7 +21,7 @@ PID_TRIES = 50  # reads of an empty lock file, 10 ms apart, before its holder is
 
 
 class InUse(Exception):
-    """The run folder is held by another command; one line."""
+    """The folder is held by another command; one line."""
 
 
 @contextmanager
@@ -49,6 +51,27 @@ def hold(run_dir: Path) -> Iterator[None]:
                         f"to finish, or use another --run-id") from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def hold_folder(folder: Path, what: str, other: str) -> Iterator[None]:
+    """Hold a lock on the existing folder ``folder`` itself for the block, or raise ``InUse`` naming
+    ``what`` and suggesting ``other``. Nothing is written into the folder."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InUse(f"{what} {folder} is in use by another ecodrive command; wait for it to finish, or use "
+                        f"{other}") from None
         yield
     finally:
         os.close(fd)
