@@ -25,19 +25,16 @@ class InputError(ValueError):
 
 class Parser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose errors are one line (``prog: error: ...``), without the usage
-    block, and whose help keeps the module docstring's layout."""
+    block, whose help keeps the module docstring's layout, and whose ``type=Path`` options refuse
+    an empty path (``path``)."""
 
     def __init__(self, *args, **kw) -> None:
         kw.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
         super().__init__(*args, **kw)
+        self.register("type", Path, path)  # every path option (groups too) refuses "", the current folder
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
-
-    def add_argument(self, *args: Any, **kw: Any) -> argparse.Action:
-        if kw.get("type") is Path:  # every path option refuses "" (it would mean the current folder)
-            kw["type"] = path
-        return super().add_argument(*args, **kw)
 
 
 def path(value: str) -> Path:
