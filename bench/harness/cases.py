@@ -17,7 +17,6 @@ from ecodrive_bench.bench.args import InputError, read_json
 MASTER_SEED = 20240501  # documented master seed of the protocol
 CASES_PER_SETTING = 100  # section 5.3
 SEED_GROUPS = 10  # independent groups for the violin figure
-MAX_GROUPS = 1000  # [-] most seed groups a case list may declare
 INSERT_RANGE = (150.0, 300.0)  # [s] U(150, 300); a stored case's insert_time must lie in it
 SEED_BOUND = 2**31 - 1  # [-] SUMO seeds are drawn from [0, SEED_BOUND)
 CASE_KEYS = ("index", "sumo_seed", "insert_time", "group")  # every key of a stored case, no other
@@ -35,7 +34,7 @@ class Case:
     index: int
     sumo_seed: int
     insert_time: float  # [s], rounded to 0.1 s
-    group: int  # seed group in [0, the list's groups)
+    group: int  # seed group: the index mod SEED_GROUPS in the fixed list
 
     def options(self) -> dict[str, float]:
         return {"sumo_seed": self.sumo_seed, "insert_time": self.insert_time}
@@ -62,17 +61,23 @@ def load(path: Path = CASES_FILE) -> list[Case]:
     if not isinstance(data, dict) or data.get("version") != VERSION:
         got = data.get("version") if isinstance(data, dict) else None
         raise CaseError(f"{path}: cases version {_shown(got)} is not the supported {VERSION}")
-    return check_cases(data.get("cases"), path, groups=check_header(data, path))
+    check_header(data, path)
+    out = check_cases(data.get("cases"), path, groups=SEED_GROUPS)
+    for pos, c in enumerate(out):
+        if c.group != c.index % SEED_GROUPS:
+            raise CaseError(f"{path}: case #{pos} (index {c.index}): group={c.group}; accepted: the index mod "
+                            f"{SEED_GROUPS}, {c.index % SEED_GROUPS} (the violin figure's seed group)")
+    return out
 
 
-def check_header(data: dict, where: str | Path) -> int:
-    """The case list's ``groups`` after its header is checked: ``groups`` an integer in [1,
-    ``MAX_GROUPS``], ``master_seed`` a non-negative integer (it documents how the list was drawn),
-    ``insert_range_s`` the protocol's ``INSERT_RANGE``; otherwise a one-line ``CaseError``."""
+def check_header(data: dict, where: str | Path) -> None:
+    """The fixed case list's header, or a one-line ``CaseError``: ``groups`` the violin figure's
+    ``SEED_GROUPS`` (it groups the cases by index mod 10), ``master_seed`` a non-negative integer
+    (it documents how the list was drawn), ``insert_range_s`` the protocol's ``INSERT_RANGE``."""
     groups = data.get("groups")
-    if isinstance(groups, bool) or not isinstance(groups, int) or not 1 <= groups <= MAX_GROUPS:
-        raise CaseError(f"{where}: groups={_shown(groups)}; accepted: an integer in [1, {MAX_GROUPS}] (the seed "
-                        f"groups of the violin figure; each case's group lies in [0, groups))")
+    if isinstance(groups, bool) or groups != SEED_GROUPS:
+        raise CaseError(f"{where}: groups={_shown(groups)}; accepted: {SEED_GROUPS} (the violin figure groups the "
+                        f"cases by index mod {SEED_GROUPS})")
     seed = data.get("master_seed")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise CaseError(f"{where}: master_seed={_shown(seed)}; accepted: a non-negative integer")
@@ -81,7 +86,6 @@ def check_header(data: dict, where: str | Path) -> int:
             and tuple(float(x) for x in span) == INSERT_RANGE):
         raise CaseError(f"{where}: insert_range_s={_shown(span)}; accepted: [{INSERT_RANGE[0]}, {INSERT_RANGE[1]}], "
                         f"the protocol's insertion window [s]")
-    return groups
 
 
 def check_cases(raw: Any, where: str | Path, groups: int) -> list[Case]:

@@ -72,11 +72,11 @@ def test_a_bad_case_is_one_line_naming_the_file_the_case_and_the_range(edit, wor
 
 
 @pytest.mark.parametrize("key, value, words", [
-    ("groups", 3, ["case #3 (index 3)", "group=3", "[0, 3)"]),  # the header's groups bounds each case's group
-    ("groups", -1, ["groups=-1", "an integer in [1, 1000]"]),
-    ("groups", None, ["groups=None", "an integer in [1, 1000]"]),
-    ("groups", 1.5, ["groups=1.5", "an integer in [1, 1000]"]),
-    ("groups", "ten", ["groups='ten'", "an integer in [1, 1000]"]),
+    ("groups", 3, ["groups=3", "accepted: 10 (the violin figure groups the cases by index mod 10)"]),
+    ("groups", -1, ["groups=-1", "accepted: 10"]),
+    ("groups", None, ["groups=None", "accepted: 10"]),
+    ("groups", 10.5, ["groups=10.5", "accepted: 10"]),
+    ("groups", "ten", ["groups='ten'", "accepted: 10"]),
     ("insert_range_s", [0, 1], ["insert_range_s=[0, 1]", "accepted: [150.0, 300.0]"]),
     ("insert_range_s", None, ["insert_range_s=None", "accepted: [150.0, 300.0]"]),
     ("master_seed", "abc", ["master_seed='abc'", "a non-negative integer"]),
@@ -101,11 +101,10 @@ def test_a_case_list_without_cases_says_so(tmp_path):
         load(path)
 
 
-def test_a_case_list_of_fewer_groups_loads(tmp_path):
-    data = cases_mod.generate(groups=4)
-    path = tmp_path / "cases.json"
-    path.write_text(json.dumps(data))
-    assert {c.group for c in load(path)} == {0, 1, 2, 3}
+def test_a_case_whose_group_is_not_its_index_mod_10_is_refused(tmp_path):
+    path = _write_cases(tmp_path, _set("group", 7))  # case 5's group is 5
+    with pytest.raises(CaseError, match=r"case #5 \(index 5\): group=7; accepted: the index mod 10, 5"):
+        load(path)
 
 
 def test_the_stored_cases_load_and_check_cleanly(tmp_path):

@@ -12,7 +12,15 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from ecodrive_bench.bench.args import InputError
-from ecodrive_bench.bench.harness.cases import CASE_KEYS, INSERT_RANGE, SEED_BOUND, CaseError, check_cases, load
+from ecodrive_bench.bench.harness.cases import (
+    CASE_KEYS,
+    INSERT_RANGE,
+    SEED_BOUND,
+    CaseError,
+    check_cases,
+    generate,
+    load,
+)
 from ecodrive_bench.bench.harness.scenarios import parse_overrides, setting
 from ecodrive_bench.envs.config import EVParams, RewardConfig, ScenarioConfig
 
@@ -30,6 +38,11 @@ CASE = st.dictionaries(st.one_of(st.sampled_from(CASE_KEYS), st.text(max_size=5)
 # mostly well-formed cases, so that the valid path is exercised too
 GOOD_CASE = st.fixed_dictionaries({"index": st.integers(-2, 40), "sumo_seed": st.integers(-2, SEED_BOUND + 1),
                                    "insert_time": st.floats(140.0, 310.0), "group": st.integers(-1, 11)})
+
+HEADER = {k: v for k, v in generate(n=1).items() if k != "cases"}  # the fixed list's own header
+# and lists that often load: each case in its seed group (the index mod 10)
+GROUPED = st.lists(GOOD_CASE.map(lambda c: {**c, "group": c["index"] % 10}), min_size=1, max_size=4,
+                   unique_by=lambda c: c["index"])
 
 
 def _one_line(e: Exception) -> None:
@@ -55,7 +68,8 @@ def test_check_cases_returns_valid_cases_or_raises_case_error(raw):
 
 @FUZZ
 @given(st.one_of(st.binary(max_size=200), JSON.map(lambda v: json.dumps(v).encode()),
-                 st.lists(GOOD_CASE, max_size=4).map(lambda c: json.dumps({"version": 1, "cases": c}).encode())))
+                 st.lists(GOOD_CASE, max_size=4).map(lambda c: json.dumps({**HEADER, "cases": c}).encode()),
+                 GROUPED.map(lambda c: json.dumps({**HEADER, "cases": c}).encode())))
 def test_load_on_any_file_content(tmp_path, content):
     path = tmp_path / "cases.json"
     path.write_bytes(content)
