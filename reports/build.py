@@ -29,7 +29,8 @@ from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 from ecodrive_bench.bench.runlock import InUse, hold_folder
 
-from . import claims, experiments, figures, generalisation, headline, metrics, mpc_goal, stats, tables
+from . import bound_sections, claims, experiments, figures, generalisation, headline, metrics, stats, tables
+from .bound_sections import LEARNED
 from .html import render
 from .html_markdown import experiment_caption
 from .html_parts import BOUND_LABEL, Figure, Page, trajectory_caption, violin_caption
@@ -45,7 +46,6 @@ from .load import (
 )
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle", "mpc")
-LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 RECORD = ".report-files.json"  # the files the last report wrote into its folder (paths relative to it)
 
@@ -106,60 +106,6 @@ def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool) -> tu
     return out / "index.md", warnings
 
 
-def _gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
-    """The distance to the energy-optimal bound, when the run has it (``ecodrive run --bounds``)."""
-    if "cost_bound" not in results.columns or results.cost_bound.isna().all():
-        return []
-    phis = headline.phis(results, manifest)
-    gaps = pd.concat([metrics.optimality_gaps(results[results.signals == s], phi) for s, phi in phis.items()],
-                     ignore_index=True)
-    atomic_csv(gaps, out / "optimality_gaps.csv")
-    learned = gaps[gaps.method.isin(["prl", "mpdqn", "ddpg", "dqn"])]
-    lines = ["## Distance to the energy-optimal bound", "",
-             "The bound is the least cost E + phi T of the ego alone on the corridor through the known signal plans "
-             "(`bench.oracle`, dynamic programming; other vehicles ignored, so it can only be lower than what is "
-             "reachable in traffic). cost_gap = mean over cases of (cost - bound) / bound, with its bootstrap CI; "
-             "energy_gap_equal_time compares energy with the least energy that arrives no later than SUMO's driver; "
-             "share_closed = the part of the baseline-to-bound cost gap a method closes.", ""]
-    for s, g in learned.groupby("signals"):
-        best = g.loc[g.share_closed.idxmax()]
-        lines += [f"{s}: the best learned method, {best.method}, closes {100 * best.share_closed:.0f}% of the gap "
-                  f"between SUMO's driver and the bound and stays {100 * best.cost_gap:.0f}% above the bound.", ""]
-    lines += [tables.frame_markdown(gaps.set_index(["method", "signals"]), digits=3), ""]
-    return lines
-
-
-def _headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page, run_dir: Path) -> list[str]:
-    """What information can buy (``metrics.headroom``), when the run has ``baseline0`` and ``mpc``; and mpc
-    against its goal (``mpc_goal``), with the evidence where it misses (read from ``run_dir``'s step logs)."""
-    phis = headline.phis(results, manifest)
-    shares = pd.concat([metrics.headroom(results[results.signals == s], phi) for s, phi in phis.items()],
-                       ignore_index=True)
-    goal = mpc_goal.lines(results, phis, run_dir, LEARNED)
-    if shares.empty:
-        if "mpc" not in set(results.method):
-            return goal
-        return ["## Headroom: how much of what information can buy a method buys", "",
-                "Not in this run: the share of the gap needs baseline0 and mpc on the same cases "
-                "(`ecodrive run --methods baseline0 mpc ...`).", ""] + goal
-    atomic_csv(shares, out / "headroom.csv")
-    p = figures.headroom(shares, out / "figures")
-    caption = ("Share of the cost gap between baseline0 (steady driving, no information) and mpc (perfect signal "
-               "information, in traffic) that each method closes; bars: 95% CI over training seeds.")
-    page.experiment_figures.append(Figure(p[0], caption, "headroom"))
-    lines = ["## Headroom: how much of what information can buy a method buys", "",
-             "share_closed = (C_baseline0 - C_method) / (C_baseline0 - C_mpc) on mean costs E + phi T over the "
-             "cases all three ran, with a stratified bootstrap CI over the method's training seeds. Above 100%: "
-             "the method beats the closed-loop controller that knows the signal plans.", ""]
-    for s, g in shares[shares.method.isin(LEARNED)].groupby("signals"):
-        best = g.loc[g.share_closed.idxmax()]
-        lines += [f"{s}: the best learned method, {best.method}, closes {headline.share_text(best)} of the gap "
-                  "between baseline0 and mpc.", ""]
-    lines += [f"![headroom](figures/{p[0].name})", "",
-              tables.frame_markdown(shares.set_index(["method", "signals"]), digits=3), ""]
-    return lines + goal
-
-
 def _manifest(run_dir: Path) -> dict:
     """The manifest of an experiments-only folder, if one is there, for the page's provenance ({} if
     none or unreadable: the page then says so; nothing else reads it)."""
@@ -197,12 +143,11 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
     atomic_csv(st, out / "statistics.csv")
     atomic_csv(seeds, out / "seeds.csv")
     groups = metrics.group_means(results)
-    overrides = manifest.get("scenario_overrides") or {}
-    corridor = ("the paper's" if not overrides else
-                f"**not the paper's**: evaluated with `{claims.overrides_text(overrides)}` (`--scenario`/`--set`)")
+    overrides = claims.overrides_text(manifest.get("scenario_overrides") or {})  # "": the paper's scenario
+    scenario = f"**not the paper's**: `{overrides}` (`--scenario`/`--set`)" if overrides else "the paper's"
     md = [f"# Report: {run_dir.name}", "",
           f"Profile `{manifest.get('profile', '?')}`, git `{manifest.get('git_sha', '?')}`, "
-          f"{len(results)} episodes, methods: {', '.join(methods)}. Corridor: {corridor}.", ""]
+          f"{len(results)} episodes, methods: {', '.join(methods)}. Scenario: {scenario}.", ""]
     if dropped:
         md += ["**results.parquet was cleaned before any table or figure was made**: what was dropped (how many "
                "rows, of which method and setting, and why) or converted is listed under Warnings.", ""]
@@ -219,8 +164,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
                f"{100 * r.cost_vs_paper:+.1f}%)" for r in costs.itertuples()] + [""]
     page.claims = claims.paper_claims(results)
     if overrides:
-        page.claims = claims.off_corridor(page.claims, f"this run's corridor is not the paper's "
-                                                       f"({claims.overrides_text(overrides)})")
+        page.claims = claims.off_scenario(page.claims, f"this run's scenario is not the paper's ({overrides})")
     md += ["## Does the paper hold on this run?", "",
            "Section 5.3's and Table 4's claims on this run's own episodes, with the published numbers and "
            "tolerances of `bench/paper.py`; a claim about a method or setting not in the run is NOT CHECKED.", "",
@@ -235,11 +179,11 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
            "case, as rliable does), the IQM over all runs, and the range of the per-seed means. One seed (a "
            "rule-based method or an agent of your own runs once) has no CI.",
            "", tables.frame_markdown(seeds.set_index(["method", "signals", "metric"]), digits=2)]
-    page.experiments_md = _gaps(results, manifest, out) + _headroom(results, manifest, out, page, run_dir)
+    page.experiments_md = bound_sections.gaps(results, manifest, out) + bound_sections.headroom(results, manifest, out, page, run_dir)
     md += page.experiments_md
     warnings = dropped + case_set_warnings(results) + unfinished_warnings(results)
     if overrides:
-        warnings.append(f"this run's corridor is not the paper's ({claims.overrides_text(overrides)}): the paper's "
+        warnings.append(f"this run's scenario is not the paper's ({overrides}): the paper's "
                         f"Table 4 numbers are beside this run's for reference only, and its claims are NOT CHECKED")
     parts, partial = _return_parts(results, run_dir, warnings, progress)
     if partial:
@@ -384,6 +328,10 @@ def main(argv: list[str] | None = None) -> int:
             return fail(ap.prog, f"--readme {args.readme}: not a UTF-8 text file")
         except ValueError as e:
             return fail(ap.prog, f"--readme {e}")
+        other = claims.overrides_text(_manifest(args.run_dir).get("scenario_overrides") or {})
+        if other:
+            return fail(ap.prog, f"--readme: this run's scenario is not the paper's ({other}); the headline sets "
+                                 f"the paper's numbers beside the run's: give a run on the paper's scenario")
     created = not out.exists()
     try:
         index, warnings = build(args.run_dir, out, args.generalisation)

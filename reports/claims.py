@@ -33,15 +33,15 @@ def status(ok: bool | None) -> str:
 CLAIM_COLUMNS = ["signals", "claim", "paper", "ours", "status", "detail"]
 
 
-def off_corridor(table: pd.DataFrame, why: str) -> pd.DataFrame:
-    """``paper_claims`` of a run on another corridor than the paper's: every claim NOT CHECKED with
+def off_scenario(table: pd.DataFrame, why: str) -> pd.DataFrame:
+    """``paper_claims`` of a run on another scenario than the paper's: every claim NOT CHECKED with
     ``why`` as its detail (this run's number stays beside the paper's, for reference only)."""
     return table.assign(status=NOT_CHECKED, detail=why)
 
 
 def overrides_text(overrides: dict, limit: int = 160) -> str:
     """A run's scenario overrides (``manifest["scenario_overrides"]``) as ``field=value`` pairs,
-    nested fields dotted (``ev.mass=1500``), cut at about ``limit`` characters."""
+    nested fields dotted (``ev.mass=1500``), cut at about ``limit`` characters; "" for none."""
     def flat(d: dict, prefix: str = "") -> list[str]:
         return [x for k, v in d.items() for x in (flat(v, f"{prefix}{k}.") if isinstance(v, dict) else [f"{prefix}{k}={v}"])]
     text = ", ".join(flat(overrides))

@@ -28,7 +28,7 @@ SIGNALS = "uncoordinated"
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_episode_over_floor(benchmark, method, cases, tmp_path):
+def test_episode_over_floor(benchmark, method, cases, tmp_path, monkeypatch):
     policy = f"models/{method}-{SIGNALS}/s0" if method in LEARNING else ""
     base = Task(method, SIGNALS, cases[0], "", policy, 0 if policy else -1)
     run_task(dataclasses.replace(base, path=str(tmp_path / "warm.mcap")))  # load the policy, compile, read the tables
@@ -43,7 +43,7 @@ def test_episode_over_floor(benchmark, method, cases, tmp_path):
         finally:
             spent["act"] += time.perf_counter() - t
 
-    agent.act = timed_act
+    monkeypatch.setattr(agent, "act", timed_act, raising=False)  # undone after the test, however it ends
 
     def one_round() -> None:
         for case in cases[:CASES]:
@@ -54,7 +54,6 @@ def test_episode_over_floor(benchmark, method, cases, tmp_path):
             spent["sumo"] += row["sumo_s"]
 
     benchmark.pedantic(one_round, rounds=ROUNDS, iterations=1)
-    del agent.act
     benchmark.extra_info["floor_ratio"] = spent["wall"] / spent["sumo"]
     benchmark.extra_info["floor_ratio_without_act"] = (spent["wall"] - spent["act"]) / spent["sumo"]
     benchmark.extra_info["episodes"] = spent["n"]

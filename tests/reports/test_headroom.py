@@ -45,7 +45,7 @@ def test_the_readme_line_names_the_best_learned_method():
 
 
 def test_the_report_states_the_whole_jobs_ratio_to_its_floor():
-    from ecodrive_bench.reports.html import _floor_all
+    from ecodrive_bench.reports.html_provenance import _floor_all
 
     man = {"wall_time_all_commands_s": 600.0, "sumo_time_all_commands_s": 800.0, "workers": 2}
     assert "= 1.50" in _floor_all(man) and "whole commands" not in _floor_all(man)

@@ -74,7 +74,7 @@ def test_a_miss_on_travel_time_alone_names_that_half_and_prints_no_nan(tmp_path)
 
 
 def test_the_report_checks_the_goal_without_baseline0_and_says_what_headroom_needs(tmp_path):
-    from ecodrive_bench.reports.build import _headroom
+    from ecodrive_bench.reports.bound_sections import headroom as _headroom
     from ecodrive_bench.reports.html_parts import Page
 
     lines = "\n".join(_headroom(_table(), {}, tmp_path, Page(run_name="t"), tmp_path))

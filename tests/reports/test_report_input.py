@@ -301,7 +301,7 @@ def test_a_damaged_file_list_removes_nothing(smoke_report, tmp_path):
     assert "figures/old.png" not in json.loads((out / ".report-files.json").read_text())
 
 
-def test_a_run_on_another_corridor_is_not_judged_by_the_papers_claims(smoke_report, tmp_path):
+def test_a_run_on_another_scenario_is_not_judged_by_the_papers_claims(smoke_report, tmp_path):
     """A run evaluated with scenario overrides (``--scenario``/``--set``): the report says so at the top
     and under Warnings, and every paper claim is NOT CHECKED, in index.md as in index.html."""
     run_dir = tmp_path / "run"
@@ -311,8 +311,11 @@ def test_a_run_on_another_corridor_is_not_judged_by_the_papers_claims(smoke_repo
     (run_dir / "manifest.json").write_text(json.dumps(manifest))
     index, warnings = build(run_dir, tmp_path / "report", progress=False)
     md, html = index.read_text(), (tmp_path / "report" / "index.html").read_text()
-    assert "Corridor: **not the paper's**: evaluated with `lanes=3, ev.mass=1500.0`" in md
-    assert any("corridor is not the paper's (lanes=3, ev.mass=1500.0)" in w for w in warnings)
+    assert "Scenario: **not the paper's**: `lanes=3, ev.mass=1500.0`" in md
+    assert any("scenario is not the paper's (lanes=3, ev.mass=1500.0)" in w for w in warnings)
+    head = html.split("</header>")[0]
+    assert "<span>Scenario</span><b>not the paper's: <code>lanes=3, ev.mass=1500.0</code>" in head
+    assert "This run's scenario is not the paper's" in html.split("id='claims'")[1]
     section = md.split("## Does the paper hold on this run?")[1].split("\n## ")[0]
     rows = [line for line in section.splitlines() if line.startswith("| ") and "claim" not in line]
     assert rows and all("| NOT CHECKED |" in r for r in rows)
@@ -322,10 +325,10 @@ def test_a_run_on_another_corridor_is_not_judged_by_the_papers_claims(smoke_repo
     assert "<tr class='fail'>" not in claims_html
 
 
-def test_the_paper_corridors_claims_are_in_index_md(smoke_report):
+def test_the_paper_scenarios_claims_are_in_index_md(smoke_report):
     """index.md carries the claims table that index.html shows, with the same statuses."""
     md = smoke_report["md"]
-    assert "Corridor: the paper's." in md
+    assert "Scenario: the paper's." in md
     section = md.split("## Does the paper hold on this run?")[1].split("\n## ")[0]
     assert "| PASS |" in section or "| FAIL |" in section
 
@@ -343,3 +346,16 @@ def test_a_second_report_into_a_folder_being_written_is_one_line(smoke_report, t
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"report folder {out} is in use by another ecodrive command; wait" in err[0]
     assert "or use another --out" in err[0] and sorted(p.name for p in out.rglob("*")) == before
+
+
+def test_the_readme_headline_is_refused_for_another_scenario(smoke_report, tmp_path, capsys):
+    run_dir = tmp_path / "run"
+    shutil.copytree(smoke_report["run"], run_dir)
+    manifest = json.loads((run_dir / "manifest.json").read_text())
+    (run_dir / "manifest.json").write_text(json.dumps({**manifest, "scenario_overrides": {"lanes": 3}}))
+    readme = tmp_path / "README.md"
+    readme.write_text("# x\n<!-- headline:start -->\nold\n<!-- headline:end -->\n")
+    assert main([str(run_dir), "--out", str(tmp_path / "rep"), "--readme", str(readme)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--readme: this run's scenario is not the paper's (lanes=3)" in err[0]
+    assert "old" in readme.read_text() and not (tmp_path / "rep").exists()
