@@ -17,8 +17,8 @@ def _no_episodes(monkeypatch):
 @pytest.mark.parametrize("item, words", [
     ("frob=1", "--set frob=1: unknown config key(s) frob; accepted:"),
     ("lanes=0", "--set lanes=0: lanes=0 is out of range; accepted: [1, 6]"),
-    ("ev.mass=NaN", "--set ev.mass=NaN: mass=nan is out of range; accepted: [500, 3500]"),
-    ("ev.mass=heavy", "--set ev.mass=heavy: mass='heavy'"),
+    ("ev.mass=NaN", "--set ev.mass=NaN: ev.mass=nan is out of range; accepted: [500, 3500]"),
+    ("ev.mass=heavy", "--set ev.mass=heavy: ev.mass='heavy'"),
     ("lanes.x=3", "--set lanes.x=3: lanes={'x': 3}"),
     ("lanes", "--set 'lanes': expected FIELD=VALUE"),
 ])
