@@ -56,7 +56,8 @@ from ecodrive_bench.envs.config import SIGNALS, ConfigError, added_values, backf
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
 VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/harness/cases.json's test cases)
-RUNS = Path(os.environ.get("ECODRIVE_RUNS", Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train"))
+# an empty $ECODRIVE_RUNS counts as unset, as $ECODRIVE_CACHE does (it would mean the current folder)
+RUNS = Path(os.environ.get("ECODRIVE_RUNS") or Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train")
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
 # Checkpoint selection on the validation cases: criterion -> sign (+1: higher is better).
 # "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
