@@ -167,3 +167,15 @@ def test_train_all_with_a_broken_manifest_is_one_line(text, words, models, tmp_p
     err = one_line(capsys)
     assert rc == 2 and err.startswith("ecodrive train-all: error:") and str(man) in err and words in err
     assert man.read_text() == text and not (tmp_path / "runs").exists()
+
+
+def test_an_empty_runs_variable_counts_as_unset():
+    """``ECODRIVE_RUNS=""`` would put the training runs in whatever folder a command starts in."""
+    import os
+    import subprocess
+    import sys
+
+    code = "from ecodrive_bench.bench.training.train import RUNS; print(RUNS)"
+    env = {**os.environ, "ECODRIVE_RUNS": ""}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.strip().endswith(os.path.join(".cache", "ecodrive-bench", "runs", "train"))
