@@ -30,6 +30,7 @@ class Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kw) -> None:
         kw.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
+        kw.setdefault("prog", prog_name())
         super().__init__(*args, **kw)
         self.register("type", Path, path)  # every path option (groups too) refuses "", the current folder
 
@@ -87,9 +88,13 @@ def float_in(lo: float | None, hi: float | None, lo_open: bool = False) -> Calla
 
 
 def prog_name() -> str:
-    """The program name argparse would use (``ecodrive COMMAND`` under the CLI)."""
+    """The program's name in help and errors: ``ecodrive COMMAND`` under the CLI (which sets
+    ``sys.argv[0]``), ``python -m MODULE`` for a module run so, else the script's file name."""
     import os
 
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if spec is not None and sys.argv[0].endswith(".py"):
+        return f"python -m {spec.name.removesuffix('.__main__')}"
     return os.path.basename(sys.argv[0])
 
 

@@ -93,3 +93,11 @@ def test_an_empty_path_is_refused_not_taken_for_the_current_folder(command, args
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "is not accepted; give a file or folder name" in err[0], err
     assert not any(tmp_path.iterdir())
+
+
+def test_a_module_run_with_python_m_names_itself_so():
+    """``python -m MODULE`` help and errors name the module, not its file (``run_command.py``)."""
+    out = subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.harness.run_command", "--frobnicate"],
+                         capture_output=True, text=True)
+    assert out.returncode == 2
+    assert out.stderr.startswith("python -m ecodrive_bench.bench.harness.run_command: error: ")
