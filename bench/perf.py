@@ -80,9 +80,10 @@ def ratios(path: Path) -> dict[str, float]:
         out["reset_ms"] = med["test_env_reset"] * 1e3
     for name, e in extra.items():  # the main job's episodes, method by method, against SUMO's own time
         if name.startswith("test_episode_over_floor[") and "floor_ratio" in e:
-            out[f"episode_over_floor_{name[len('test_episode_over_floor['):-1]}"] = e["floor_ratio"]
+            method = name[len("test_episode_over_floor["):-1]
+            out[f"episode_over_floor_{method}"] = e["floor_ratio"]
             if "floor_ratio_without_act" in e:
-                out[f"without_act_over_floor_{name[len('test_episode_over_floor['):-1]}"] = e["floor_ratio_without_act"]
+                out[f"without_act_over_floor_{method}"] = e["floor_ratio_without_act"]
     if "median_s" in extra.get("test_dp_replan", {}):  # one re-plan of mpc, against the cold solve
         out["replan_median_ms"] = extra["test_dp_replan"]["median_s"] * 1e3
         out["replan_p99_ms"] = extra["test_dp_replan"]["p99_s"] * 1e3

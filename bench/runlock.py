@@ -15,6 +15,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 LOCK = ".lock"
 PID_TRIES = 50  # reads of an empty lock file, 10 ms apart, before its holder is "unknown"
@@ -37,9 +38,7 @@ def hold(run_dir: Path) -> Iterator[None]:
     except OSError as e:
         raise InUse(f"run folder {run_dir}: cannot open its lock file {LOCK} ({e.strerror})") from None
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+        if not _locked(fcntl, fd):
             holder = ""
             for _ in range(PID_TRIES):  # the holder writes its pid just after it locks: an empty file is that moment
                 holder = os.pread(fd, 32, 0).decode(errors="replace").strip()
@@ -67,11 +66,18 @@ def hold_folder(folder: Path, what: str, other: str) -> Iterator[None]:
         return
     fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+        if not _locked(fcntl, fd):
             raise InUse(f"{what} {folder} is in use by another ecodrive command; wait for it to finish, or use "
-                        f"{other}") from None
+                        f"{other}")
         yield
     finally:
         os.close(fd)
+
+
+def _locked(fcntl: Any, fd: int) -> bool:
+    """Whether this process now holds the exclusive lock on ``fd`` (False: another one does)."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
