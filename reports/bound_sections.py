@@ -22,7 +22,7 @@ def gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
     gaps = pd.concat([metrics.optimality_gaps(results[results.signals == s], phi) for s, phi in phis.items()],
                      ignore_index=True)
     atomic_csv(gaps, out / "optimality_gaps.csv")
-    learned = gaps[gaps.method.isin(["prl", "mpdqn", "ddpg", "dqn"])]
+    learned = gaps[gaps.method.isin(LEARNED)]
     lines = ["## Distance to the energy-optimal bound", "",
              "The bound is the least cost E + phi T of the ego alone on the corridor through the known signal plans "
              "(`bench.oracle`, dynamic programming; other vehicles ignored, so it can only be lower than what is "
