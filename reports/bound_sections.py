@@ -9,9 +9,8 @@ import pandas as pd
 from ecodrive_bench.bench.io import atomic_csv
 
 from . import figures, headline, metrics, mpc_goal, tables
+from .headline import LEARNED
 from .html_parts import Figure, Page
-
-LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
 
 
 def gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:

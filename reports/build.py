@@ -30,7 +30,7 @@ from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 from ecodrive_bench.bench.runlock import InUse, hold_folder
 
 from . import bound_sections, claims, experiments, figures, generalisation, headline, metrics, stats, tables
-from .bound_sections import LEARNED
+from .headline import LEARNED
 from .html import render
 from .html_markdown import experiment_caption
 from .html_parts import BOUND_LABEL, Figure, Page, trajectory_caption, violin_caption
