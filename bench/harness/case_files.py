@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ecodrive_bench.bench.args import InputError, Parser, fail, int_in
 from ecodrive_bench.bench.harness import cases, generalisation
+from ecodrive_bench.bench.hosts import DP_RTOL
 
 
 def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
@@ -73,7 +74,7 @@ def bounds(prog: str, write: bool, workers: int, path: Path | None) -> int:
         fail(prog, line)
     if not lines:
         n = shipped_bounds.CHECK_PER_SETTING
-        print(f"wrote {path}" if write else f"{path.name} matches the DP on the sample ({n} cases per setting)")
+        print(f"wrote {path}" if write else f"{path.name} matches the DP on the sample ({n} cases per setting; floats within a relative {DP_RTOL:g})")
     return 2 if lines else 0
 
 

@@ -50,7 +50,7 @@ def mechanical_power_w(v0: ArrayLike, v1: ArrayLike, dt: float, ev: EVParams,
     dth = np.abs(np.asarray(heading_change, dtype=float))
     m = ev.mass
     power = 0.5 * (m + ev.rotating_mass) * (v1 * v1 - v0 * v0) / dt
-    power = power + 0.5 * AIR_DENSITY * ev.front_surface_area * ev.air_drag_coefficient * v1 ** 3
+    power = power + 0.5 * AIR_DENSITY * ev.front_surface_area * ev.air_drag_coefficient * (v1 * v1 * v1)
     power = power + ev.roll_drag_coefficient * GRAVITY * m * v1
     if np.any(dth != 0.0):
         with np.errstate(divide="ignore", invalid="ignore"):
