@@ -10,6 +10,7 @@ import numpy as np
 from . import rewards
 from .action import make_action
 from .config import ScenarioConfig
+from .family import corridors
 from .observation import GridLogicObservation
 from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
 from .scenario import build
@@ -35,6 +36,12 @@ class EcoDriveEnv(gym.Env):
       range (``docs/environment.md`` lists them).
     - ``**overrides``: scenario fields given directly, e.g. ``max_episode_time=300.0``; they
       win over ``config``.
+    - ``family``: ``None`` (the one corridor of the config) or a split of the corridor families
+      (``envs.family``): ``"train"``, ``"validation"`` or ``"test"``. Each ``reset`` then draws one
+      of the split's corridors from ``self.np_random`` (or takes ``options={"corridor": name}``),
+      with the corridor's overrides on top of the config and ``obs_lanes`` = 5, so the spaces are
+      the same on every corridor; ``info["corridor"]`` names it. Scenario files are built once
+      per corridor (the cache of ``envs.scenario``).
 
     ## Example
     >>> import gymnasium as gym, numpy as np
@@ -109,6 +116,7 @@ class EcoDriveEnv(gym.Env):
         config: ScenarioConfig | dict | None = None,
         render_mode: str | None = None,
         rerun_target: str = "spawn",
+        family: str | None = None,
         **overrides: Any,
     ) -> None:
         check_mode(render_mode)
@@ -121,15 +129,13 @@ class EcoDriveEnv(gym.Env):
         if isinstance(base["reward"], dict):
             base["reward"] = {**base["reward"], "form": base["reward"].get("form", reward)}
         base.update(overrides)
-        self.cfg = ScenarioConfig.from_dict(base)
-        self.files = build(self.cfg)
-        self.session = SumoSession(self.cfg, self.files)
-        self.obs_type = GridLogicObservation(self.cfg, self.files)
-        self.action_type = make_action(action, self.cfg)
+        self._base, self._action = base, action
+        self.family = None if family is None else corridors(family)  # a ConfigError names a bad split
+        self.corridor: str | None = None if family is None else self.family[0].name
+        self._use(self.family[0].config(base) if self.family else ScenarioConfig.from_dict(base))
         self.observation_space = self.obs_type.space
         self.action_space = self.action_type.space
         self.render_mode, self._rerun_target = render_mode, rerun_target
-        self._closeup = CloseUp(self.files.lane_y, self.files.stop_lines, self.cfg.vehicle_length)
         self._stream: RerunStream | None = None
         self._spec: Any = None
         self.ego: ControlledVehicle | None = None
@@ -143,15 +149,43 @@ class EcoDriveEnv(gym.Env):
         self.collisions_all = 0
         self.teleports_all = 0
 
+    def _use(self, cfg: ScenarioConfig) -> None:
+        """Drive the corridor of ``cfg``: its files (built once, cached), session and types."""
+        self.cfg = cfg
+        self.files = build(cfg)
+        self.session = SumoSession(cfg, self.files)
+        self.obs_type = GridLogicObservation(cfg, self.files)
+        self.action_type = make_action(self._action, cfg)
+        self._closeup = CloseUp(self.files.lane_y, self.files.stop_lines, cfg.vehicle_length)
+
+    def _draw_corridor(self, options: dict) -> None:
+        """A family env's corridor for this episode: ``options["corridor"]`` or a draw."""
+        assert self.family is not None
+        names = [c.name for c in self.family]
+        if "corridor" in options:
+            name = options["corridor"]
+            if name not in names:
+                raise ValueError(f"corridor={name!r:.60} is not accepted; accepted: a corridor of this family "
+                                 f"({names[0]} .. {names[-1]}, {len(names)} in all)")
+        else:
+            name = names[int(self.np_random.integers(len(names)))]
+        if name != self.corridor:
+            self.session.close()
+            self._use(self.family[names.index(name)].config(self._base))
+            self.corridor = name
+
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         options = dict(options or {})
-        cfg = self.cfg
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        accepted = RESET_OPTIONS + (("corridor",) if self.family else ())
+        unknown = sorted(set(options) - set(accepted))
         if unknown:
             raise ValueError(f"reset option(s) {', '.join(map(repr, unknown))} not accepted; accepted: "
-                             f"{', '.join(RESET_OPTIONS)}")
+                             f"{', '.join(accepted)}")
+        if self.family:
+            self._draw_corridor(options)
+        cfg = self.cfg
         sumo_seed = options.get("sumo_seed", int(self.np_random.integers(0, SEED_BOUND)))
         if isinstance(sumo_seed, (bool, np.bool_)) or not isinstance(sumo_seed, (int, np.integer)) \
                 or not 0 <= sumo_seed < SEED_BOUND:
@@ -305,6 +339,7 @@ class EcoDriveEnv(gym.Env):
             "collisions_all": self.collisions_all,
             "teleports_all": self.teleports_all,
             "case": dict(self.case),
+            **({"corridor": self.corridor} if self.family else {}),
         }
 
     def _record(self, obs, m, action, r, comps, info) -> dict[str, Any]:

@@ -1,10 +1,12 @@
 """``ecodrive cases``: write or check the versioned case files against their generators.
 
-    ecodrive cases --write|--check [--generalisation | --bounds] [--workers N]
+    ecodrive cases --write|--check [--family train|test | --bounds] [--workers N]
 
 The fixed test cases (``bench/harness/cases.json``, ``bench.harness.cases``); with
-``--generalisation``, the family of held-out corridors (``bench/harness/generalisation.json``,
-``bench.harness.generalisation``); with ``--bounds``, the DP's bounds, the oracle's plans and
+``--family test`` (or ``--generalisation``), the family of held-out corridors
+(``envs/families/heldout.json``, ``bench.harness.generalisation``); with ``--family train``, the
+training family and its validation split (``envs/families/train.json``,
+``bench.harness.families``), which must share no corridor with the held-out one; with ``--bounds``, the DP's bounds, the oracle's plans and
 mpc's first plans for the fixed cases (``bench/harness/shipped_bounds.parquet``,
 ``bench.harness.shipped_bounds``).
 ``--check`` alone checks cases.json and the shipped bounds: the DP re-solves a fixed sample of
@@ -23,7 +25,7 @@ import tempfile
 from pathlib import Path
 
 from ecodrive_bench.bench.args import InputError, Parser, fail, int_in
-from ecodrive_bench.bench.harness import cases, generalisation
+from ecodrive_bench.bench.harness import cases, families, generalisation
 from ecodrive_bench.bench.hosts import DP_RTOL
 
 
@@ -37,16 +39,21 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
                    help="check bench/harness/cases.json against the generator and the shipped bounds against the DP")
     which = ap.add_mutually_exclusive_group()
     which.add_argument("--generalisation", action="store_true",
-                       help="write or check the generalisation family instead (bench/harness/generalisation.json, "
-                            "bench.harness.generalisation)")
+                       help="write or check the held-out family instead (envs/families/heldout.json, "
+                            "bench.harness.generalisation); the same as --family test")
+    which.add_argument("--family", choices=("train", "test"), default=None,
+                       help="write or check a corridor family instead: train (the training and validation splits, "
+                            "envs/families/train.json, bench.harness.families) or test (the held-out family)")
     which.add_argument("--bounds", action="store_true",
                        help="write or check the shipped bounds only (bench/harness/shipped_bounds.parquet, "
                             "bench.harness.shipped_bounds)")
     ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, metavar="N",
                     help="parallel episodes and DP solves of --write --bounds (>= 1)")
     args = ap.parse_args(argv)
-    if args.generalisation:
+    if args.generalisation or args.family == "test":
         return generalisation.main(args.write)
+    if args.family == "train":
+        return families.main(args.write)
     if args.bounds:
         return bounds(ap.prog, args.write, args.workers, bounds_file)
     data = cases.generate()

@@ -3,15 +3,16 @@
 Beside the 100 fixed cases on the paper's corridor, a small versioned family of corridors that no
 shipped policy saw in training, each a named scenario override dict (``ScenarioConfig`` fields)
 with its own test cases. It is generated from ``MASTER_SEED`` and ``VERSION`` and stored in
-``bench/harness/generalisation.json``; ``ecodrive cases --generalisation --write`` regenerates
+``envs/families/heldout.json``; ``ecodrive cases --family test --write`` regenerates
 it and ``--check`` verifies it. ``load`` refuses a file that differs from the generator, so a
 run always evaluates the documented family.
 
-Every variant changes all four axes at once, each spread over the family by a shuffled
+Every variant changes all five axes at once, each spread over the family by a shuffled
 stratification (so each value range is covered, in a seed-given pairing):
 
-- spacing: the four links between the five junctions drawn in ``SPACING_RANGE`` (entry and exit
-  links stay 440 m);
+- junctions: ``JUNCTIONS`` (3 to 7 signalized intersections; the paper's corridor has 5);
+- spacing: the links between the junctions drawn in ``SPACING_RANGE`` (entry and exit links stay
+  440 m);
 - signal plans: one cycle per variant from ``CYCLES`` (a green wave stays possible), each
   junction's arterial green a share ``GREEN_SHARE`` of it; offsets either the signal setting's
   (green wave over the uneven links / all in sync) or, in half of the variants, drawn at random
@@ -20,8 +21,11 @@ stratification (so each value range is covered, in a seed-given pairing):
 - demand: ``arterial_flow`` stratified over ``FLOW_RANGE``;
 - lanes: ``LANES`` (a shipped 5-lane policy observes fewer as padded, occupied lanes).
 
-The grid, step and perception settings and ``n_intersections`` are the paper's, so every shipped
-policy can observe every variant (``bench.harness.policies.transfer_overrides``).
+The grid, step and perception settings are the paper's, so every shipped policy can observe every
+variant (``bench.harness.policies.transfer_overrides``). The file lives with the env
+(``envs/families/heldout.json``), whose ``family="test"`` samples its corridors
+(``envs.family``); the training family (``bench.harness.families``) draws from the same axes
+and shares no corridor with it.
 """
 from __future__ import annotations
 
@@ -36,9 +40,10 @@ import numpy as np
 from ecodrive_bench.bench.args import InputError, read_json
 from ecodrive_bench.bench.harness.cases import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, ScenarioConfig
+from ecodrive_bench.envs.family import HELDOUT_FILE
 
 MASTER_SEED = 20240621  # documented master seed of the family
-VERSION = 1
+VERSION = 2  # 2: the number of junctions is an axis (JUNCTIONS); 1 had the paper's 5 everywhere
 N_VARIANTS = 6
 CASES_PER_VARIANT = 10  # per signal setting: 6 x 10 x 2 settings = 120 episodes per method
 SPACING_RANGE = (200.0, 800.0)  # [m] each inner link, rounded to 10 m
@@ -46,7 +51,8 @@ CYCLES = (60.0, 75.0, 90.0, 105.0, 120.0)  # [s] one per variant
 GREEN_SHARE = (0.35, 0.6)  # [-] arterial green / cycle per junction, rounded to 1 s
 FLOW_RANGE = (600.0, 1400.0)  # [veh/h] W->E, stratified, rounded to 50 veh/h
 LANES = (3, 4, 5)  # [-] each twice
-FAMILY_FILE = Path(__file__).with_name("generalisation.json")
+JUNCTIONS = (3, 4, 5, 6, 7)  # [-] signalized intersections, stratified (one value twice over six variants)
+FAMILY_FILE = HELDOUT_FILE
 
 
 class FamilyError(InputError):
@@ -63,8 +69,11 @@ class Variant:
         return ScenarioConfig.from_dict({**self.scenario, "signals": signals})
 
 
-def _variant(rng: np.random.Generator, k: int, lanes: int, flow: float, random_offsets: bool) -> dict[str, Any]:
-    n = ScenarioConfig().n_intersections
+def draw_corridor(rng: np.random.Generator, name: str, lanes: int, flow: float, random_offsets: bool,
+                  junctions: int) -> dict[str, Any]:
+    """One corridor ``{"name", "scenario"}`` on the family's axes, its links, cycle, greens and
+    offsets drawn from ``rng`` (the offsets always, so the stream does not depend on the kind)."""
+    n = junctions
     spacings = [float(v) for v in np.round(rng.uniform(*SPACING_RANGE, size=n - 1), -1)]
     cycle = float(rng.choice(CYCLES))
     greens = [float(v) for v in np.round(rng.uniform(*GREEN_SHARE, size=n) * cycle)]
@@ -73,8 +82,9 @@ def _variant(rng: np.random.Generator, k: int, lanes: int, flow: float, random_o
     offsets = rng.uniform(0.0, cycle, size=n)  # drawn for every variant: the stream does not depend on the kind
     if random_offsets:
         scenario["junction_offsets"] = [float(np.floor(o)) for o in offsets]
-    name = f"g{k + 1}-{lanes}lane-{int(flow)}vph-c{int(cycle)}-{'randoff' if random_offsets else 'planoff'}"
-    return {"name": name, "scenario": scenario}
+    scenario["n_intersections"] = n
+    return {"name": f"{name}-{n}j-{lanes}lane-{int(flow)}vph-c{int(cycle)}-{'randoff' if random_offsets else 'planoff'}",
+            "scenario": scenario}
 
 
 def generate(master_seed: int = MASTER_SEED, n: int = N_VARIANTS, cases: int = CASES_PER_VARIANT) -> dict:
@@ -82,9 +92,10 @@ def generate(master_seed: int = MASTER_SEED, n: int = N_VARIANTS, cases: int = C
     lanes = rng.permutation(np.resize(np.array(LANES), n))
     flows = rng.permutation(np.round(np.linspace(*FLOW_RANGE, n) / 50.0) * 50.0)
     kinds = rng.permutation(np.arange(n) % 2 == 1)
+    junctions = rng.permutation(np.resize(np.array(JUNCTIONS), n))
     variants = []
     for k in range(n):
-        v = _variant(rng, k, int(lanes[k]), float(flows[k]), bool(kinds[k]))
+        v = draw_corridor(rng, f"g{k + 1}", int(lanes[k]), float(flows[k]), bool(kinds[k]), int(junctions[k]))
         seeds = rng.choice(SEED_BOUND, size=cases, replace=False)
         times = np.round(rng.uniform(*INSERT_RANGE, size=cases), 1)
         v["cases"] = [{"index": i, "sumo_seed": int(seeds[i]), "insert_time": float(times[i]), "group": i}
