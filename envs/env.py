@@ -149,6 +149,11 @@ class EcoDriveEnv(gym.Env):
         self.collisions_all = 0
         self.teleports_all = 0
 
+    @property
+    def base_config(self) -> ScenarioConfig:
+        """The config before a family's corridor overrides (``cfg`` itself without a family)."""
+        return ScenarioConfig.from_dict(self._base) if self.family else self.cfg
+
     def _use(self, cfg: ScenarioConfig) -> None:
         """Drive the corridor of ``cfg``: its files (built once, cached), session and types."""
         self.cfg = cfg

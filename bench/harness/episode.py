@@ -25,8 +25,10 @@ def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = None) -> EcoDriveEnv:
-    """The raw env for an agent (or a method name), with the agent's scenario overrides."""
+def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = None,
+             family: str | None = None) -> EcoDriveEnv:
+    """The raw env for an agent (or a method name), with the agent's scenario overrides; ``family``:
+    a split of the corridor families, one corridor drawn per reset (``envs.family``)."""
     from ecodrive_bench.agents.registry import ACTION_INTERFACE, ENV_OVERRIDES
 
     if isinstance(agent, str):
@@ -34,7 +36,8 @@ def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = N
     else:
         interface, overrides = agent.action_interface, agent.env_overrides
     cfg = deep_merge(config or {}, overrides)
-    env = gym.make("EcoDrive-v0", signals=signals, action=interface, config=cfg)
+    env = gym.make("EcoDrive-v0", signals=signals, action=interface, config=cfg,
+                   **({"family": family} if family is not None else {}))
     return env.unwrapped  # the harness steps the raw env: no wrappers in the timed loop
 
 

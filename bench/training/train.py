@@ -43,12 +43,14 @@ from tqdm import tqdm
 from ecodrive_bench.agents.device import parse as parse_device
 from ecodrive_bench.agents.registry import LEARNING, make_agent
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
+from ecodrive_bench.bench.harness import families
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.episode import deep_merge, make_env, run_episode
 from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
 from ecodrive_bench.bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import write_train_log
+from ecodrive_bench.bench.training import family as generalist
 from ecodrive_bench.bench.training.braking import NO_SCRIPT, RATE_RANGE, BrakingLeaders
 from ecodrive_bench.bench.training.braking import spec as braking_spec
 from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
@@ -183,25 +185,29 @@ def load_agent(agent, state: dict[str, Any], path: Path) -> None:
 def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkpoint_every: int = 25,
           models: Path | None = MODELS, agent_config: dict[str, Any] | None = None,
           scenario: dict[str, Any] | None = None, command: list[str] | None = None,
-          stop_after: int | None = None, progress: bool = True, validation_cases: int = VALIDATION_CASES,
-          select: str = "objective", device: str = "cpu", braking_leaders: float = 0.0) -> pd.DataFrame:
+          stop_after: int | None = None, progress: bool = True, validation_cases: int | None = None,
+          select: str = "objective", device: str = "cpu", braking_leaders: float = 0.0,
+          family: str | None = None) -> pd.DataFrame:
     """Run (or resume) training; returns the per-episode metrics. ``stop_after`` ends the call
     after that many episodes of this call (used to test resumption).
 
     At every checkpoint the greedy policy is scored on ``validation_cases`` cases drawn from
-    ``VALIDATION_SEED`` (never the test cases). The run keeps the best checkpoint under each
+    ``VALIDATION_SEED`` (never the test cases; None: the recipes' ``VALIDATION_CASES``, or with a
+    family every validation corridor's cases). The run keeps the best checkpoint under each
     criterion of ``SELECTION``; the one named by ``select`` is exported, with its episode and
     validation metrics in the manifest. Epsilon decays over the run's own ``episodes`` (eq. 12
     with N = the training length) unless ``agent_config`` sets ``eps_decay_episodes``. ``device``
     holds the networks (``agents.device``; the CPU unless given). ``braking_leaders`` > 0: that share of
     the episodes gets a scripted leader braking ahead of the ego (``bench.training.braking``); the
-    run's identity, checkpoint and manifest record it."""
+    run's identity, checkpoint and manifest record it. ``family="train"``: each episode on a corridor
+    of the training family, checkpoints scored on the validation corridors instead
+    (``bench.training.family``), exported as ``<method>-family``."""
     if select not in SELECTION:
         raise ValueError(f"select {select!r} is not accepted; choose one of {', '.join(SELECTION)}")
     ckpt = out / "checkpoint.pt"
     state = read_checkpoint(ckpt) if ckpt.exists() else None  # a file that is no checkpoint: refused before anything runs
     torch.set_num_threads(1)
-    env = make_env(method, signals, scenario)
+    env = make_env(method, signals, scenario, family)
     decay = {} if method not in ("prl", "mpdqn", "dqn") else {"eps_decay_episodes": episodes}
     agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **{**decay, **(agent_config or {})})
     dev = parse_device(device)
@@ -210,7 +216,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         torch.use_deterministic_algorithms(True)
     agent.to(dev)  # before loading a checkpoint: the optimizers' state follows the parameters
     identity = {"method": method, "signals": signals, "seed": seed, "agent_config": agent_config or {},
-                "scenario": env.cfg.to_dict()}
+                "scenario": env.base_config.to_dict(), **({"family": generalist.identity(family)} if family else {})}
     leaders = BrakingLeaders(braking_leaders, seed) if braking_leaders else None  # off: no draw, no key
     if leaders is not None:
         identity["braking_leaders"] = braking_spec(leaders.rate)
@@ -223,10 +229,10 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         try:
             try:
                 kept = added_values(state["identity"].get("scenario", {}))
-                if deep_merge(env.cfg.to_dict(), kept) != env.cfg.to_dict():  # the run keeps what it started with
+                if deep_merge(env.base_config.to_dict(), kept) != env.base_config.to_dict():  # the run keeps what it started with
                     env.close()
-                    env = make_env(method, signals, deep_merge(kept, scenario or {}))  # explicit settings still win
-                    identity["scenario"] = env.cfg.to_dict()
+                    env = make_env(method, signals, deep_merge(kept, scenario or {}), family)  # explicit settings still win
+                    identity["scenario"] = env.base_config.to_dict()
                     if progress:
                         print(f"note: this run keeps the behaviour it started with: {', '.join(f'{k}={v}' for k, v in flat(kept).items())}",
                               file=sys.stderr)
@@ -234,7 +240,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
             except (ConfigError, AttributeError, TypeError, KeyError) as e:
                 raise CheckpointError(f"{ckpt}: its identity's scenario is not accepted ({e})") from None
             if saved != identity:
-                diff = [k for k in identity if saved.get(k) != identity[k]]
+                diff = [k for k in {**saved, **identity} if saved.get(k) != identity.get(k)]
                 raise CheckpointError(f"{ckpt}: belongs to a different run (differs in {', '.join(diff)}); "
                                       f"use another --out or remove the folder")
             replay = out / state["replay"]
@@ -293,8 +299,9 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         done_here += 1
         last = ep + 1 == episodes
         if (ep + 1) % checkpoint_every == 0 or last or (stop_after is not None and done_here >= stop_after):
-            if validation_cases:
-                score = validate(env, agent, validation_cases, progress)
+            if validation_cases != 0:
+                score = (generalist.validate(method, signals, identity["scenario"], agent, validation_cases, progress)
+                         if family else validate(env, agent, validation_cases or VALIDATION_CASES, progress))
                 score["objective"] = round(score["energy"] + env.cfg.reward.phi * score["travel_time"], 4)
                 rows[-1].update({f"val_{k}": v for k, v in score.items()})
                 policy = None
@@ -315,8 +322,14 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     if models is not None and len(df) == episodes:
         chosen = best.get(select, {})
         tail = df.tail(FINAL_WINDOW)
+        name = generalist.method_name(method, family)
+        vcases = ({"corridors": len(generalist.cases(validation_cases)),
+                   "cases": sum(len(c) for _, c in generalist.cases(validation_cases)),
+                   "master_seed": families.MASTER_SEED} if family else
+                  {"cases": validation_cases or VALIDATION_CASES, "master_seed": VALIDATION_SEED})
         manifest = {
-            "method": method, "signals": signals, "seed": seed, "episodes": episodes,
+            "method": name, **({"base_method": method, "family": identity["family"]} if family else {}),
+            "signals": signals, "seed": seed, "episodes": episodes,
             "command": " ".join(command or sys.argv), "git_sha": git_sha(), "packages": package_versions(),
             "training_wall_time_s": round(wall_total, 1), "device": str(dev), "agent_config": agent_config or {},
             "scenario": identity["scenario"], **({"braking_leaders": identity["braking_leaders"]} if leaders else {}),
@@ -324,10 +337,10 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
                               for k in ("energy", "travel_time", "return_", "collisions", "lane_changes")},
             "selection": select if chosen else "final",
             "selected_episode": chosen.get("episode", episodes),
-            "validation": {"cases": validation_cases, "master_seed": VALIDATION_SEED, **chosen.get("score", {})},
+            "validation": {**vcases, **chosen.get("score", {})},
         }
         policy = chosen["agent"] if chosen else agent.state_dict(with_training=False)
-        folder = policy_dir(method, signals, models, seed)
+        folder = policy_dir(name, signals, models, seed)
         save_policy(folder, policy, manifest)
         atomic_parquet(df, folder / "metrics.parquet")  # per-episode training metrics ship with the policy
     return df
@@ -382,7 +395,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int_in(0), default=0, help="seed of the agent and of the episode draws (>= 0)")
     ap.add_argument("--checkpoint-every", type=int_in(1), default=25, help="episodes between checkpoints (>= 1)")
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
-    ap.add_argument("--validation-cases", type=int_in(0, 100), default=VALIDATION_CASES, help="validation cases scored at every checkpoint (0-100; 0 exports the final policy)")
+    ap.add_argument("--validation-cases", type=int_in(0, 100), default=None,
+                    help=f"validation cases scored at every checkpoint (0-100; 0 exports the final policy; default "
+                         f"{VALIDATION_CASES}, with --family all {families.N_VALIDATION * families.VALIDATION_CASES} "
+                         f"of the validation corridors)")
     ap.add_argument("--select", default="objective", choices=list(SELECTION),
                     help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
     ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
@@ -395,6 +411,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--braking-leaders", type=float_in(*RATE_RANGE), default=0.0, metavar="RATE",
                     help="share of episodes (0-1; default 0: off) with a scripted leader braking ahead of the ego "
                          "(bench.training.braking); an experiment")
+    ap.add_argument("--family", choices=generalist.SPLITS, default=None,
+                    help="train over the corridor family's train split (a corridor per episode), select on its "
+                         "validation corridors, export as <method>-family (docs/generalisation.md)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override an agent config field (repeatable); a run whose config is not the recipe's is an "
                          "experiment, exported only to an explicit --models DIR")
@@ -416,7 +435,8 @@ def main(argv: list[str] | None = None) -> int:
               + "".join(f"+{k}={v}" for k, v in sorted(overrides.items()) if k not in base or base[k] != v)
               + (f"+e{args.episodes}" if args.episodes != chosen.episodes else "")
               + (f"+braking={args.braking_leaders:g}" if args.braking_leaders else ""))
-    out = args.out or RUNS / f"{args.method}-{args.signals}-s{args.seed}{suffix}"
+    name = generalist.method_name(args.method, args.family)
+    out = args.out or RUNS / f"{name}-{args.signals}-s{args.seed}{suffix}"
     reference = (is_recipe(args.method, args.signals, overrides) and args.episodes == rec.episodes
                  and not args.braking_leaders)
     experiment_to_shipped = not reference and args.models.resolve() == MODELS.resolve()
@@ -432,7 +452,7 @@ def main(argv: list[str] | None = None) -> int:
                    models=None if args.no_export or experiment_to_shipped else args.models,
                    command=["ecodrive", "train", *(argv if argv is not None else sys.argv[1:])],
                    validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select,
-                   device=args.device, braking_leaders=args.braking_leaders)
+                   device=args.device, braking_leaders=args.braking_leaders, family=args.family)
     except CheckpointError as e:
         return fail(ap.prog, str(e))
     tail = df.tail(FINAL_WINDOW)
