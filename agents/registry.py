@@ -8,17 +8,27 @@ from .ddpg import DDPGAgent, DDPGConfig
 from .dqn import DQNAgent, DQNConfig
 from .pdqn import PDQNAgent, PDQNConfig
 
-LEARNING = ("prl", "mpdqn", "dqn", "ddpg")
+LEARNING = ("prl", "mpdqn", "dqn", "ddpg")  # trainable methods (``ecodrive train --method``)
+FAMILY_SUFFIX = "-family"  # a learning method trained over the corridor family: its own method name
+GENERALISTS = tuple(f"{m}{FAMILY_SUFFIX}" for m in ("prl", "mpdqn"))  # the ones a run looks for
+POLICY_METHODS = LEARNING + GENERALISTS  # methods that drive with a trained policy
 RULE_BASED = tuple(_RULE_CLASSES)
-METHODS = RULE_BASED + LEARNING
+METHODS = RULE_BASED + POLICY_METHODS
 ACTION_INTERFACE = {**{m: c.action_interface for m, c in _RULE_CLASSES.items()},
                     "prl": "parameterized", "mpdqn": "parameterized", "dqn": "discrete27", "ddpg": "longitudinal"}
+ACTION_INTERFACE.update({g: ACTION_INTERFACE[g.removesuffix(FAMILY_SUFFIX)] for g in GENERALISTS})
+
+
+def base_method(method: str) -> str:
+    """The algorithm a method runs: ``prl-family`` is PRL trained over the family."""
+    return method.removesuffix(FAMILY_SUFFIX) if method in GENERALISTS else method
 ENV_OVERRIDES: dict[str, dict[str, Any]] = {
     m: c.env_overrides for m, c in {**_RULE_CLASSES, "ddpg": DDPGAgent}.items() if c.env_overrides}
 
 
 def make_agent(method: str, observation_space, action_space, seed: int = 0, **config: Any):
     """A fresh agent for ``method``; ``config`` overrides fields of its config dataclass."""
+    method = base_method(method)
     if method in _RULE_CLASSES:
         return _RULE_CLASSES[method]()
     if method in ("prl", "mpdqn"):

@@ -276,11 +276,11 @@ def run_task(task: LateralTask) -> dict[str, Any]:
 def task_agent(task: LateralTask, env: Any) -> tuple[Agent, str]:
     """(agent, policy sha256) of a task: a rule-based agent, or a learning one holding its
     verified policy (a file that cannot be loaded is a ``CheckpointError`` naming it)."""
-    from ecodrive_bench.agents.registry import LEARNING, make_agent
+    from ecodrive_bench.agents.registry import POLICY_METHODS, make_agent
     from ecodrive_bench.bench.harness.policies import load_policy, policy_agent
 
     spaces = (env.observation_space, env.action_space)
-    if task.method not in LEARNING:
+    if task.method not in POLICY_METHODS:
         return make_agent(task.method, *spaces), ""
     folder = Path(task.policy_dir)
     state, manifest = load_policy(folder, task.method)
@@ -364,11 +364,11 @@ def lateral_seeds(methods: list[str], models: Path,
     """(the shipped uncoordinated training seeds of each method, [None] for a rule-based one; the
     learning methods skipped for want of one). A learning method without one is a
     ``CheckpointError`` when ``explicit`` (named in --methods), else skipped."""
-    from ecodrive_bench.agents.registry import LEARNING
+    from ecodrive_bench.agents.registry import POLICY_METHODS
     from ecodrive_bench.bench.harness.policies import CheckpointError, family_dir, shipped_seeds
 
     seeds: dict[str, list[int | None]] = {
-        m: list(shipped_seeds(m, "uncoordinated", models)) if m in LEARNING else [None] for m in methods}
+        m: list(shipped_seeds(m, "uncoordinated", models)) if m in POLICY_METHODS else [None] for m in methods}
     missing = [m for m in methods if not seeds[m]]
     if missing and explicit:
         raise CheckpointError(f"--methods {' '.join(missing)}: no shipped uncoordinated policy under {models} (expected "

@@ -150,10 +150,10 @@ def task_agent(task: Task, env: Any) -> tuple[Any, str]:
     """(agent, policy sha256) of a built-in method on ``env``: a rule-based one, or a learning
     one holding its verified policy (``bench.harness.policies``; a policy that cannot be loaded
     is a ``CheckpointError`` naming the file)."""
-    from ecodrive_bench.agents.registry import LEARNING, make_agent
+    from ecodrive_bench.agents.registry import POLICY_METHODS, make_agent
     from ecodrive_bench.bench.harness.policies import load_policy, policy_agent, policy_spaces
 
-    if task.method not in LEARNING:
+    if task.method not in POLICY_METHODS:
         return make_agent(task.method, env.observation_space, env.action_space), ""
     folder = Path(task.policy_dir)
     state, manifest = load_policy(folder, task.method, env.cfg.to_dict(), task.transfer)
@@ -175,12 +175,12 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
     while the learning methods' episodes are held back and the others run."""
     if workers <= 1:
         return run_pool(tasks, workers, fn, on_failure, skip)
-    from ecodrive_bench.agents.registry import LEARNING
+    from ecodrive_bench.agents.registry import POLICY_METHODS
 
     tasks = list(tasks)
     compile_grid()
     compiled = threading.Event()
-    if not any(getattr(t, "method", None) in LEARNING for t in tasks):
+    if not any(getattr(t, "method", None) in POLICY_METHODS for t in tasks):
         compiled.set()  # no act to compile (the bounds, the rule-based methods, the planners)
 
     def compile_act() -> None:
@@ -196,7 +196,7 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
         threading.Thread(target=compile_act, name="compile-greedy-act", daemon=True).start()
 
     def hold(task: Any) -> bool:
-        return not compiled.is_set() and getattr(task, "method", None) in LEARNING
+        return not compiled.is_set() and getattr(task, "method", None) in POLICY_METHODS
 
     return run_pool(tasks, workers, fn, on_failure, skip, hold=hold)
 

@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from ecodrive_bench.agents.registry import LEARNING, METHODS
+from ecodrive_bench.agents.registry import METHODS, POLICY_METHODS
 from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.harness import external, failures, scenarios
 from ecodrive_bench.bench.harness.bounds import attach
@@ -85,7 +85,7 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
         named += [p for p in PLANNERS if p not in named]
     for m in [*named, *factories]:
         for s in opts.signals:
-            if m not in LEARNING:
+            if m not in POLICY_METHODS:
                 runs.append((m, s, -1))
                 continue
             have = shipped_seeds(m, s, opts.models)
