@@ -1,11 +1,12 @@
 """The report's folder (``--out``): which folder it is, whether a report may go there, and how a
 finished report takes its place without losing a file that is not the report's.
 
-- ``--out`` is resolved before anything is decided (``os.path.realpath``): ``new/../existing``
-  is ``existing``, whether or not ``new`` is there, so every check below is about the folder the
-  files land in, and a missing folder on the way is never created for nothing. ``--out`` that is
-  a symbolic link, passes through one to a missing folder, or is a folder holding a link is
-  refused (the folders above it may be links to real folders).
+- ``--out`` is resolved before anything is decided, component by component as
+  ``os.path.realpath`` does: ``new/../existing`` is ``existing``, whether or not ``new`` is
+  there, so every check below is about the folder the files land in, and a missing folder on the
+  way is never created for nothing. ``--out`` whose last component is a symbolic link (also
+  after a ``..``), that passes through a link to no folder, or that holds a link is refused (the
+  folders above it may be links to real folders).
 - A folder that exists must be empty or hold an earlier report (its ``.report-files.json``). A
   folder of other files (``--out .`` in a project, a run folder) is refused in one line, and
   nothing is written, unless ``force_into``.
@@ -87,15 +88,25 @@ class Stage:
 
 
 def resolve(out: Path) -> Path:
-    """``out`` resolved as the system would reach it; a link at its end, or a link on the way to a
-    folder that is not there, is an ``Unwritable``."""
+    """``out`` resolved component by component as ``os.path.realpath`` does (a ``..`` after a
+    missing folder cancels it); its last component a link, or a link on the way to a folder that
+    is not there, is an ``Unwritable``."""
     out = Path(out)
-    if out.is_symlink():
-        raise Unwritable(f"{WHAT} {out} is a symbolic link; refusing to write through it (give a real folder)")
-    for part in (out, *out.parents):
-        if part.is_symlink() and not part.exists():
-            raise Unwritable(f"{WHAT} {out}: {part} is a symbolic link to a missing folder; give a real folder")
-    return Path(os.path.realpath(out))
+    folder = Path(out.anchor) if out.is_absolute() else Path(os.path.realpath(os.getcwd()))
+    parts = out.parts[1:] if out.is_absolute() else out.parts
+    for i, part in enumerate(parts):
+        if part == "..":
+            folder = folder.parent  # ``folder`` has no link in it: its parent is the real one
+            continue
+        folder = folder / part
+        if not folder.is_symlink():
+            continue
+        if i == len(parts) - 1:
+            raise Unwritable(f"{WHAT} {out} is a symbolic link; refusing to write through it (give a real folder)")
+        if not folder.is_dir():
+            raise Unwritable(f"{WHAT} {out}: {folder} is a symbolic link to no folder; give a real folder")
+        folder = Path(os.path.realpath(folder))
+    return folder
 
 
 @contextmanager

@@ -221,3 +221,16 @@ def test_a_report_folder_on_another_mount_is_built_inside_it(smoke_report, tmp_p
     assert left == listed | {".report-files.json", "notes.txt"} and "figures/violin-uncoordinated.png" in listed
     assert not [p for p in out.iterdir() if p.name.startswith(".report.tmp-")]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "run"]
+
+
+def test_a_link_reached_through_dotdot_is_refused(smoke_report, tmp_path, capsys):
+    """``--out x/missing/../../link``: the link is --out's last component, refused as written
+    straight; nothing is written through it and ``x/missing`` is never made."""
+    real = tmp_path / "real"
+    real.mkdir()
+    (tmp_path / "link").symlink_to(real, target_is_directory=True)
+    (tmp_path / "x").mkdir()
+    assert main([str(smoke_report["run"]), "--out", str(tmp_path / "x" / "missing" / ".." / ".." / "link")]) == 2
+    line = one_line(capsys)
+    assert list(real.iterdir()) == [] and list((tmp_path / "x").iterdir()) == []
+    assert "is a symbolic link; refusing to write through it" in line
