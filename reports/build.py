@@ -8,15 +8,17 @@ paper run's report gains it, with the in-distribution change beside it, with ``-
 (``reports.generalisation``).
 
 Reads only ``results.parquet``, ``manifest.json`` and the step logs; writes ``index.md`` and
-``index.html`` (which shows the figures) plus the tables and figures. A report built into a folder
-that holds an earlier one removes the earlier one's files that it did not write again (a figure of
-a method or case no longer in the run), listed in ``.report-files.json``; files it never wrote are
-left alone.
+``index.html`` (which shows the figures) plus the tables and figures. ``--out`` is a new or empty
+folder, or one that holds an earlier report (its ``.report-files.json``); a folder of other files
+is refused unless ``--force-into``. The report is built beside ``--out`` and put there when it is
+complete: a build that fails leaves the folder as it was. A report built into a folder that holds
+an earlier one removes the earlier one's files that it did not write again (a figure of a method
+or case no longer in the run), listed in ``.report-files.json``; files it never wrote are left
+alone.
 """
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 from pathlib import Path
 
@@ -24,10 +26,10 @@ import pandas as pd
 from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail
-from ecodrive_bench.bench.io import atomic_csv, atomic_text, prune_unwritten, refuse_links, writable_dir, written_files
+from ecodrive_bench.bench.io import atomic_csv, atomic_text
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
-from ecodrive_bench.bench.runlock import InUse, hold_folder
+from ecodrive_bench.bench.runlock import InUse
 
 from . import bound_sections, claims, experiments, figures, generalisation, headline, metrics, stats, tables
 from .headline import LEARNED
@@ -44,17 +46,20 @@ from .load import (
     stop_lines,
     unfinished_warnings,
 )
+from .outdir import staged
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle", "mpc")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 RECORD = ".report-files.json"  # the files the last report wrote into its folder (paths relative to it)
 
 
-def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool = True) -> tuple[Path, list[str]]:
-    """Write the report of ``run_dir`` into ``out``: the path of ``index.md`` and the warnings.
-    The parts whose time grows with the run, reading every step log for the return split and
-    drawing the figures, show bars with an ETA on stderr where it is a terminal (``progress=False``:
-    never; a CI log gets none either way)."""
+def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool = True,
+          force_into: bool = False) -> tuple[Path, list[str]]:
+    """Write the report of ``run_dir`` into ``out``: the path of ``index.md`` (in ``out`` resolved)
+    and the warnings. ``out`` must be new, empty or an earlier report's folder unless
+    ``force_into`` (``reports.outdir``). The parts whose time grows with the run, reading every
+    step log for the return split and drawing the figures, show bars with an ETA on stderr where it
+    is a terminal (``progress=False``: never; a CI log gets none either way)."""
     if not run_dir.is_dir():
         raise RunError(f"{run_dir}: not a run folder (a directory written by `ecodrive run`)")
     if gen_dir is not None and not gen_dir.is_dir():
@@ -68,17 +73,9 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
             and not generalisation.present(run_dir)):
         raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
                        f"`ecodrive run`?)")
-    refuse_links(out, "report folder")  # an Unwritable (OSError): one line, nothing written
-    writable_dir(out)  # a file under its name, no permission: an Unwritable naming the folder
-    with hold_folder(out, "report folder", "another --out"), written_files() as written:
-        try:
-            index, warnings = _write(run_dir, out, gen_dir, progress)
-        except BaseException:
-            if written:  # the next whole build removes them
-                prune_unwritten(out, written, RECORD, remove=False)
-            raise
-        prune_unwritten(out, written, RECORD)  # the earlier report's files that this one has not
-    return index, warnings
+    with staged(out, RECORD, force_into) as stage:  # an Unwritable (OSError) or InUse: one line, nothing written
+        _, warnings = _write(run_dir, stage.scratch, gen_dir, progress)
+    return stage.out / "index.md", warnings
 
 
 def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool) -> tuple[Path, list[str]]:
@@ -317,6 +314,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--generalisation", type=Path, default=None, metavar="GEN_RUN",
                     help="add the generalisation section of this `ecodrive run --profile generalisation` folder, "
                          "each method's change on the held-out corridors beside its change in this run")
+    ap.add_argument("--force-into", action="store_true",
+                    help="write into --out even though it holds files and no earlier report; the report's "
+                         "files replace those of the same names, the others are kept")
     args = ap.parse_args(argv)
     out = args.out or Path("reports") / args.run_dir.resolve().name  # "..": the folder's own name, not ""
     if args.readme is not None:
@@ -332,12 +332,9 @@ def main(argv: list[str] | None = None) -> int:
         if other:
             return fail(ap.prog, f"--readme: this run's scenario is not the paper's ({other}); the headline sets "
                                  f"the paper's numbers beside the run's: give a run on the paper's scenario")
-    created = not out.exists()
     try:
-        index, warnings = build(args.run_dir, out, args.generalisation)
-    except (RunError, LogError, OSError, InUse) as e:
-        if created and out.exists():  # nothing is left behind
-            shutil.rmtree(out)
+        index, warnings = build(args.run_dir, out, args.generalisation, force_into=args.force_into)
+    except (RunError, LogError, OSError, InUse) as e:  # nothing is left behind (reports.outdir)
         return fail(ap.prog, str(e))
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)

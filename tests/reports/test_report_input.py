@@ -161,8 +161,11 @@ def test_a_refused_table_leaves_an_existing_report_as_it_was(smoke, tmp_path, ca
     out = tmp_path / "report"
     out.mkdir()
     (out / "index.md").write_text("an earlier report")
+    (out / ".report-files.json").write_text('["index.md"]\n')
     assert main([str(run_dir), "--out", str(out)]) == 2
-    assert [p.name for p in out.iterdir()] == ["index.md"] and (out / "index.md").read_text() == "an earlier report"
+    assert "no rows" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == [".report-files.json", "index.md"]
+    assert (out / "index.md").read_text() == "an earlier report"
 
 
 def nan_energy(t):
