@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import libsumo as ls
+import numpy as np
 from libsumo import constants as tc
 
 from .config import ScenarioConfig
@@ -194,6 +195,19 @@ class SumoSession:
             if type(e).__name__ == "TraCIException":
                 return False
             raise
+
+    def eastbound(self, exclude: str) -> tuple[tuple[str, ...], np.ndarray]:
+        """Every vehicle but ``exclude`` heading east (SUMO angle within 45 deg of 90): their ids,
+        and one row each of front bumper x, y [m], length [m], speed [m/s] ((0, 4) for none)."""
+        v = self._api.vehicle
+        ids, rows = [], []
+        for vid in v.getIDList():
+            if vid == exclude or abs(v.getAngle(vid) - 90.0) > 45.0:
+                continue
+            x, y = v.getPosition(vid)
+            ids.append(vid)
+            rows.append((x, y, v.getLength(vid), v.getSpeed(vid)))
+        return tuple(ids), np.array(rows, dtype=float).reshape(-1, 4)
 
     # ------------------------------------------------------------------ vehicles
     def add_vehicle(self, vid: str, controlled: bool, glosa: bool = False) -> None:

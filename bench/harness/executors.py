@@ -138,6 +138,8 @@ def run_task(task: Task) -> dict[str, Any]:
         _AGENTS[key] = task_agent(task, env)
     agent, sha = _AGENTS[key]
     t0 = time.perf_counter()
+    if hasattr(agent, "prepare"):  # a planner that drives the case first (clairvoyant: its future traffic)
+        agent.prepare(env, task.case)
     row = run_episode(env, agent, task.case, task.method, log_path=Path(task.path), agent_sha256=sha,
                       log_meta=dict(task.meta))
     row["episode_wall_s"] = time.perf_counter() - t0

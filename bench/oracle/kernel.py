@@ -114,6 +114,15 @@ def mask_gap(buf: np.ndarray, lo: int, hi: int, jlo: int, jhi: int, base: float,
                 buf[j, i] = np.inf
 
 
+@njit(nogil=True)
+def mask_caps(buf: np.ndarray, lo: int, hi: int, jlo: int, jhi: int, caps: np.ndarray) -> None:
+    """The states (rows ``lo..hi``, speeds ``jlo..jhi``) of ``buf`` [speed, row] above their
+    speed's row cap ``caps[j]`` become infinite (moving obstacles, ``bench.oracle.clairvoyant``)."""
+    for j in range(jlo, jhi + 1):
+        for i in range(max(lo, caps[j] + 1), hi + 1):
+            buf[j, i] = np.inf
+
+
 def backward_step_numpy(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
                         d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray,
                         *next_window: int) -> None:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -37,7 +38,7 @@ import numpy as np
 from ecodrive_bench.envs.config import ScenarioConfig
 
 from .dp import GRID_EPS, MS, Corridor, Grid, Plan, Window, _Lattice, _Run, refine, solve
-from .kernel import backward_step, backward_step_in, mask_gap
+from .kernel import backward_step, backward_step_in, mask_caps, mask_gap
 
 VERSION = 1  # [-] of the first plans and re-plans: bumped with any change that moves one (the shipped first plans' key)
 LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
@@ -242,21 +243,27 @@ def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
 
 def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
            lookahead: int = LOOKAHEAD, headway: float = HEADWAY, leader_accel: float = LEADER_ACCEL,
-           length: int | None = None) -> Replan | None:
+           length: int | None = None, caps: Callable[[_Lattice, int], np.ndarray] | None = None) -> Replan | None:
     """The least-cost plan from the ego's state (``x`` [m], ``v`` [m/s]) at step ``k`` after the
     departure, keeping the gap to ``leader`` over the look-ahead; None when no plan arrives within
     the table's horizon. ``length``: only the plan's first ``length`` entries (at least 2; its
     value is the whole plan's), without following the table's choices further; None: to the
-    arrival."""
+    arrival. ``caps`` (instead of ``leader``): a known future of the vehicles ahead, as
+    ``caps(lat, m)`` = the highest row of each speed at look-ahead step ``m``
+    (``bench.oracle.clairvoyant``)."""
     started = time.perf_counter()
     i0, j0 = snap(tab, x, v)
     mode = "none"
-    if leader is not None:
+    plan = None
+    if caps is not None:
+        plan = _solve(tab, k, i0, j0, lookahead, None, 0.0, headway, leader_accel, length, caps)
+        mode = "kept" if plan is not None else "relaxed"
+    elif leader is not None:
         plan = _solve(tab, k, i0, j0, lookahead, x + leader.gap, leader.speed, headway, leader_accel, length)
         mode = "kept"
         if plan is None:
             mode = "relaxed"
-    if leader is None or plan is None:
+    if plan is None:
         plan = _solve(tab, k, i0, j0, lookahead, None, 0.0, headway, leader_accel, length)
     if plan is None:
         return None
@@ -267,8 +274,8 @@ def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
 
 
 def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: float | None,
-           leader_speed: float, headway: float, leader_accel: float,
-           length: int | None = None) -> tuple[np.ndarray, np.ndarray, float, int] | None:
+           leader_speed: float, headway: float, leader_accel: float, length: int | None = None,
+           caps: Callable[[_Lattice, int], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, float, int] | None:
     lat, nv = tab.lat, tab.lat.nv
     if i0 >= lat.i_end:
         return np.array([i0]), np.array([j0]), 0.0, 0
@@ -301,6 +308,8 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
 
     def keep_gap(buf: np.ndarray, m: int, win: Window) -> None:  # states at look-ahead step m that come too close
         lo, hi, jlo, jhi = win
+        if caps is not None and lo <= hi and jlo <= jhi:
+            mask_caps(buf, lo, hi, jlo, jhi, caps(lat, m))
         if leader_rear is None or lo > hi or jlo > jhi:
             return
         mask_gap(buf, lo, hi, jlo, jhi, leader_rear + travel[m] - MIN_GAP, headway, speeds_ms, tab.cor.x0, lat.dx,
