@@ -73,7 +73,7 @@ from ecodrive_bench.envs.config import ScenarioConfig
 from .corridor import MS, Corridor
 from .energy import energy_wh
 from .horizon import LeastCost
-from .kernel import backward_step_in, backward_step_numpy, mask_caps
+from .kernel import backward_step_in, backward_step_numpy
 
 OBJECTIVES = ("cost", "energy")
 HORIZON_MARGIN = 10  # [steps] added to the first guess of the "cost" horizon
@@ -159,12 +159,10 @@ def bound(cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
 
 def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str = "cost",
           time_limit: float | None = None, grid: Grid | None = None, kernel: str = "numba",
-          krauss: bool = False, slack: int = 0, prune: bool = True, obstacles: Any = None) -> Plan:
+          krauss: bool = False, slack: int = 0, prune: bool = True) -> Plan:
     """``bound`` on a given ``Corridor`` (tests drop or move its signals). ``slack`` > 0 (``"cost"``
     only): the global pass runs ``slack`` steps past the horizon it needs and the plan keeps it
-    (``Plan.table``: the cost-to-go a re-planning controller reads, ``bench.oracle.mpc``).
-    ``obstacles``: moving obstacles, an object whose ``caps(lat, steps)`` gives each step's highest
-    row per speed ([steps, speeds] int64; ``bench.oracle.clairvoyant``); every pass obeys them."""
+    (``Plan.table``: the cost-to-go a re-planning controller reads, ``bench.oracle.mpc``)."""
     if objective not in OBJECTIVES:
         raise ValueError(f"objective={objective!r} is not accepted; choose one of {', '.join(OBJECTIVES)}")
     if kernel not in KERNELS:
@@ -173,7 +171,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
         raise ValueError("objective='energy' needs a time_limit [s]")
     grid = grid or Grid()
     started = time.perf_counter()
-    run = _Run(cor, cfg, depart_time, cfg.reward.phi if objective == "cost" else 0.0, kernel, obstacles)
+    run = _Run(cor, cfg, depart_time, cfg.reward.phi if objective == "cost" else 0.0, kernel)
     lat = _Lattice(cor, cfg, grid.n_v, krauss)
     if objective == "energy":
         horizon = int(math.floor(float(time_limit) / cfg.step_length + GRID_EPS))
@@ -228,17 +226,14 @@ def refine(run: _Run, lat: _Lattice, rows: np.ndarray, speeds: np.ndarray, horiz
 class _Run:
     """One solve: the signals seen from ``depart_time`` and the time weight ``phi`` [Wh/s]."""
 
-    def __init__(self, cor: Corridor, cfg: ScenarioConfig, depart_time: float, phi: float, kernel: str,
-                 obstacles: Any = None) -> None:
+    def __init__(self, cor: Corridor, cfg: ScenarioConfig, depart_time: float, phi: float, kernel: str) -> None:
         self.cor, self.cfg, self.depart_time, self.phi, self.kernel = cor, cfg, depart_time, phi, kernel
-        self.obstacles = obstacles
         self.states = 0  # evaluated, all passes
 
     def backward(self, lat: _Lattice, windows: list[Window], keep: bool = False) -> _Solution:
         dt = self.cfg.step_length
         green = self.cor.green(self.depart_time + np.arange(len(windows)) * dt, dt) if self.cor.stop_lines else None
-        caps = None if self.obstacles is None else self.obstacles.caps(lat, len(windows))
-        out = _backward(lat, green, windows, self.phi * dt, self.kernel, keep, caps)
+        out = _backward(lat, green, windows, self.phi * dt, self.kernel, keep)
         self.states += out.states
         return out
 
@@ -374,7 +369,7 @@ def _margin(cost: float) -> float:
 
 
 def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float,
-              kernel: str = "numba", keep: bool = False, caps: np.ndarray | None = None) -> _Solution:
+              kernel: str = "numba", keep: bool = False) -> _Solution:
     """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start,
     one ``bench.oracle.kernel`` step per time step; ``keep``: also return every step's values
     (the cost-to-go table a re-planning controller reads, ``bench.oracle.mpc``)."""
@@ -406,8 +401,6 @@ def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], ti
             arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=arg_type)  # [speed, row]
             step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red,
                  *(reg_nxt if reg_nxt is not None else (1, 0, 1, 0)), i_end)  # nxt's finite window, empty at the end
-            if caps is not None:  # moving obstacles: the states past a vehicle ahead are infeasible
-                mask_caps(cur, lo, hi, jlo, jhi, caps[k])
             reg_cur = (lo, hi, jlo, jhi)
             policy[k] = (lo, jlo, arg)
             if values is not None:
