@@ -44,6 +44,9 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
     which.add_argument("--family", choices=("train", "test"), default=None,
                        help="write or check a corridor family instead: train (the training and validation splits, "
                             "envs/families/train.json, bench.harness.families) or test (the held-out family)")
+    which.add_argument("--clairvoyant", action="store_true",
+                       help="write or check the clairvoyant drives of the fixed cases only "
+                            "(bench/harness/clairvoyant_drives.parquet, bench.harness.clairvoyant)")
     which.add_argument("--bounds", action="store_true",
                        help="write or check the shipped bounds only (bench/harness/shipped_bounds.parquet, "
                             "bench.harness.shipped_bounds)")
@@ -56,6 +59,8 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
         return families.main(args.write)
     if args.bounds:
         return bounds(ap.prog, args.write, args.workers, bounds_file)
+    if args.clairvoyant:
+        return clairvoyant(ap.prog, args.write, args.workers)
     data = cases.generate()
     text = json.dumps(data, indent=1) + "\n"
     if args.write:
@@ -64,7 +69,42 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
         return 0
     ok = cases.CASES_FILE.exists() and cases.CASES_FILE.read_text() == text
     print("cases.json matches the generator" if ok else "cases.json differs from the generator")
-    return bounds(ap.prog, False, args.workers, bounds_file) or (0 if ok else 1)
+    return bounds(ap.prog, False, args.workers, bounds_file) or clairvoyant(ap.prog, False, 1) or (0 if ok else 1)
+
+
+def clairvoyant(prog: str, write: bool, workers: int) -> int:
+    """Write or check the shipped clairvoyant drives: 0, or 2 after one line per problem."""
+    from ecodrive_bench.bench.harness import clairvoyant as cv
+    from ecodrive_bench.bench.harness import clairvoyant_drives as drives
+
+    path = drives.FILE
+    if not write and not path.exists():
+        print(f"{path.name}: not shipped; every clairvoyant case is planned in the run")
+        return 0
+    lines = write_clairvoyant(path, workers) if write else cv.check(path)
+    for line in lines:
+        fail(prog, line)
+    if not lines:
+        print(f"wrote {path}" if write else f"{path.name} matches the planner on the sample "
+              f"({drives.CHECK_PER_SETTING} case per setting)")
+    return 2 if lines else 0
+
+
+def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[str]:
+    """Plan every fixed case of both settings and ship the chosen drives (about 10 s a case)."""
+    import pandas as pd
+    from tqdm import tqdm
+
+    from ecodrive_bench.bench.harness import clairvoyant_drives as drives
+    from ecodrive_bench.bench.harness.clairvoyant import solve
+    from ecodrive_bench.bench.harness.executors import run_local
+    from ecodrive_bench.envs.config import SIGNALS
+
+    tasks = [(s, c) for s in SIGNALS for c in cases.load()]
+    rows = list(tqdm(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
+                     disable=None if progress else True))
+    drives.save(pd.DataFrame(rows), path)
+    return []
 
 
 def bounds(prog: str, write: bool, workers: int, path: Path | None) -> int:

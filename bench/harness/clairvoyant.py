@@ -17,6 +17,9 @@ and drives once more, up to ``ROUNDS`` drives; the episode replays the round who
 (E + phi T): its actions, one by one, which drive that very episode again, since a case is
 deterministic.
 
+For the fixed cases the chosen drives are shipped (``bench.harness.clairvoyant_drives``): ``prepare``
+reads the case's actions instead of planning, where they answer its problem.
+
 It drives the ``parameterized`` action: the lane decision (the LC2013 mask may refuse it) and the
 acceleration that brings its speed to the plan's next one, through the same safety layer as
 every method.
@@ -24,12 +27,15 @@ every method.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ecodrive_bench.bench.harness import clairvoyant_drives as drives
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.not_learning import NotLearning
+from ecodrive_bench.bench.hosts import ENERGY_RTOL, close
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import Recording, Tracks, ahead_future, gap_caps
 from ecodrive_bench.bench.oracle.dp import Corridor
@@ -49,8 +55,9 @@ class ClairvoyantAgent(NotLearning):
     action_interface = "parameterized"
     env_overrides: dict[str, Any] = {}
 
-    def __init__(self, cfg: ScenarioConfig) -> None:
+    def __init__(self, cfg: ScenarioConfig, shipped: Path | None = drives.FILE) -> None:
         self.cfg = cfg
+        self.shipped = shipped  # the shipped drives of the fixed cases (bench.harness.clairvoyant_drives); None: plan
         self.cor = Corridor.from_config(cfg)
         self.env: Any = None
         self.tracks: Tracks | None = None  # the recorded future the next drive uses
@@ -69,6 +76,11 @@ class ClairvoyantAgent(NotLearning):
         started = time.perf_counter()
         self.env, self.lane_y = env, env.files.lane_y
         self.tracks, self.rounds, self.actions = None, [], None
+        if self.shipped is not None:
+            self.actions = drives.lookup(env.cfg, case, self.shipped)
+            if self.actions is not None:
+                self.rounds = [{"shipped": str(self.shipped.name)}]
+                return
         best: tuple[float, list[tuple[int, float]]] | None = None
         for r in range(ROUNDS):
             used = self.tracks
@@ -142,3 +154,44 @@ class ClairvoyantAgent(NotLearning):
     def plan_trace(self) -> dict[str, Any] | None:
         """What planning the case found (step log metadata)."""
         return {"rounds": self.rounds} if self.rounds else None
+
+
+def solve(task: tuple[str, Case]) -> dict[str, Any]:
+    """One fixed case planned from scratch (in a worker)."""
+    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.harness.scenarios import setting
+
+    signals, case = task
+    cfg = setting(signals, None)
+    agent = ClairvoyantAgent(cfg, shipped=None)
+    env = make_env(agent, signals, None)
+    try:
+        agent.prepare(env, case)
+    finally:
+        env.close()
+    return drives.entry(signals, case, cfg, agent)
+
+
+def check(path: Path = drives.FILE, per_setting: int = drives.CHECK_PER_SETTING) -> list[str]:
+    """One line per drift ([]: none) on a sample of the shipped cases, planned again."""
+    from ecodrive_bench.bench.harness.cases import load
+
+    try:
+        frame = drives.read(path)
+    except drives.DrivesError as e:
+        return [str(e)]
+    cases = {c.index: c for c in load()}
+    lines = []
+    for s in sorted(set(frame.signals)):
+        rows = frame[frame.signals == s].sort_values("case")
+        pick = np.random.default_rng(20261127).choice(len(rows), size=min(per_setting, len(rows)), replace=False)
+        for r in rows.iloc[np.sort(pick)].itertuples(index=False):
+            got = solve((s, cases[int(r.case)]))
+            at = f"{path}: {s} case {int(r.case)}"
+            if list(got["lateral"]) != [int(a) for a in r.lateral]:
+                lines.append(f"{at}: the lane decisions differ from a new plan's; rebuild: {drives.REBUILD}")
+            elif not np.allclose(got["accel"], list(r.accel), rtol=drives.ACCEL_RTOL, atol=1e-9):
+                lines.append(f"{at}: the accelerations differ beyond a relative {drives.ACCEL_RTOL:g}; rebuild: {drives.REBUILD}")
+            elif not close(got["cost"], float(r.cost), ENERGY_RTOL):
+                lines.append(f"{at}: cost {float(r.cost)!r} stored, {got['cost']!r} planned; rebuild: {drives.REBUILD}")
+    return lines
