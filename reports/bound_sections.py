@@ -1,4 +1,4 @@
-"""The report's sections on the energy-optimal bound: each method's distance to it (``gaps``), and
+"""The report's sections on the cost-optimal bound: each method's distance to it (``gaps``), and
 how much of what information can buy each method buys (``headroom``, with mpc against its goal)."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from .html_parts import Figure, Page
 
 
 def gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
-    """The distance to the energy-optimal bound, when the run has it (``ecodrive run --bounds``)."""
+    """The distance to the cost-optimal bound, when the run has it (``ecodrive run --bounds``)."""
     if "cost_bound" not in results.columns or results.cost_bound.isna().all():
         return []
     phis = headline.phis(results, manifest)
@@ -22,7 +22,7 @@ def gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
                      ignore_index=True)
     atomic_csv(gaps, out / "optimality_gaps.csv")
     learned = gaps[gaps.method.isin(LEARNED)]
-    lines = ["## Distance to the energy-optimal bound", "",
+    lines = ["## Distance to the cost-optimal bound", "",
              "The bound is the least cost E + phi T of the ego alone on the corridor through the known signal plans "
              "(`bench.oracle`, dynamic programming; other vehicles ignored, so it can only be lower than what is "
              "reachable in traffic). cost_gap = mean over cases of (cost - bound) / bound, with its bootstrap CI; "
@@ -37,31 +37,39 @@ def gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
 
 
 def headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page, run_dir: Path) -> list[str]:
-    """What information can buy (``metrics.headroom``), when the run has ``baseline0`` and ``mpc``; and mpc
-    against its goal (``mpc_goal``), with the evidence where it misses (read from ``run_dir``'s step logs)."""
+    """What information can buy (``metrics.headroom``), when the run has ``baseline0`` and
+    ``clairvoyant``; and mpc against its goal (``mpc_goal``), with the evidence where it misses
+    (read from ``run_dir``'s step logs)."""
     phis = headline.phis(results, manifest)
     shares = pd.concat([metrics.headroom(results[results.signals == s], phi) for s, phi in phis.items()],
                        ignore_index=True)
-    goal = mpc_goal.lines(results, phis, run_dir, LEARNED)
+    goal = mpc_goal.lines(results, phis, run_dir, LEARNED) if "mpc" in set(results.method) else []
     if shares.empty:
-        if "mpc" not in set(results.method):
+        if "clairvoyant" not in set(results.method):
             return goal
         return ["## Headroom: how much of what information can buy a method buys", "",
-                "Not in this run: the share of the gap needs baseline0 and mpc on the same cases "
-                "(`ecodrive run --methods baseline0 mpc ...`).", ""] + goal
+                "Not in this run: the share of the gap needs baseline0 and clairvoyant on the same cases "
+                "(`ecodrive run --methods baseline0 clairvoyant ...`, or `--planners`).", ""] + goal
     atomic_csv(shares, out / "headroom.csv")
     p = figures.headroom(shares, out / "figures")
-    caption = ("Share of the cost gap between baseline0 (steady driving, no information) and mpc (perfect signal "
-               "information, in traffic) that each method closes; bars: 95% CI over training seeds.")
+    caption = ("Share of the cost gap between baseline0 (steady driving, no information) and clairvoyant (the signal "
+               "plans and the case's future traffic) that each method closes; bars: 95% CI over cases and training "
+               "seeds, paired by case.")
     page.experiment_figures.append(Figure(p[0], caption, "headroom"))
     lines = ["## Headroom: how much of what information can buy a method buys", "",
-             "share_closed = (C_baseline0 - C_method) / (C_baseline0 - C_mpc) on mean costs E + phi T over the "
-             "cases all three ran, with a stratified bootstrap CI over the method's training seeds. Above 100%: "
-             "the method beats the closed-loop controller that knows the signal plans.", ""]
+             "share_closed = (C_baseline0 - C_method) / (C_baseline0 - C_clairvoyant) on mean costs E + phi T over "
+             "the cases all three ran; the 95% CI resamples cases and training seeds, paired by case. clairvoyant "
+             "knows the signal plans and every other vehicle's future in the case ([Clairvoyant](clairvoyant.md)), so "
+             "a share lies in [0, 100%] unless a method drives worse than steady driving or the reference misses; "
+             "`beaten` counts the cases where a method's seed mean costs less than clairvoyant, a defect of the "
+             "reference, and `beaten_cases` names them.", ""]
     for s, g in shares[shares.method.isin(LEARNED)].groupby("signals"):
         best = g.loc[g.share_closed.idxmax()]
-        lines += [f"{s}: the best learned method, {best.method}, closes {headline.share_text(best)} of the gap "
-                  "between baseline0 and mpc.", ""]
+        lines += [f"{s}: {headline.headroom_sentence(best)}", ""]
+    beaten = shares[shares.beaten > 0]
+    lines += [f"Cases where a method costs less than clairvoyant: {int(beaten.beaten.sum())} "
+              + ("(" + "; ".join(f"{r.method} {r.signals}: case {r.beaten_cases}" for r in beaten.itertuples()) + ")"
+                 if len(beaten) else "(none)") + ".", ""]
     lines += [f"![headroom](figures/{p[0].name})", "",
               tables.frame_markdown(shares.set_index(["method", "signals"]), digits=3), ""]
     return lines + goal

@@ -48,7 +48,8 @@ from .load import (
 )
 from .outdir import staged
 
-METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "ddpg", "dqn", "oracle", "mpc")
+METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "prl-family", "mpdqn-family", "ddpg", "dqn", "oracle",
+                "mpc", "clairvoyant")
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 RECORD = ".report-files.json"  # the files the last report wrote into its folder (paths relative to it)
 
@@ -265,7 +266,7 @@ def _trajectory(run_dir: Path, out: Path, sub: pd.DataFrame, compare: str, signa
 
 
 def _bound_plan(run_dir: Path, sub: pd.DataFrame, case: int, warnings: list[str]) -> pd.DataFrame | None:
-    """The energy-optimal plan of ``case``, from the oracle's log when the run has one."""
+    """The cost-optimal plan of ``case``, from the oracle's log when the run has one."""
     rows = sub[(sub.method == "oracle") & (sub.case == case)]
     if rows.empty:
         return None

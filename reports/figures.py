@@ -187,19 +187,30 @@ def generalisation(per_variant: pd.DataFrame, methods: list[str], signals: str, 
 
 
 def headroom(shares: pd.DataFrame, out: Path) -> list[Path]:
-    """The share of the baseline0-to-mpc cost gap each method closes, per setting, with its CI
-    over training seeds (``reports.metrics.headroom``'s rows)."""
+    """The share of the baseline0-to-clairvoyant cost gap each method closes, per setting, with its
+    CI over cases and seeds (``reports.metrics.headroom``'s rows). The axis spans [-25, 125] % at
+    least and [-100, 200] % at most; a bar or whisker beyond it is cut at the edge and its value
+    written there, so one method far outside does not squeeze the others."""
     settings = sorted(set(shares.signals))
     fig, axes = plt.subplots(1, len(settings), figsize=(5 * len(settings), 3.6), squeeze=False)
     for ax, s in zip(axes[0], settings):
         g = shares[shares.signals == s].sort_values("share_closed")
         y = np.arange(len(g))
-        err = np.vstack([g.share_closed - g.ci_low, g.ci_high - g.share_closed])
-        ax.barh(y, 100 * g.share_closed, xerr=100 * np.nan_to_num(err), color="tab:blue", alpha=0.7, capsize=3)
+        vals = 100 * g[["share_closed", "ci_low", "ci_high"]].to_numpy(dtype=float)
+        left = float(np.clip(np.nanmin(vals, initial=0.0) - 10, -100, -25))
+        right = float(np.clip(np.nanmax(vals, initial=100.0) + 10, 125, 200))
+        mid = np.clip(vals[:, 0], left, right)
+        err = np.vstack([mid - np.clip(vals[:, 1], left, right), np.clip(vals[:, 2], left, right) - mid])
+        ax.barh(y, mid, xerr=np.nan_to_num(err), color="tab:blue", alpha=0.7, capsize=3)
+        for yi, v in zip(y, vals[:, 0]):
+            if v < left or v > right:
+                ax.text(left if v < left else right, yi, f" {v:.0f}% ", va="center",
+                        ha="left" if v < left else "right", fontsize=8)
+        ax.set_xlim(left, right)
         ax.set_yticks(y, g.method)
         ax.axvline(0, color="k", lw=0.8)
         ax.axvline(100, color="k", lw=0.8, ls="--")
-        ax.set_xlabel("share of the baseline0-to-mpc cost gap closed [%]")
+        ax.set_xlabel("share of the baseline0-to-clairvoyant cost gap closed [%]")
         ax.set_title(s)
         ax.grid(alpha=0.3, axis="x")
     return save(fig, out, "headroom")

@@ -14,8 +14,11 @@ STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT CHECKED": "absent",
                 "KNOWN FAIL": "fail", "OUTSIDE BAND": "fail"}
 METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
                  "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",
-                 "dqn": "DQN", "oracle": "Oracle (energy-optimal plan replayed in traffic)",
-                 "mpc": "MPC (closed-loop re-planning with the signal plans)"}
+                 "dqn": "DQN", "oracle": "Oracle (cost-optimal plan replayed in traffic)",
+                 "mpc": "MPC (closed-loop re-planning with the signal plans)",
+                 "prl-family": "PRL-family (trained on the corridor family)",
+                 "mpdqn-family": "MP-DQN-family (trained on the corridor family)",
+                 "clairvoyant": "Clairvoyant (the signal plans and the case's future traffic)"}
 METRIC_UNITS = {"energy": ("Energy", "Wh"), "travel_time": ("Travel time", "s")}
 
 
@@ -144,7 +147,7 @@ def settings_of(df: pd.DataFrame) -> list[str]:
     return sorted(set(df.signals))
 
 
-BOUND_LABEL = "energy-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
+BOUND_LABEL = "cost-optimal plan"  # the oracle's plan (the bound's trajectory), drawn dashed
 
 
 def violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[str], signals: str) -> str:
@@ -159,7 +162,7 @@ def violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[st
 
 def trajectory_caption(drawn: list[str], signals: str, case: int) -> str:
     who = esc(" and ".join(label(m) for m in drawn))
-    plan = (" The dashed line is the energy-optimal plan, the trajectory of the case's bound (the ego alone on "
+    plan = (" The dashed line is the cost-optimal plan, the trajectory of the case's bound (the ego alone on "
             "the corridor; no energy curve)." if BOUND_LABEL in drawn else "")
     return (f"<b>fig:compare, {esc(signals)} signals, test case {case}</b> ({who}). Left: distance travelled [m] against "
             "time since entry [s], with the signal state at each stop line as green and red bars at its position; "

@@ -62,7 +62,7 @@ class RunOptions:
     run_id: str = "paper"  # run folder under logs (a plain name)
     logs: Path = Path("logs")  # log root
     models: Path = MODELS  # shipped policies, <method>-<signals>/s<seed>/
-    bounds: bool = False  # add each case's energy-optimal bound (bench.oracle DP)
+    bounds: bool = False  # add each case's cost-optimal bound (bench.oracle DP)
     train_seeds: list[int] | None = None  # training seeds of the learning methods; None: every shipped one
     factories: dict[str, str] = field(default_factory=dict)  # user method name -> package.module:factory
     agent_sha256: dict[str, str] = field(default_factory=dict)  # user method name -> sha256 of its --sb3 zip
@@ -95,7 +95,7 @@ def parser() -> Parser:
     users = registered()
     ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, *PLANNERS, *users],
                     help=f"among {', '.join([*METHODS, *PLANNERS, *users])} (default: every method with a shipped "
-                         f"policy; {ORACLE} (the energy-optimal plan replayed, a DP solve per case), {MPC} (re-plans "
+                         f"policy; {ORACLE} (the cost-optimal plan replayed, a DP solve per case), {MPC} (re-plans "
                          "on the DP in closed loop, a few s per case) and installed "
                          f"agents of the entry-point group {GROUP} run when named)")
     ap.add_argument("--planners", action="store_true",
@@ -120,7 +120,7 @@ def parser() -> Parser:
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")
     ap.add_argument("--models", type=Path, default=MODELS, help="shipped policies (default: models/)")
     ap.add_argument("--bounds", action="store_true",
-                    help="add each case's energy-optimal bound (bench.oracle DP; a few s per case, kept in "
+                    help="add each case's cost-optimal bound (bench.oracle DP; a few s per case, kept in "
                          "<run>/bounds.parquet): columns cost_bound and energy_bound")
     ap.add_argument("--train-seeds", nargs="+", type=int_in(0), default=None, metavar="SEED",
                     help="training seeds of the learning methods to evaluate, each >= 0 (default: every shipped one)")

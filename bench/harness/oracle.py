@@ -1,4 +1,4 @@
-"""The ``oracle`` method: the energy-optimal plan (``bench.oracle.dp``) replayed in SUMO.
+"""The ``oracle`` method: the cost-optimal plan (``bench.oracle.dp``) replayed in SUMO.
 
 At the first step of an episode the agent solves the case's bound with the ``"cost"`` objective
 (least E + phi T through the known fixed-time signals, the ego alone on the corridor) for the
@@ -35,7 +35,7 @@ OBJECTIVE = "cost"  # the bound the oracle replays: least E + phi T
 
 
 class OracleAgent(NotLearning):
-    """Replays the energy-optimal plan of each episode's departure; never learns."""
+    """Replays the cost-optimal plan of each episode's departure; never learns."""
 
     name = NAME
     action_interface = "longitudinal"

@@ -1,7 +1,7 @@
 """The built-in methods that plan with the signal plans (``bench.oracle``): never trained, run
 when named in ``--methods`` (and by default on the generalisation profile).
 
-- ``oracle``: the energy-optimal plan of the departure, replayed open loop in time;
+- ``oracle``: the cost-optimal plan of the departure, replayed open loop in time;
 - ``mpc``: re-plans on the DP's cost-to-go in closed loop, keeping the gap to the vehicle ahead;
 - ``clairvoyant``: re-plans in closed loop knowing the case's future traffic, and picks its lane:
   the top of the scale (``bench.harness.clairvoyant``).

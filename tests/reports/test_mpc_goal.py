@@ -73,11 +73,11 @@ def test_a_miss_on_travel_time_alone_names_that_half_and_prints_no_nan(tmp_path)
     assert "no step log of mpc carries its re-plans" in text
 
 
-def test_the_report_checks_the_goal_without_baseline0_and_says_what_headroom_needs(tmp_path):
+def test_the_report_checks_the_goal_and_leaves_out_headroom_without_clairvoyant(tmp_path):
     from ecodrive_bench.reports.bound_sections import headroom as _headroom
     from ecodrive_bench.reports.html_parts import Page
 
     lines = "\n".join(_headroom(_table(), {}, tmp_path, Page(run_name="t"), tmp_path))
-    assert "## Headroom" in lines and "needs baseline0 and mpc" in lines
+    assert "## Headroom" not in lines  # no clairvoyant in the run: no headroom section
     assert "### mpc against its goal" in lines and "**missed**" in lines
     assert _headroom(_table()[lambda d: d.method != "mpc"], {}, tmp_path, Page(run_name="t"), tmp_path) == []
