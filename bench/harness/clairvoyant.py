@@ -5,8 +5,10 @@ the case (the traffic is deterministic given the case's SUMO seed). Before its e
 calls ``prepare(env, case)``, which drives the case on the worker's own env to record that future
 (``bench.oracle.clairvoyant.Recording``, every eastbound vehicle at every step).
 
-Then it drives in closed loop, as ``mpc`` does, but with the future known instead of guessed: at
-every step it re-plans on the DP's cost-to-go table (``bench.oracle.mpc.replan``) over a
+Then it drives in closed loop, as ``mpc`` does, but with the future known instead of guessed. It
+follows the departure's first plan (the DP's free-flow optimum with Krauss' red cap, on the fine
+lattice) while the ego stays on it and no recorded vehicle ahead comes into its way over the
+look-ahead; from then on, at every step, it re-plans on the DP's cost-to-go table (``bench.oracle.mpc.replan``) over a
 ``LOOKAHEAD``-step look-ahead in which the vehicles ahead of it in its lane move as the recording
 says (``ahead_future``: each one's recorded path from now, shifted to where it is now), kept
 behind at SUMO's minGap plus Krauss' safe distance (``gap_caps``). Every ``LANE_EVERY`` steps it
@@ -33,12 +35,14 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.harness import clairvoyant_drives as drives
+from ecodrive_bench.bench.harness import shipped_bounds
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.not_learning import NotLearning
 from ecodrive_bench.bench.hosts import ENERGY_RTOL, close
 from ecodrive_bench.bench.oracle import mpc as planner
-from ecodrive_bench.bench.oracle.clairvoyant import Recording, Tracks, ahead_future, gap_caps
+from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
 from ecodrive_bench.bench.oracle.dp import Corridor
+from ecodrive_bench.bench.oracle.mpc import HEADWAY, MIN_GAP
 from ecodrive_bench.envs.config import ScenarioConfig
 
 NAME = "clairvoyant"
@@ -46,6 +50,8 @@ LOOKAHEAD = 40  # [steps] of known traffic in each re-plan
 LANE_EVERY = 5  # [steps] between looks at the lanes beside the ego's
 LANE_GAIN = 1.0  # [Wh] a lane beside is taken when its plan costs this much less
 ROUNDS = 3  # [-] record-and-drive rounds per case; the cheapest drive is the method's
+TOL_V = 0.05  # [m/s] speed drift that leaves the first plan for re-plans (as mpc)
+TOL_X = 0.6  # [m] position drift that does the same (beyond about a row of the global lattice)
 
 
 class ClairvoyantAgent(NotLearning):
@@ -64,6 +70,7 @@ class ClairvoyantAgent(NotLearning):
         self.table: planner.Table | None = None
         self.t0 = 0.0
         self.want: int | None = None  # the lane the ego is changing to
+        self.first: Any = None  # the departure's first plan (fine lattice), followed while it holds
         self.rounds: list[dict[str, Any]] = []
         self.lane_y: tuple[float, ...] = ()
         self.taken: list[tuple[int, float]] = []  # the drive's actions so far: (k index, acceleration)
@@ -123,18 +130,38 @@ class ClairvoyantAgent(NotLearning):
         self.taken.append((int(out[0]), float(out[1][0])))
         return out
 
+    def _follows(self, k: int, x: float, v: float, lane: int, ids: tuple[str, ...], rows: np.ndarray) -> bool:
+        """Whether the first plan still holds: the ego on it, and no vehicle ahead in its way over
+        the look-ahead (the recorded future, the same gap as ``gap_caps``)."""
+        p = self.first
+        if p is None or k + 1 >= len(p.v) or abs(v - p.v[k]) > TOL_V or abs(x - p.x[k]) > TOL_X:
+            return False
+        rear, speed = ahead_future(self.tracks, k, LOOKAHEAD, ids, rows, x, self.lane_y[lane])
+        m = np.arange(1, min(LOOKAHEAD, len(p.v) - 1 - k) + 1)
+        pv = p.v[k + m]
+        gap = np.maximum(0.0, HEADWAY * pv + (pv * pv - speed[m] * speed[m]) / (2.0 * -self.cfg.a_min))
+        return not np.any(p.x[k + m] > rear[m] - MIN_GAP - MARGIN - gap)
+
     def _closed_loop(self, obs: dict[str, np.ndarray], info: dict[str, Any]):
         cfg, dt = self.cfg, self.cfg.step_length
         if info["travel_time"] == 0.0 or self.table is None:  # the reset: a new departure
             if self.env is None:
                 raise RuntimeError("clairvoyant: prepare(env, case) records each case before its episode")
             self.t0 = float(info["time"])
-            _, self.table = planner.start(self.cor, cfg, self.t0)
+            table = shipped_bounds.table() if self.shipped is not None else None
+            first = table.mpc_plan(cfg, self.t0) if table is not None else None
+            self.first, self.table = planner.start(self.cor, cfg, self.t0, first_plan=first)
             self.want = None
         k = int(round((float(info["time"]) - self.t0) / dt))
         x, v = float(info["position"]), float(obs["logic"][cfg.observed_lanes + 1])
         lane = int(np.argmax(obs["logic"][:cfg.observed_lanes]))
         ids, rows = self.env.traffic()
+        if self.first is not None and self.want is None and self._follows(k, x, v, lane, ids, rows):
+            if k % LANE_EVERY != 0:  # on the first plan, between looks at the lanes beside
+                accel = min(max((float(self.first.v[k + 1]) - v) / dt, cfg.a_min), cfg.a_max)
+                return 1, np.full(3, accel, dtype=np.float32)
+        else:
+            self.first = None  # from here on every step re-plans on the global lattice
         here = self._plan(k, x, v, lane, ids, rows)
         if self.want == lane:
             self.want = None
@@ -146,7 +173,12 @@ class ClairvoyantAgent(NotLearning):
                     if there is not None and there.leader == "kept" and there.value < here.value - LANE_GAIN:
                         self.want = other
         k_index = 1 if self.want is None else (0 if self.want > lane else 2)
-        target = float(here.v[1]) if here is not None and len(here.v) > 1 else cfg.speed_limit
+        if self.want is not None:
+            self.first = None
+        if self.first is not None:
+            target = float(self.first.v[k + 1])
+        else:
+            target = float(here.v[1]) if here is not None and len(here.v) > 1 else cfg.speed_limit
         accel = min(max((target - v) / dt, cfg.a_min), cfg.a_max)
         return k_index, np.full(3, accel, dtype=np.float32)
 

@@ -1,0 +1,55 @@
+"""The ``clairvoyant`` method: on an empty corridor it drives the DP's Krauss-capped free-flow plan;
+a drive repeats exactly, traffic included (what the method relies on); it drives every case safely."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
+from ecodrive_bench.bench.harness.episode import make_env
+from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.oracle.dp import bound
+
+EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0}
+CASE = Case(index=0, sumo_seed=7, insert_time=210.0, group=0)
+
+
+@pytest.mark.slow
+def test_on_an_empty_corridor_it_drives_the_krauss_capped_plan():
+    cfg = setting("uncoordinated", EMPTY)
+    agent = ClairvoyantAgent(cfg, shipped=None)
+    env = make_env(agent, "uncoordinated", EMPTY)
+    try:
+        agent.prepare(env, CASE)
+        rec, cost = agent._drive(env, CASE)  # the chosen drive, again
+    finally:
+        env.close()
+    free = bound(cfg, rec.t0, "cost", krauss=True)  # the refined bound with Krauss' cap
+    assert len(rec.ego_x) == len(free.x) and np.max(np.abs(rec.ego_x - free.x)) < 1e-3  # step for step (float32 requests)
+    assert cost == pytest.approx(free.cost, rel=1e-6)  # SUMO's energy against the DP's model of it
+    assert all(len(ids) == 0 for ids, _ in rec.traffic)
+
+
+@pytest.mark.slow
+def test_a_chosen_drive_repeats_step_for_step_with_its_traffic():
+    cfg = setting("uncoordinated", None)
+    agent = ClairvoyantAgent(cfg, shipped=None)
+    env = make_env(agent, "uncoordinated", None)
+    try:
+        agent.prepare(env, CASE)
+        a, cost_a = agent._drive(env, CASE)
+        b, cost_b = agent._drive(env, CASE)
+    finally:
+        env.close()
+    assert cost_a == cost_b == agent.rounds[-1]["chosen_cost"] or cost_a == pytest.approx(agent.rounds[-1]["chosen_cost"], abs=1e-4)
+    assert a.t0 == b.t0 and np.array_equal(a.ego_x, b.ego_x) and len(a.traffic) == len(b.traffic)
+    for (ids_a, rows_a), (ids_b, rows_b) in zip(a.traffic, b.traffic):
+        assert ids_a == ids_b and np.array_equal(rows_a, rows_b)
+
+
+def test_an_episode_needs_its_case_prepared():
+    agent = ClairvoyantAgent(setting("coordinated", None), shipped=None)
+    obs = {"logic": np.zeros(9, dtype=np.float32), "grid": np.ones((60, 5), dtype=np.float32)}
+    with pytest.raises(RuntimeError, match="prepare"):
+        agent.act(obs, {"travel_time": 0.0, "time": 250.0, "position": 5.1, "action_mask": np.ones(3, int)})
