@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.harness.errors import install_hint
 from ecodrive_bench.bench.harness.planners import PLANNERS
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 from ecodrive_bench.bench.io import atomic_bytes
@@ -60,7 +61,7 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None
         ap.error(f"--address {args.address} is for --executor ray (got --executor {args.executor}); "
                  f"add --executor ray or drop --address")
     if args.executor == "ray" and importlib.util.find_spec("ray") is None:
-        ap.error("--executor ray needs Ray, which is not installed here: pip install '.[distributed]', "
+        ap.error(f"--executor ray needs Ray, which is not installed here: {install_hint('distributed')}, "
                  "or use --executor local")
 
 
@@ -227,7 +228,7 @@ def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callabl
     try:
         import ray
     except ImportError:
-        raise SystemExit("error: --executor ray needs Ray: pip install '.[distributed]'") from None
+        raise SystemExit(f"error: --executor ray needs Ray: {install_hint('distributed')}") from None
     root = str(Path(__file__).resolve().parents[2])
     if not ray.is_initialized():
         path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)  # a user agent's module too
