@@ -229,9 +229,12 @@ def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callabl
         import ray
     except ImportError:
         raise SystemExit(f"error: --executor ray needs Ray: {install_hint('distributed')}") from None
+    from ecodrive_bench.bench.harness.external import agent_folder
+
     root = str(Path(__file__).resolve().parents[2])
     if not ray.is_initialized():
-        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)  # a user agent's module too
+        # a user agent's module too: on PYTHONPATH, or in the current folder (external.load_factory)
+        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", ""), agent_folder()) if p)
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
                                   "runtime_env": {"env_vars": {"PYTHONPATH": path}}}
         if address:
