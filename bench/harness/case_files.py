@@ -131,13 +131,13 @@ def write_bounds(path: Path, workers: int, progress: bool = True) -> list[str]:
     exactly as a run measures them), then both bounds of each case with its plan. Returns error
     lines ([]: written); after an error nothing is written."""
     import pandas as pd
-    from tqdm import tqdm
 
     from ecodrive_bench.bench.harness.bounds import solve_entry, tasks_for
     from ecodrive_bench.bench.harness.executors import run_local
     from ecodrive_bench.bench.harness.options import RunOptions
     from ecodrive_bench.bench.harness.run import run
     from ecodrive_bench.bench.harness.shipped_bounds import REBUILD, save
+    from ecodrive_bench.bench.progress import bar
     from ecodrive_bench.envs.config import SIGNALS
 
     with tempfile.TemporaryDirectory(prefix="ecodrive-shipped-bounds-") as tmp:
@@ -147,8 +147,8 @@ def write_bounds(path: Path, workers: int, progress: bool = True) -> list[str]:
     if opts.failures:
         return [f"{path}: not written: {len(opts.failures)} baseline episode(s) failed (above); rerun: {REBUILD}"]
     tasks = tasks_for(results)
-    rows = list(tqdm(run_local(tasks, workers, solve_entry), total=len(tasks), desc="bounds", unit="case",
-                     disable=None if progress else True))  # None: off where stderr is no terminal
+    rows = list(bar(run_local(tasks, workers, solve_entry), total=len(tasks), desc="bounds", unit="case",
+                    enabled=progress))
     save(pd.DataFrame(rows), path)
     return []
 
