@@ -26,7 +26,7 @@ from typing import Any
 
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.errors import install_hint
-from ecodrive_bench.bench.harness.planners import PLANNERS
+from ecodrive_bench.bench.harness.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 from ecodrive_bench.bench.io import atomic_bytes
 
@@ -129,7 +129,11 @@ def run_task(task: Task) -> dict[str, Any]:
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
         _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
     if task.method in PLANNERS and key not in _AGENTS:
-        planner = PLANNERS[task.method]
+        from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
+        from ecodrive_bench.bench.harness.mpc import MPCAgent
+        from ecodrive_bench.bench.harness.oracle import OracleAgent
+
+        planner = {ORACLE: OracleAgent, MPC: MPCAgent, CLAIRVOYANT: ClairvoyantAgent}[task.method]
         _ENVS[env_key] = env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
         _AGENTS[key] = (planner(env.cfg), "")
     if env_key not in _ENVS:
