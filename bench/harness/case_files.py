@@ -93,16 +93,16 @@ def clairvoyant(prog: str, write: bool, workers: int) -> int:
 def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[str]:
     """Plan every fixed case of both settings and ship the chosen drives (about 10 s a case)."""
     import pandas as pd
-    from tqdm import tqdm
 
     from ecodrive_bench.bench.harness import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.clairvoyant import solve
     from ecodrive_bench.bench.harness.executors import run_local
+    from ecodrive_bench.bench.progress import bar
     from ecodrive_bench.envs.config import SIGNALS
 
     tasks = [(s, c) for s in SIGNALS for c in cases.load()]
-    rows = list(tqdm(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
-                     disable=None if progress else True))
+    rows = list(bar(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
+                    enabled=progress))
     drives.save(pd.DataFrame(rows), path)
     return []
 
