@@ -4,6 +4,7 @@ reinstall it. Each session calls the ``ecodrive`` command."""
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 
 import nox
@@ -12,6 +13,18 @@ import nox
 LATERAL_ALL = ("baseline", "baseline0", "prl", "mpdqn", "dqn", "ddpg")
 
 nox.options.default_venv_backend = "none"
+
+
+class _NoUvProbe(logging.Filter):
+    """Drops nox's "uv binary not found." line. nox looks for uv to list its optional backends
+    whichever backend a session uses, "none" too, and no option turns that look-up off; this
+    project creates no environment, so uv is never needed. Only that one line is dropped."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() != "uv binary not found."
+
+
+logging.getLogger("nox").addFilter(_NoUvProbe())
 nox.options.sessions = ["tests", "regression", "crosshost", "lint", "docs", "wheel"]
 
 

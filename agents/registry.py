@@ -1,12 +1,11 @@
-"""Method name -> agent construction, for the harness and the training command."""
+"""Method name -> agent construction, for the harness and the training command. The learning
+agents (torch) are imported when one is built, so the method names cost no torch import (a
+command's ``--help`` lists them)."""
 from __future__ import annotations
 
 from typing import Any
 
 from . import RULE_BASED as _RULE_CLASSES
-from .ddpg import DDPGAgent, DDPGConfig
-from .dqn import DQNAgent, DQNConfig
-from .pdqn import PDQNAgent, PDQNConfig
 
 LEARNING = ("prl", "mpdqn", "dqn", "ddpg")  # trainable methods (``ecodrive train --method``)
 FAMILY_SUFFIX = "-family"  # a learning method trained over the corridor family: its own method name
@@ -22,8 +21,18 @@ ACTION_INTERFACE.update({g: ACTION_INTERFACE[g.removesuffix(FAMILY_SUFFIX)] for 
 def base_method(method: str) -> str:
     """The algorithm a method runs: ``prl-family`` is PRL trained over the family."""
     return method.removesuffix(FAMILY_SUFFIX) if method in GENERALISTS else method
-ENV_OVERRIDES: dict[str, dict[str, Any]] = {
-    m: c.env_overrides for m, c in {**_RULE_CLASSES, "ddpg": DDPGAgent}.items() if c.env_overrides}
+
+
+def __getattr__(name: str) -> Any:
+    """``ENV_OVERRIDES``: method -> the scenario overrides its agent needs, read from the agent
+    classes on first use (DDPG's imports torch)."""
+    if name != "ENV_OVERRIDES":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from .ddpg import DDPGAgent
+
+    value = {m: c.env_overrides for m, c in {**_RULE_CLASSES, "ddpg": DDPGAgent}.items() if c.env_overrides}
+    globals()["ENV_OVERRIDES"] = value
+    return value
 
 
 def make_agent(method: str, observation_space, action_space, seed: int = 0, **config: Any):
@@ -31,6 +40,10 @@ def make_agent(method: str, observation_space, action_space, seed: int = 0, **co
     method = base_method(method)
     if method in _RULE_CLASSES:
         return _RULE_CLASSES[method]()
+    from .ddpg import DDPGAgent, DDPGConfig
+    from .dqn import DQNAgent, DQNConfig
+    from .pdqn import PDQNAgent, PDQNConfig
+
     if method in ("prl", "mpdqn"):
         return PDQNAgent(observation_space, action_space, PDQNConfig(seed=seed, multipass=method == "mpdqn", **config))
     if method == "dqn":

@@ -1,5 +1,5 @@
 """The packages read bottom-up: no import runs back up a layer, and reports read from ``bench``
-only the logs, the paper's numbers and the shared helpers (io, args, runlock, hosts). Modules are named by their
+only the logs, the paper's numbers and the shared helpers (io, args, runlock, hosts, progress). Modules are named by their
 folders (``bench.harness.run``); their import names carry the distribution's prefix
 (``ecodrive_bench.bench.harness.run``)."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 # a module may import from its own layer and those below it (lower number)
-LAYER = {"envs": 0, "agents": 0, "bench.paper": 1, "bench.io": 1, "bench.args": 1, "bench.runlock": 1, "bench.hosts": 1, "bench.logs": 2, "bench.oracle": 2, "bench.harness": 3,
+LAYER = {"envs": 0, "agents": 0, "bench.paper": 1, "bench.io": 1, "bench.args": 1, "bench.runlock": 1, "bench.hosts": 1, "bench.progress": 1, "bench.logs": 2, "bench.oracle": 2, "bench.harness": 3,
          "bench.training": 4, "bench.experiments": 5, "bench.regression": 6, "bench.perf": 6, "reports": 7,
          "bench.cli": 8}
 
@@ -49,7 +49,8 @@ def test_no_import_runs_back_up():
 
 def test_reports_read_only_logs_and_the_paper_from_bench():
     bad = [f"{p.name}: {imp}" for p in sorted((ROOT / "reports").glob("*.py")) for imp in imports(p)
-           if imp.startswith("bench") and layer_of(imp) not in ("bench.logs", "bench.paper", "bench.io", "bench.args", "bench.runlock", "bench.hosts")]
+           if imp.startswith("bench") and layer_of(imp) not in ("bench.logs", "bench.paper", "bench.io", "bench.args", "bench.runlock", "bench.hosts",
+                                                        "bench.progress")]
     assert not bad, "\n".join(bad)
 
 

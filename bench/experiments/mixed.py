@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
 from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local, run_ray
@@ -33,6 +32,7 @@ from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, polic
 from ecodrive_bench.bench.harness.provenance import git_sha
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import read_log, write_records
+from ecodrive_bench.bench.progress import bar
 from ecodrive_bench.envs.config import SIGNALS
 from ecodrive_bench.envs.sumo import SPEED_MODE_SAFE  # the safety layer every CV drives under, recorded per cell
 
@@ -270,8 +270,7 @@ def main(argv: list[str] | None = None) -> int:
     it = (run_local(todo, args.workers, run_cell) if args.executor == "local"
           else run_ray(todo, args.address, args.workers, run_cell))
     try:
-        for row in tqdm(it, total=len(cells), initial=len(cells) - len(todo), desc="cells", unit="cell",
-                        disable=None):  # None: off where stderr is no terminal (CI logs)
+        for row in bar(it, total=len(cells), initial=len(cells) - len(todo), desc="cells", unit="cell"):
             rows[row["mcap"]] = row
             write_table(rows, table)  # a killed sweep leaves the table of its finished cells
     except CheckpointError as e:

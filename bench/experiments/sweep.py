@@ -45,7 +45,6 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from tqdm import tqdm
 
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
 from ecodrive_bench.bench.experiments import store
@@ -53,6 +52,7 @@ from ecodrive_bench.bench.harness.executors import add_options, check_options, r
 from ecodrive_bench.bench.harness.policies import CheckpointError
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import episode_summary
+from ecodrive_bench.bench.progress import bar
 from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, recipe
 from ecodrive_bench.envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig, accepted_range
 
@@ -381,7 +381,7 @@ def _sweep(args: argparse.Namespace, todo: list[Job], root: Path) -> int:
         from ecodrive_bench.bench.experiments.sweep_ray import run_jobs
 
         it = run_jobs(todo, args.address, args.workers, run_job)
-    for row in tqdm(it, total=len(todo), desc=f"{args.study} jobs", unit="job", disable=None):  # no bar off a terminal
+    for row in bar(it, total=len(todo), desc=f"{args.study} jobs", unit="job"):
         rows.update(finished(root))  # and what a sweep running beside this one finished meanwhile
         rows[row["log_dir"]] = row
         _store(args.store, by_dir[row["log_dir"]])

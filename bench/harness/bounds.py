@@ -5,7 +5,7 @@ solved: ``cost_bound``, the least E + phi T through the signals (phi of the scen
 and ``energy_bound``, the least energy that arrives no later than SUMO's driver (``baseline``)
 did on that case, an equal-time comparison. Solutions are kept in ``<run>/bounds.parquet``,
 rewritten as each case finishes (a killed run loses only the cases in flight), and reused by a
-rerun (the DP takes a few seconds per case); a progress bar with an ETA shows the phase. A case
+rerun (the DP takes a few seconds per case); its progress with an ETA is on stderr (``bench.progress``). A case
 whose problem the bounds shipped with the fixed cases answer (``bench.harness.shipped_bounds``:
 same scenario, DP version and grid, departure and time limit) is read from there, not solved;
 its row says so in ``bound_source`` ("shipped", else "solved") and keeps in ``bound_wall_s`` the
@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from ecodrive_bench.bench.io import atomic_parquet
+from ecodrive_bench.bench.progress import bar as progress_bar
 
 NO_LIMIT = -1.0  # no baseline row, or it did not finish: no equal-time bound
 KEY = ["signals", "case", "depart_time", "time_limit"]
@@ -127,8 +127,8 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
 
         if rows:
             save()
-        with tqdm(total=len(rows) + len(todo), initial=len(rows), desc="bounds", unit="case",
-                  disable=None if progress else True) as bar:  # None: off where stderr is no terminal
+        with progress_bar(total=len(rows) + len(todo), initial=len(rows), desc="bounds", unit="case",
+                          enabled=progress) as bar:
             for row in runner(todo, workers, solve) if todo else ():
                 rows.append(row)
                 save()

@@ -93,16 +93,16 @@ def clairvoyant(prog: str, write: bool, workers: int) -> int:
 def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[str]:
     """Plan every fixed case of both settings and ship the chosen drives (about 10 s a case)."""
     import pandas as pd
-    from tqdm import tqdm
 
     from ecodrive_bench.bench.harness import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.clairvoyant import solve
     from ecodrive_bench.bench.harness.executors import run_local
+    from ecodrive_bench.bench.progress import bar
     from ecodrive_bench.envs.config import SIGNALS
 
     tasks = [(s, c) for s in SIGNALS for c in cases.load()]
-    rows = list(tqdm(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
-                     disable=None if progress else True))
+    rows = list(bar(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
+                    enabled=progress))
     drives.save(pd.DataFrame(rows), path)
     return []
 
@@ -131,13 +131,13 @@ def write_bounds(path: Path, workers: int, progress: bool = True) -> list[str]:
     exactly as a run measures them), then both bounds of each case with its plan. Returns error
     lines ([]: written); after an error nothing is written."""
     import pandas as pd
-    from tqdm import tqdm
 
     from ecodrive_bench.bench.harness.bounds import solve_entry, tasks_for
     from ecodrive_bench.bench.harness.executors import run_local
     from ecodrive_bench.bench.harness.options import RunOptions
     from ecodrive_bench.bench.harness.run import run
     from ecodrive_bench.bench.harness.shipped_bounds import REBUILD, save
+    from ecodrive_bench.bench.progress import bar
     from ecodrive_bench.envs.config import SIGNALS
 
     with tempfile.TemporaryDirectory(prefix="ecodrive-shipped-bounds-") as tmp:
@@ -147,8 +147,8 @@ def write_bounds(path: Path, workers: int, progress: bool = True) -> list[str]:
     if opts.failures:
         return [f"{path}: not written: {len(opts.failures)} baseline episode(s) failed (above); rerun: {REBUILD}"]
     tasks = tasks_for(results)
-    rows = list(tqdm(run_local(tasks, workers, solve_entry), total=len(tasks), desc="bounds", unit="case",
-                     disable=None if progress else True))  # None: off where stderr is no terminal
+    rows = list(bar(run_local(tasks, workers, solve_entry), total=len(tasks), desc="bounds", unit="case",
+                    enabled=progress))
     save(pd.DataFrame(rows), path)
     return []
 

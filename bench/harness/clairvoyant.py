@@ -38,6 +38,7 @@ from ecodrive_bench.bench.harness import clairvoyant_drives as drives
 from ecodrive_bench.bench.harness import shipped_bounds
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.not_learning import NotLearning
+from ecodrive_bench.bench.harness.planners import CLAIRVOYANT as NAME
 from ecodrive_bench.bench.hosts import ENERGY_RTOL, close
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
@@ -45,7 +46,6 @@ from ecodrive_bench.bench.oracle.dp import Corridor
 from ecodrive_bench.bench.oracle.mpc import HEADWAY, MIN_GAP
 from ecodrive_bench.envs.config import ScenarioConfig
 
-NAME = "clairvoyant"
 LOOKAHEAD = 40  # [steps] of known traffic in each re-plan
 LANE_EVERY = 5  # [steps] between looks at the lanes beside the ego's
 LANE_GAIN = 1.0  # [Wh] a lane beside is taken when its plan costs this much less

@@ -10,19 +10,13 @@ import numpy as np
 from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
+from ecodrive_bench.bench.harness.scenarios import deep_merge
 from ecodrive_bench.bench.logs.mcaplog import EpisodeLog, meta_json
 from ecodrive_bench.envs.env import EcoDriveEnv
 from ecodrive_bench.envs.scenario import LANE_WIDTH
 from ecodrive_bench.envs.sumo import sumo_version
 
 STOP_SPEED = 0.1  # [m/s] below this the ego counts as stopped
-
-
-def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
 
 
 def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = None,

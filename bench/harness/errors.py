@@ -10,3 +10,9 @@ class AgentError(ValueError):
 
 class UsageError(Exception):
     """Bad input to ``ecodrive run`` found after parsing; printed as one line, nothing touched."""
+
+
+def install_hint(extra: str) -> str:
+    """The command that adds the optional ``extra``, as the README installs the package (editable,
+    from the checkout)."""
+    return f'pip install -e ".[{extra}]" in the checkout'

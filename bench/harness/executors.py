@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.bench.harness.cases import Case
-from ecodrive_bench.bench.harness.planners import PLANNERS
+from ecodrive_bench.bench.harness.errors import install_hint
+from ecodrive_bench.bench.harness.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 from ecodrive_bench.bench.io import atomic_bytes
 
@@ -60,7 +61,7 @@ def check_options(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None
         ap.error(f"--address {args.address} is for --executor ray (got --executor {args.executor}); "
                  f"add --executor ray or drop --address")
     if args.executor == "ray" and importlib.util.find_spec("ray") is None:
-        ap.error("--executor ray needs Ray, which is not installed here: pip install '.[distributed]', "
+        ap.error(f"--executor ray needs Ray, which is not installed here: {install_hint('distributed')}, "
                  "or use --executor local")
 
 
@@ -128,7 +129,11 @@ def run_task(task: Task) -> dict[str, Any]:
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
         _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
     if task.method in PLANNERS and key not in _AGENTS:
-        planner = PLANNERS[task.method]
+        from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
+        from ecodrive_bench.bench.harness.mpc import MPCAgent
+        from ecodrive_bench.bench.harness.oracle import OracleAgent
+
+        planner = {ORACLE: OracleAgent, MPC: MPCAgent, CLAIRVOYANT: ClairvoyantAgent}[task.method]
         _ENVS[env_key] = env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
         _AGENTS[key] = (planner(env.cfg), "")
     if env_key not in _ENVS:
@@ -227,10 +232,13 @@ def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callabl
     try:
         import ray
     except ImportError:
-        raise SystemExit("error: --executor ray needs Ray: pip install '.[distributed]'") from None
+        raise SystemExit(f"error: --executor ray needs Ray: {install_hint('distributed')}") from None
+    from ecodrive_bench.bench.harness.external import agent_folder
+
     root = str(Path(__file__).resolve().parents[2])
     if not ray.is_initialized():
-        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)  # a user agent's module too
+        # a user agent's module too: on PYTHONPATH, or in the current folder (external.load_factory)
+        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", ""), agent_folder()) if p)
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
                                   "runtime_env": {"env_vars": {"PYTHONPATH": path}}}
         if address:

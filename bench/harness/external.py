@@ -3,7 +3,9 @@
 Two ways in, both giving a *factory*: a callable ``factory(observation_space, action_space)``
 that returns an object satisfying ``agents.base.Agent``:
 
-- ``ecodrive run --agent package.module:factory [--name NAME]`` imports it by path;
+- ``ecodrive run --agent package.module:factory [--name NAME]`` imports it by path, from the
+  installed packages, ``PYTHONPATH`` or the current folder (``agent_folder``: the folder a
+  ``python -m`` run would look in, put after the others so it shadows nothing);
 - an installed package registers it under the entry-point group ``ecodrive_bench.agents``
   (``[project.entry-points."ecodrive_bench.agents"] theirs = "theirpkg.agent:make"``), and
   ``ecodrive run --methods theirs`` finds it.
@@ -16,6 +18,7 @@ action outside it stops the run with one line naming the value and the space.
 from __future__ import annotations
 
 import importlib
+import os
 import re
 import sys
 from collections.abc import Callable
@@ -49,9 +52,21 @@ def registered() -> dict[str, str]:
     return out
 
 
+def agent_folder() -> str | None:
+    """The current folder, absolute, where an ``--agent`` module is looked up after ``sys.path``
+    (as ``python -m`` would find it there; the console script's ``sys.path`` lacks it). None
+    where the folder is gone. The pool's workers run in the same folder; ``run_ray`` hands it to
+    Ray's in ``PYTHONPATH``."""
+    try:
+        return os.getcwd()
+    except OSError:
+        return None
+
+
 def load_factory(spec: str) -> Callable[..., Any]:
     """The factory named by ``package.module:factory`` (or, for ``sb3:ALGO:PATH``, the one that
-    loads a Stable-Baselines3 model: ``bench.harness.sb3``)."""
+    loads a Stable-Baselines3 model: ``bench.harness.sb3``); the module is imported from
+    ``sys.path``, then from ``agent_folder()``."""
     if spec.startswith("sb3:"):
         from ecodrive_bench.bench.harness import sb3
 
@@ -59,8 +74,18 @@ def load_factory(spec: str) -> Callable[..., Any]:
     if not SPEC.match(spec):
         raise AgentError(f"--agent {spec!r} is not accepted; expected package.module:factory")
     module, attr = spec.split(":")
+    here = agent_folder()
+    if here is not None and here not in {os.path.abspath(p or os.curdir) for p in sys.path}:
+        sys.path.append(here)
     try:
         mod = importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        if e.name is None or not (module == e.name or module.startswith(e.name + ".")):
+            raise AgentError(f"--agent {spec!r}: cannot import {module} ({type(e).__name__}: {e})") from None
+        top = module.split(".")[0]  # the user's own module (or its package) is not found
+        raise AgentError(f"--agent {spec!r}: cannot import {module}: no module {e.name!r} in the current folder "
+                         f"({here or 'gone'}) nor on PYTHONPATH; run from the folder that holds {top}.py (or the "
+                         f"package {top}/), or add that folder to PYTHONPATH") from None
     except Exception as e:  # the user's module: any error while importing it
         raise AgentError(f"--agent {spec!r}: cannot import {module} ({type(e).__name__}: {e})") from None
     factory = getattr(mod, attr, None)

@@ -45,11 +45,11 @@ import numpy as np
 
 from ecodrive_bench.bench.harness import shipped_bounds
 from ecodrive_bench.bench.harness.not_learning import NotLearning
+from ecodrive_bench.bench.harness.planners import MPC as NAME
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan
 from ecodrive_bench.envs.config import ScenarioConfig
 
-NAME = "mpc"
 GREEN_MARGINS = (0.0, 0.0)  # [s] planned crossings keep off the first / last seconds of each green (variant)
 PLAN_HEADWAY = 0.0  # [s] time gap the plan keeps to the vehicle ahead, beyond MIN_GAP (validation: docs/mpc.md)
 TOL_V = 0.05  # [m/s] speed drift that triggers a re-plan

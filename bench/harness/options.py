@@ -102,7 +102,9 @@ def parser() -> Parser:
                     help=f"also run the planners, {ORACLE} and {MPC}, besides the methods (the default ones or "
                          "--methods), in the same pool: one command for the main job (nox -s benchmark)")
     ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
-                    help="also evaluate your own agent: factory(observation_space, action_space) -> ecodrive_bench.agents.base.Agent")
+                    help="also evaluate your own agent: factory(observation_space, action_space) -> "
+                         "ecodrive_bench.agents.base.Agent; MODULE is imported from the installed packages, "
+                         "PYTHONPATH or the current folder (as `python -m` finds it there)")
     ap.add_argument("--sb3", type=Path, default=None, metavar="MODEL.zip",
                     help="also evaluate a Stable-Baselines3 model trained on EcoDrive-v0 (needs the sb3 extra; "
                          "nothing in the zip is unpickled but its spaces and policy class and kwargs, through an "

@@ -27,10 +27,10 @@ import numpy as np
 
 from ecodrive_bench.bench.harness import shipped_bounds
 from ecodrive_bench.bench.harness.not_learning import NotLearning
+from ecodrive_bench.bench.harness.planners import ORACLE as NAME
 from ecodrive_bench.bench.oracle.dp import Plan, bound
 from ecodrive_bench.envs.config import ScenarioConfig
 
-NAME = "oracle"
 OBJECTIVE = "cost"  # the bound the oracle replays: least E + phi T
 
 

@@ -5,15 +5,14 @@ when named in ``--methods`` (and by default on the generalisation profile).
 - ``mpc``: re-plans on the DP's cost-to-go in closed loop, keeping the gap to the vehicle ahead;
 - ``clairvoyant``: re-plans in closed loop knowing the case's future traffic, and picks its lane:
   the top of the scale (``bench.harness.clairvoyant``).
+
+Their names only: the agents (``bench.harness.oracle.OracleAgent``, ``bench.harness.mpc.MPCAgent``,
+``bench.harness.clairvoyant.ClairvoyantAgent``, built from the env's config) import the DP, which
+the options and a command's ``--help`` need not.
 """
 from __future__ import annotations
 
-from ecodrive_bench.bench.harness.clairvoyant import NAME as CLAIRVOYANT
-from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
-from ecodrive_bench.bench.harness.mpc import NAME as MPC
-from ecodrive_bench.bench.harness.mpc import MPCAgent
-from ecodrive_bench.bench.harness.oracle import NAME as ORACLE
-from ecodrive_bench.bench.harness.oracle import OracleAgent
-
-PLANNERS = {ORACLE: OracleAgent, MPC: MPCAgent, CLAIRVOYANT: ClairvoyantAgent}  # name -> agent class, built from the env's config
-__all__ = ["CLAIRVOYANT", "MPC", "ORACLE", "PLANNERS"]
+ORACLE = "oracle"
+MPC = "mpc"
+CLAIRVOYANT = "clairvoyant"
+PLANNERS = (ORACLE, MPC, CLAIRVOYANT)

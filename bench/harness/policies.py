@@ -14,8 +14,6 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import torch
-
 from ecodrive_bench.bench.io import atomic_json, atomic_torch_save, sha256
 
 if TYPE_CHECKING:
@@ -32,6 +30,8 @@ def load_torch(path: Path) -> Any:
     """A torch file read as data (``weights_only=True``): tensors and plain Python containers
     only. A pickle that names any other global (a planted ``__reduce__`` payload, say) is a
     ``CheckpointError``, and nothing in it runs."""
+    import torch  # here, not at the top: the folders and errors of this module cost no torch import
+
     try:
         with warnings.catch_warnings():  # a raw pickle (no torch zip) warns of its protocol before it is refused
             warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
@@ -130,6 +130,8 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
 
 def _non_finite(state: Any, where: str = "") -> list[str]:
     """Paths of the floating-point tensors in ``state`` (nested dicts, lists) holding NaN or inf."""
+    import torch
+
     if isinstance(state, dict):
         return [p for k, v in state.items() for p in _non_finite(v, f"{where}.{k}" if where else str(k))]
     if isinstance(state, (list, tuple)):
@@ -155,6 +157,8 @@ def check_policy(folder: Path, method: str) -> None:
     its state loaded into a fresh agent on the spaces it was trained with. The episodes' workers
     load it again; this is the parent's check, so a bad file is one error before any folder is
     written."""
+    import torch
+
     state, manifest = load_policy(folder, method)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # a few small networks: threads only contend

@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from ecodrive_bench.agents.registry import METHODS, POLICY_METHODS
 from ecodrive_bench.bench import runlock
@@ -37,6 +36,7 @@ from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, pack
 from ecodrive_bench.bench.harness.scenarios import Evaluation
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import episode_summary, resolve_log
+from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.envs.config import ScenarioConfig
 
 KEEP = ("method", "signals", "train_seed", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
@@ -202,8 +202,8 @@ def execute(opts: RunOptions, todo: Plan, progress: bool = True) -> tuple[list[d
     it = (run_local(todo.tasks, opts.workers, on_failure=failed, skip=failed.skip) if opts.executor == "local"
           else run_ray(todo.tasks, opts.address, opts.workers, on_failure=failed, skip=failed.skip))
     rows = []
-    with tqdm(total=len(todo.reused) + len(todo.tasks), initial=len(todo.reused), desc="episodes", unit="ep",
-              disable=None if progress else True) as bar:  # None: off where stderr is no terminal (CI logs)
+    with progress_bar(total=len(todo.reused) + len(todo.tasks), initial=len(todo.reused), desc="episodes",
+                      unit="ep", enabled=progress) as bar:
         for row in it:
             rows.append(row)
             bar.update(1)

@@ -1,23 +1,25 @@
 """``ecodrive run``: the profile dispatch above the two runners (one scenario:
 ``bench.harness.run``; the held-out corridors: ``bench.harness.generalisation_run``), and the
-command's exit codes. Its options: ``bench.harness.options``."""
+command's exit codes. Its options: ``bench.harness.options``, which import neither torch nor the
+runners, so ``--help`` and bad options answer at once; the runners are imported after parsing."""
 from __future__ import annotations
 
 import sys
 
 from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.args import InputError, fail
-from ecodrive_bench.bench.harness import failures
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError
-from ecodrive_bench.bench.harness.generalisation_run import run_family
 from ecodrive_bench.bench.harness.options import parse, parser
 from ecodrive_bench.bench.harness.policies import CheckpointError
-from ecodrive_bench.bench.harness.run import run
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     opts = parse(argv)
+    from ecodrive_bench.bench.harness import failures
+    from ecodrive_bench.bench.harness.generalisation_run import run_family
+    from ecodrive_bench.bench.harness.run import run
+
     try:
         df = run_family(opts) if opts.profile == "generalisation" else run(opts)
     except (UsageError, CheckpointError, AgentError, InputError, runlock.InUse) as e:

@@ -27,12 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.harness.errors import AgentError
+from ecodrive_bench.bench.harness.errors import AgentError, install_hint
 from ecodrive_bench.bench.harness.sb3_zip import Saved, ZipError, read
 
 ALGOS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")  # Stable-Baselines3's algorithms (not sb3-contrib)
 PREFIX = "sb3:"
-EXTRA = "install the sb3 extra: pip install -e .[sb3]"
+EXTRA = f"install the sb3 extra: {install_hint('sb3')}"
 
 
 def require() -> Any:

@@ -20,8 +20,15 @@ from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.bench.args import MAX_JSON_BYTES, MAX_JSON_DEPTH, InputError, depth, one_line, read_json
-from ecodrive_bench.bench.harness.episode import deep_merge
 from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
+
+
+def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``over`` on top, nested dicts merged key by key."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
 
 
 def add_options(ap) -> None:

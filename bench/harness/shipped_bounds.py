@@ -254,9 +254,8 @@ def check(path: Path = FILE, per_setting: int = CHECK_PER_SETTING, signals: tupl
     """One line per drift ([]: none): a file that cannot be read; a setting whose rows are for
     another problem (scenario, DP version, grid) or that lacks fixed cases; and, on ``sample``'s
     rows of each setting, a stored bound or plan that is not exactly what the DP solves now."""
-    from tqdm import tqdm
-
     from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.progress import bar
 
     try:
         tab = read(path)
@@ -283,7 +282,7 @@ def check(path: Path = FILE, per_setting: int = CHECK_PER_SETTING, signals: tupl
             lines.append(f"{path}: no {s} rows for {len(missing)} of the {len(fixed)} fixed cases (first: case "
                          f"{missing[0]}); rebuild: {REBUILD}")
         todo += [(s, cfg, r) for r in sample(rows, per_setting).itertuples(index=False)]
-    for s, cfg, r in tqdm(todo, desc="check bounds", unit="case", disable=None if progress else True):
+    for s, cfg, r in bar(todo, desc="check bounds", unit="case", enabled=progress):
         lines += compare(path, s, cfg, r)
     return lines
 

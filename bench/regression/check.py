@@ -184,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
         checks = preflight(opts)  # a refused command prints its one error line only
         if args.logs is None:  # every episode and cell is written there as it finishes: a kill keeps them
             print(f"regression: logs in {logs} (after a kill, --logs {logs} reuses what finished)", file=sys.stderr)
-        df = run(opts, checks=checks)  # progress bars on stderr where it is a terminal
+        df = run(opts, checks=checks)  # progress on stderr: bars on a terminal, lines in a log
     except (UsageError, CheckpointError, AgentError) as e:  # a shipped policy that cannot drive included
         if args.logs is None:
             _drop_if_empty(Path(logs))

@@ -14,13 +14,13 @@ import tempfile
 from pathlib import Path
 
 import pandas as pd
-from tqdm import tqdm
 
 from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, CI_MPRS, Cell, _done, run_cell
 from ecodrive_bench.bench.harness.executors import run_local
 from ecodrive_bench.bench.harness.policies import MODELS, policy_dir
 from ecodrive_bench.bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
 from ecodrive_bench.bench.paper import HDV_TOL, SPEED_LOSS_TOL
+from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.envs.config import SIGNALS
 
 
@@ -28,8 +28,8 @@ def run_cells(workers: int = 2, logs: Path | None = None, progress: bool = True)
     """The CI cells, in cell order, or None when a PRL policy is missing for a setting. Each cell
     writes its file under ``logs`` as it finishes; a cell already finished there (a killed check
     run again on the same folder) is read back, not rerun, and one made with other settings raises
-    ``CellMismatch`` (``bench.experiments.mixed``). A bar with an ETA shows the cells on a
-    terminal (stderr; ``progress=False``: never)."""
+    ``CellMismatch`` (``bench.experiments.mixed``). The cells' progress with an ETA is on
+    stderr (``bench.progress``: a bar on a terminal, lines in a log; ``progress=False``: none)."""
     if not all((policy_dir("prl", s) / "manifest.json").is_file() for s in SIGNALS):
         return None
     root = Path(logs or tempfile.mkdtemp(prefix="ecodrive-mixed-"))
@@ -39,8 +39,7 @@ def run_cells(workers: int = 2, logs: Path | None = None, progress: bool = True)
     todo = [c for c in cells if c.path not in rows]
     for c in todo:
         Path(c.path).parent.mkdir(parents=True, exist_ok=True)
-    with tqdm(total=len(cells), initial=len(rows), desc="mixed cells", unit="cell",
-              disable=None if progress else True) as bar:  # None: off where stderr is no terminal
+    with progress_bar(total=len(cells), initial=len(rows), desc="mixed cells", unit="cell", enabled=progress) as bar:
         for row in run_local(todo, workers, run_cell):
             rows[row["mcap"]] = row
             bar.update(1)

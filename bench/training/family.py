@@ -46,12 +46,12 @@ def validate(method: str, signals: str, scenario: dict[str, Any], agent, n: int 
              progress: bool = False) -> dict[str, float]:
     """Mean greedy energy, travel time and return over ``cases(n)`` (the corridor's overrides on
     ``scenario``, observing ``OBS_LANES`` lanes as in training)."""
-    from tqdm import tqdm
+    from ecodrive_bench.bench.progress import bar as progress_bar
 
     rows = []
     todo = cases(n)
-    bar = tqdm(total=sum(len(c) for _, c in todo), desc="validation", unit="ep", leave=False,
-               disable=None if progress else True)
+    bar = progress_bar(total=sum(len(c) for _, c in todo), desc="validation", unit="ep", leave=False,
+                       enabled=progress)
     for corridor, some in todo:
         env = make_env(method, signals, {**scenario, **corridor.scenario, "obs_lanes": OBS_LANES})
         try:

@@ -38,7 +38,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch
-from tqdm import tqdm
 
 from ecodrive_bench.agents.device import parse as parse_device
 from ecodrive_bench.agents.registry import LEARNING, make_agent
@@ -50,6 +49,7 @@ from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
 from ecodrive_bench.bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import write_train_log
+from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.bench.training import family as generalist
 from ecodrive_bench.bench.training.braking import NO_SCRIPT, RATE_RANGE, BrakingLeaders
 from ecodrive_bench.bench.training.braking import spec as braking_spec
@@ -266,8 +266,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         except CheckpointError:
             env.close()
             raise
-    bar = tqdm(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep",
-               disable=None if progress else True)  # None: off where stderr is no terminal
+    bar = progress_bar(total=episodes, initial=start, desc=f"{method}/{signals}", unit="ep", enabled=progress)
     done_here = 0
     t_call = time.perf_counter()
     for ep in range(start, episodes):
@@ -361,9 +360,9 @@ def validation_cases(cfg, n: int) -> list[Case]:
 
 def validate(env, agent, n: int, progress: bool = False) -> dict[str, float]:
     """Mean greedy energy, travel time and return on ``n`` validation cases; ``progress``: a bar
-    under training's on a terminal, which stands still while a checkpoint's ``n`` episodes run."""
-    cases = tqdm(validation_cases(env.cfg, n), desc="validation", unit="ep", leave=False,
-                 disable=None if progress else True)
+    under training's on a terminal, which stands still while a checkpoint's ``n`` episodes run
+    (lines in a log: ``bench.progress``)."""
+    cases = progress_bar(validation_cases(env.cfg, n), desc="validation", unit="ep", leave=False, enabled=progress)
     rows = [run_episode(env, agent, case, "validation") for case in cases]
     return {k: round(float(np.mean([r[col] for r in rows])), 4)
             for k, col in (("energy", "energy"), ("travel_time", "travel_time"), ("return", "return_"))}

@@ -101,3 +101,44 @@ def test_a_module_run_with_python_m_names_itself_so():
                          capture_output=True, text=True)
     assert out.returncode == 2
     assert out.stderr.startswith("python -m ecodrive_bench.bench.harness.run_command: error: ")
+
+
+# commands whose --help still imports torch or the report's stack: train and train-all list the
+# agents' config fields (dataclasses beside the torch networks); report builds its parser in
+# reports/build.py, which imports pandas and matplotlib at the top
+HEAVY_HELP = ("train", "train-all", "report")
+# what a help must not import: torch for every other command; for `ecodrive` and `ecodrive run`
+# also the runners' stack (SUMO, the compiled kernels, the tables)
+NOT_FOR_HELP = {"": ("torch", "numpy", "pandas", "libsumo", "numba", "scipy", "mcap"),
+                "run": ("torch", "pandas", "libsumo", "numba", "scipy", "mcap", "matplotlib")}
+HELP_IMPORTS = """
+import contextlib, io, json, sys
+from ecodrive_bench.bench.cli import main
+sys.argv = ["ecodrive"]
+seen = {}
+for command in json.loads(sys.argv_commands):
+    with contextlib.redirect_stdout(io.StringIO()):
+        try:
+            main([command, "--help"] if command else ["--help"])
+        except SystemExit as e:
+            assert e.code == 0, (command, e.code)
+    seen[command] = sorted(name for name in sys.modules if "." not in name)
+print(json.dumps(seen))
+"""
+
+
+def test_help_answers_without_importing_torch_or_the_runners():
+    """``ecodrive --help`` and ``ecodrive COMMAND --help`` build the parser only: the commands
+    import their runners after parsing. One interpreter asks each command in turn (``ecodrive``
+    and ``run`` first), so a module seen after a command was imported by it or by one before."""
+    import json
+
+    commands = ["", "run", *(c for c in COMMANDS if c not in (*HEAVY_HELP, "run"))]
+    code = HELP_IMPORTS.replace("sys.argv_commands", repr(json.dumps(commands)))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    seen = json.loads(out.stdout)
+    for command in commands:
+        banned = NOT_FOR_HELP.get(command, ("torch",))
+        assert not set(seen[command]) & set(banned), f"`ecodrive {command} --help` imported " \
+                                                     f"{sorted(set(seen[command]) & set(banned))}"

@@ -85,6 +85,6 @@ def test_ray_missing_is_one_line_before_anything_is_written(command, main, argv,
         (main or run_main)([*argv, str(tmp_path / "out"), "--executor", "ray"])
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"{command}: error: --executor ray needs Ray, which is not installed here: pip install "
-                   f"'.[distributed]', or use --executor local"]
+    assert err == [f"{command}: error: --executor ray needs Ray, which is not installed here: pip install -e "
+                   f"\".[distributed]\" in the checkout, or use --executor local"]
     assert not (tmp_path / "out").exists()

@@ -363,7 +363,7 @@ def test_bad_cases_or_store_are_one_line_before_any_training(tmp_path, monkeypat
     assert afile.read_text() == "precious\n" and not (tmp_path / "logs").exists()
 
 
-def test_a_sweep_writes_no_bar_to_a_log(tmp_path, monkeypatch, capsys):
+def test_a_sweep_writes_plain_progress_lines_to_a_log(tmp_path, monkeypatch, capsys):
     argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--logs", str(tmp_path), "--run-id", "t"]
 
     def run_job(job):
@@ -376,4 +376,7 @@ def test_a_sweep_writes_no_bar_to_a_log(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sweep, "run_job", run_job)
     monkeypatch.setattr(sweep, "run_local", lambda todo, workers, fn: (fn(t) for t in todo))
     assert sweep.main(argv) == 0
-    assert "reward jobs" not in capsys.readouterr().err  # pytest's captured stderr is no terminal
+    err = capsys.readouterr().err  # pytest's captured stderr is no terminal: lines, not a bar (bench.progress)
+    jobs = [line for line in err.splitlines() if line.startswith("reward jobs: ")]
+    assert "\r" not in err and jobs[0] == "reward jobs: 0/1 (0%), starting" and jobs[-1].startswith("reward jobs: 1/1 (100%)")
+    assert jobs[-1].endswith(", done") and len(jobs) == 2

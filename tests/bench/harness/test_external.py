@@ -144,3 +144,35 @@ def test_the_documented_agent_builds_under_each_action_interface(tmp_path, monke
                                       .replace("make.action_interface = Cruise.action_interface", ""))
     with pytest.raises(AgentError, match="set the factory's action_interface = 'longitudinal' too"):
         build("bare:make", None, None)
+
+
+def test_the_documented_agent_runs_from_its_own_folder(tmp_path):
+    """docs/your-agent.md's ``myagents.py`` in the folder ``ecodrive run`` is started from, as the
+    console script (whose ``sys.path`` lacks the current folder), with no PYTHONPATH: it is found."""
+    import os
+    import re
+    import subprocess
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[3] / "docs" / "your-agent.md").read_text()
+    (tmp_path / "myagents.py").write_text(re.search(r"```python\n(# myagents.py.*?)```", doc, re.S).group(1))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = subprocess.run([str(Path(sys.executable).parent / "ecodrive"), "run", "--profile", "smoke", "--methods",
+                          "baseline", "--signals", "coordinated", "--agent", "myagents:make", "--name", "cruise",
+                          "--workers", "2", "--logs", "logs"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr
+    table = pd.read_parquet(tmp_path / "logs" / "smoke" / "results.parquet")
+    assert sorted(set(table.method)) == ["baseline", "cruise"] and len(table) == 6
+
+
+def test_an_agent_module_found_nowhere_names_the_folder_and_the_fix(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    with pytest.raises(AgentError) as e:
+        load_factory("myagents_nowhere:make")
+    assert f"no module 'myagents_nowhere' in the current folder ({tmp_path})" in str(e.value)
+    assert "run from the folder that holds myagents_nowhere.py" in str(e.value) and "PYTHONPATH" in str(e.value)
+    (tmp_path / "myagents_here.py").write_text("def make(observation_space, action_space):\n    return None\n")
+    sys.modules.pop("myagents_here", None)
+    assert callable(load_factory("myagents_here:make"))  # from the current folder, as `python -m` finds it
