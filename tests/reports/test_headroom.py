@@ -2,7 +2,6 @@
 cases and seeds, the cases where the reference is beaten, and the figure's axis."""
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 import pytest
 
