@@ -11,7 +11,7 @@ import pandas as pd
 DASH = "\u2013"
 MINUS = "\u2212"
 STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT CHECKED": "absent",
-                "KNOWN FAIL": "fail", "OUTSIDE BAND": "fail"}
+                "KNOWN FAIL": "known", "OUTSIDE BAND": "known"}
 METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
                  "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",
                  "dqn": "DQN", "oracle": "Oracle (cost-optimal plan replayed in traffic)",

@@ -5,7 +5,8 @@ from string import Template
 
 CSS = """
 :root { --fg:#1d2327; --muted:#5f6b73; --line:#d9dee2; --bg:#ffffff; --band:#f5f7f9; --accent:#1f5f99;
-        --pass:#1a7f37; --pass-bg:#e6f4ea; --fail:#b42318; --fail-bg:#fdecea; --absent:#6b7280; --absent-bg:#eef0f2; }
+        --pass:#1a7f37; --pass-bg:#e6f4ea; --fail:#b42318; --fail-bg:#fdecea; --absent:#6b7280; --absent-bg:#eef0f2;
+        --known:#8a5a00; --known-bg:#fdf3dc; }
 * { box-sizing: border-box; }
 body { margin:0; font:15px/1.5 -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif;
        color:var(--fg); background:var(--bg); }
@@ -51,6 +52,7 @@ tr.published th { border-left:3px solid var(--accent); }
 .badge.pass { color:var(--pass); background:var(--pass-bg); }
 .badge.fail { color:var(--fail); background:var(--fail-bg); }
 .badge.absent { color:var(--absent); background:var(--absent-bg); }
+.badge.known { color:var(--known); background:var(--known-bg); }
 table.claims td.detail { color:var(--muted); font-size:12.5px; }
 table.claims tr.absent td { color:var(--absent); }
 table.kv { width:auto; margin:10px 0 18px; }

@@ -277,12 +277,26 @@ def test_paper_claims_on_made_up_results():
     assert c[("coordinated", "baseline energy within \u00b110% of Table 4")] == "PASS"
     assert c[("uncoordinated", "baseline energy within \u00b110% of Table 4")] == "FAIL"
     assert c[("coordinated", "PRL saves energy against the baseline")] == "PASS"
-    assert c[("coordinated", "PRL's energy saving within \u00b115 points of the paper's")] == "FAIL"  # 20 vs 4.06
+    assert c[("coordinated", "PRL's energy saving within \u00b115 points of the paper's")] == "OUTSIDE BAND"  # 20 vs 4.06
     assert c[("uncoordinated", "PRL's energy saving within \u00b115 points of the paper's")] == "PASS"  # 15 vs 27.13
     assert c[("coordinated", "PRL travel-time penalty < 15%")] == "PASS"
     assert c[("both", "PRL saves more energy uncoordinated than coordinated")] == "FAIL"  # 15% < 20%
     assert c[("coordinated", "PRL uses less energy than DDPG+LC2013")] == NOT_CHECKED
     assert c[("both", "no collisions")] == "PASS"
+
+
+def test_a_claim_recorded_as_failing_is_a_known_failure():
+    """The regression's record lists "DQN has the worst travel time (coordinated)" as failing: the
+    report says KNOWN FAIL and links the known failures, as ``ecodrive regress`` does."""
+    from ecodrive_bench.reports.claims import KNOWN_FAILURES, known_failures
+
+    assert "DQN has the worst travel time (coordinated)" in known_failures()
+    rows = []
+    for m, e, t in (("baseline", 231.0, 189.0), ("prl", 180.0, 180.0), ("ddpg", 200.0, 185.0), ("dqn", 220.0, 170.0)):
+        rows.append({"method": m, "signals": "coordinated", "energy": e, "travel_time": t, "collisions": 0})
+    c = paper_claims(pd.DataFrame(rows)).set_index(["signals", "claim"])
+    row = c.loc[("coordinated", "DQN has the worst travel time")]
+    assert row.status == "KNOWN FAIL" and KNOWN_FAILURES in row.detail
 
 
 # ---------------------------------------------------------------- an experiments-only folder
