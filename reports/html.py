@@ -137,12 +137,13 @@ def table4_section(page: Page) -> str:
                         + "".join(cells) + "</tr>")
         cases = sorted(set(n[[i for i in n.index if i[1] == signals]]))
         ncases = f"{cases[0]}" if len(cases) == 1 else f"{cases[0]}\u2013{cases[-1]}"
-        head = ("<thead><tr><th rowspan='2' scope='col'>Method</th><th rowspan='2' scope='col'>Cases</th>"
+        head = ("<thead><tr><th rowspan='2' scope='col'>Method</th><th rowspan='2' scope='col'>Episodes</th>"
                 "<th colspan='5' class='group first'>Energy consumption [Wh]</th>"
                 "<th colspan='5' class='group first'>Travel time [s]</th></tr><tr>"
                 + "<th class='first'>This run</th><th>Paper</th><th>vs paper</th><th>Imp.</th><th>Paper Imp.</th>" * 2 + "</tr></thead>")
         parts.append(f"<div class='scroll'><table class='table4' id='table4-{esc(signals)}'><caption><b>Table 4, "
-                     f"{esc(signals)} signals.</b> Mean over {ncases} test cases per method (the paper: 100). "
+                     f"{esc(signals)} signals.</b> Mean over {ncases} episodes per method: the fixed test cases times the "
+                     "method's training seeds (the paper: 100 cases, one policy). "
                      "<b>Imp.</b> = (baseline \u2212 method) / baseline, as in the paper: <b>+</b> means the method "
                      "uses less energy or takes less time than the baseline (better), <b>\u2212</b> means more "
                      "(worse). <b>vs paper</b> = this run / published \u2212 1. Paper columns: the published "

@@ -22,7 +22,8 @@ def test_bounds_join_every_row_and_lie_below_the_baseline(tmp_path):
     assert (base.energy_bound <= base.energy).all()  # the least energy in no more time than the baseline took
     b = pd.read_parquet(tmp_path / "smoke" / "bounds.parquet")
     assert len(b) == 3 and (b.bound_travel_time > 0).all() and (b.energy_bound_travel_time <= b.time_limit + 1e-9).all()
-    assert json.loads((tmp_path / "smoke" / "manifest.json").read_text())["bound_wall_s_median"] > 0
+    median = json.loads((tmp_path / "smoke" / "manifest.json").read_text())["bound_wall_s_median"]
+    assert median is None if (b.bound_source == "shipped").all() else median > 0  # only what this run solved
     # a rerun solves nothing again
     mtime = (tmp_path / "smoke" / "bounds.parquet").stat().st_mtime_ns
     again = run(opts, progress=False)
@@ -36,10 +37,10 @@ def test_the_report_shows_the_gaps(tmp_path):
     run(parse(["--profile", "smoke", "--logs", str(tmp_path), "--methods", "baseline", "baseline0",
                "--signals", "coordinated", "--workers", "2", "--bounds"]), progress=False)
     index, _ = build(tmp_path / "smoke", tmp_path / "report")
-    assert "## Distance to the energy-optimal bound" in index.read_text()
+    assert "## Distance to the cost-optimal bound" in index.read_text()
     gaps = pd.read_csv(tmp_path / "report" / "optimality_gaps.csv").set_index("method")
     assert gaps.loc["baseline", "share_closed"] == 0.0 and (gaps.cost_gap > 0).all()
-    assert "Distance to the energy-optimal bound" in (tmp_path / "report" / "index.html").read_text()
+    assert "Distance to the cost-optimal bound" in (tmp_path / "report" / "index.html").read_text()
 
 
 def test_bounds_are_written_case_by_case_so_a_kill_keeps_the_finished_ones(tmp_path):
