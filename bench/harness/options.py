@@ -15,7 +15,7 @@ from ecodrive_bench.bench.harness.errors import AgentError
 from ecodrive_bench.bench.harness.executors import add_options, check_options
 from ecodrive_bench.bench.harness.external import GROUP, registered
 from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FamilyError, Variant
-from ecodrive_bench.bench.harness.planners import MPC, ORACLE, PLANNERS
+from ecodrive_bench.bench.harness.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 from ecodrive_bench.bench.harness.policies import MODELS
 from ecodrive_bench.bench.harness.sb3 import ALGOS as SB3_ALGOS
 from ecodrive_bench.envs.config import SIGNALS
@@ -54,7 +54,7 @@ class RunOptions:
 
     profile: str = "paper"  # smoke | paper | full | generalisation (PROFILES: cases per setting)
     methods: list[str] | None = None  # the methods asked for; None: every method with a shipped policy
-    planners: bool = False  # also the planners (oracle, mpc), in the same pool as the methods
+    planners: bool = False  # also the planners (oracle, mpc, clairvoyant), in the same pool as the methods
     signals: list[str] = field(default_factory=lambda: list(SIGNALS))  # signal settings to run
     executor: str = "local"  # local process pool, or ray
     address: str | None = None  # Ray cluster address (executor ray); None: a local Ray
@@ -87,7 +87,7 @@ def parser() -> Parser:
     ap.add_argument("--profile", default="paper", choices=list(PROFILES),
                     help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
                          "experiments (in `nox -s benchmark`); generalisation: every method with a policy, "
-                         f"{ORACLE} and {MPC} included, on each held-out corridor of the family (docs/generalisation.md), "
+                         f"{ORACLE}, {MPC} and {CLAIRVOYANT} included, on each held-out corridor of the family (docs/generalisation.md), "
                          "its cases, with --transfer implied, one sub-folder per variant")
     ap.add_argument("--variants", nargs="+", default=None, metavar="NAME",
                     help="with --profile generalisation: only these variants of the family, by full or short name "
@@ -96,10 +96,11 @@ def parser() -> Parser:
     ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, *PLANNERS, *users],
                     help=f"among {', '.join([*METHODS, *PLANNERS, *users])} (default: every method with a shipped "
                          f"policy; {ORACLE} (the cost-optimal plan replayed, a DP solve per case), {MPC} (re-plans "
-                         "on the DP in closed loop, a few s per case) and installed "
+                         f"on the DP in closed loop, a few s per case), {CLAIRVOYANT} (knows the case's future traffic; "
+                         "its drives of the fixed cases are shipped, other cases 5-15 s each) and installed "
                          f"agents of the entry-point group {GROUP} run when named)")
     ap.add_argument("--planners", action="store_true",
-                    help=f"also run the planners, {ORACLE} and {MPC}, besides the methods (the default ones or "
+                    help=f"also run the planners, {ORACLE}, {MPC} and {CLAIRVOYANT}, besides the methods (the default ones or "
                          "--methods), in the same pool: one command for the main job (nox -s benchmark)")
     ap.add_argument("--agent", default=None, metavar="MODULE:FACTORY",
                     help="also evaluate your own agent: factory(observation_space, action_space) -> "

@@ -1,0 +1,50 @@
+"""The clairvoyant drives shipped with the fixed cases: the file is checked on reading, covers every
+fixed case of both settings, and on the CI cases it is the top of the scale against the own
+reference's learned and rule-based methods (``bench/regression/reference/ci.csv``)."""
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from ecodrive_bench.bench.harness import cases, clairvoyant_drives
+from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.regression.check import CI_CASES, REFERENCE
+
+pytestmark = pytest.mark.skipif(not clairvoyant_drives.FILE.is_file(), reason="no shipped clairvoyant drives")
+LEARNED = ("prl", "mpdqn", "ddpg", "dqn")
+RULE_BASED = ("baseline", "baseline0", "glosa")
+MARGIN = 0.05  # [-] the issue's target: at least 5% below every method's mean cost
+CASE_SHARE = 0.9  # [-] ... and no more expensive than each learned method's seed mean on 90% of the cases
+
+
+def test_the_file_covers_every_fixed_case_and_answers_its_lookups():
+    frame = clairvoyant_drives.read()
+    fixed = {c.index for c in cases.load()}
+    for s in ("coordinated", "uncoordinated"):
+        assert set(frame[frame.signals == s].case) == fixed
+    case = cases.load()[0]
+    actions = clairvoyant_drives.lookup(setting("uncoordinated", None), case)
+    assert actions and all(k in (0, 1, 2) for k, _ in actions)
+    assert clairvoyant_drives.lookup(setting("uncoordinated", {"spacing": 500.0}), case) is None  # another problem
+
+
+@pytest.mark.parametrize("signals", ["coordinated", "uncoordinated"])
+def test_on_the_ci_cases_no_method_comes_close(signals):
+    ref = pd.read_csv(REFERENCE)
+    ref = ref[(ref.signals == signals) & (ref.case < CI_CASES)].assign(cost=lambda d: d.energy + d.travel_time)
+    cv = clairvoyant_drives.read().query("signals == @signals and case < @CI_CASES").set_index("case").cost
+    for method in LEARNED + RULE_BASED:
+        per_case = ref[ref.method == method].groupby("case").cost.mean()
+        assert cv.mean() <= (1 - MARGIN) * per_case.mean(), method
+        if method in LEARNED:
+            assert (cv <= per_case.reindex(cv.index)).mean() >= CASE_SHARE, method
+
+
+def test_an_edited_file_is_one_line_and_every_case_is_planned(tmp_path, capsys):
+    bad = tmp_path / "drives.parquet"
+    frame = clairvoyant_drives.read()
+    frame.loc[0, "cost"] += 1.0
+    frame.to_parquet(bad)
+    assert clairvoyant_drives.lookup(setting("uncoordinated", None), cases.load()[0], bad) is None
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "every clairvoyant case is planned" in err[0]
