@@ -88,11 +88,13 @@ def regression(session: nox.Session) -> None:
 def crosshost(session: nox.Session) -> None:
     """The checks of shipped numbers once more with numpy's and torch's AVX-512 paths off
     (``bench.hosts.CROSS_HOST_ENV``), so a host-dependent last digit fails here, not on a user's
-    AVX2 machine: the shipped bounds, and the regression's own reference (CI runs this)."""
+    AVX2 machine: the shipped bounds, the shipped clairvoyant drives, and the regression's own
+    reference (CI runs this)."""
     import json
 
     env = json.loads(session.run("python", "-m", "ecodrive_bench.bench.hosts", silent=True))
     session.run("ecodrive", "cases", "--check", "--bounds", env=env)
+    session.run("ecodrive", "cases", "--check", "--clairvoyant", env=env)
     session.run("ecodrive", "regress", "--no-mixed", *session.posargs, env=env)
 
 
