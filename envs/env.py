@@ -47,7 +47,7 @@ class EcoDriveEnv(gym.Env):
     >>> import gymnasium as gym, numpy as np
     >>> import ecodrive_bench.envs  # registers EcoDrive-v0
     >>> env = gym.make("EcoDrive-v0", signals="uncoordinated", reward="r")
-    >>> obs, info = env.reset(options={"sumo_seed": 7, "insert_time": 210.0})  # one fixed case
+    >>> obs, info = env.reset(options={"sumo_seed": 7, "insert_time": 210.0})  # one case, fixed by its seed and time
     >>> obs["grid"].shape, obs["logic"].shape
     ((60, 5), (9,))
     >>> obs, reward, terminated, truncated, info = env.step((1, np.array([0.0, 1.0, 0.0], np.float32)))
