@@ -23,8 +23,8 @@ import numpy as np
 
 from ecodrive_bench.bench.args import InputError
 from ecodrive_bench.bench.harness import generalisation
-from ecodrive_bench.bench.harness.cases import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
-from ecodrive_bench.bench.harness.generalisation import CYCLES, FLOW_RANGE, JUNCTIONS, LANES, draw_corridor
+from ecodrive_bench.bench.harness.cases import INSERT_RANGE, Case, CaseError, check_cases
+from ecodrive_bench.bench.harness.generalisation import CYCLES, FLOW_RANGE, JUNCTIONS, LANES, draw_family
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, ScenarioConfig, diff
 from ecodrive_bench.envs.family import TRAIN_FILE, Corridor, read
 
@@ -39,24 +39,6 @@ class TrainFamilyError(InputError):
     """A training-family file that is not the generator's, or that overlaps a held-out corridor."""
 
 
-def _split(rng: np.random.Generator, prefix: str, n: int, cases: int) -> list[dict[str, Any]]:
-    lanes = rng.permutation(np.resize(np.array(LANES), n))
-    flows = rng.permutation(np.round(np.linspace(*FLOW_RANGE, n) / 50.0) * 50.0)
-    kinds = rng.permutation(np.arange(n) % 2 == 1)
-    junctions = rng.permutation(np.resize(np.array(JUNCTIONS), n))
-    out = []
-    for k in range(n):
-        c = draw_corridor(rng, f"{prefix}{k + 1:02d}", int(lanes[k]), float(flows[k]), bool(kinds[k]),
-                          int(junctions[k]))
-        if cases:
-            seeds = rng.choice(SEED_BOUND, size=cases, replace=False)
-            times = np.round(rng.uniform(*INSERT_RANGE, size=cases), 1)
-            c["cases"] = [{"index": i, "sumo_seed": int(seeds[i]), "insert_time": float(times[i]), "group": i}
-                          for i in range(cases)]
-        out.append(c)
-    return out
-
-
 def generate(master_seed: int = MASTER_SEED) -> dict[str, Any]:
     rng = np.random.default_rng(master_seed)
     return {"version": VERSION, "master_seed": master_seed, "axes": {
@@ -64,7 +46,8 @@ def generate(master_seed: int = MASTER_SEED) -> dict[str, Any]:
                 "flow_vph": list(FLOW_RANGE), "spacing_m": list(generalisation.SPACING_RANGE),
                 "green_share": list(generalisation.GREEN_SHARE)},
             "validation_cases": VALIDATION_CASES, "insert_range_s": list(INSERT_RANGE),
-            "splits": {"train": _split(rng, "t", N_TRAIN, 0), "validation": _split(rng, "v", N_VALIDATION, VALIDATION_CASES)}}
+            "splits": {"train": draw_family(rng, N_TRAIN, 0, lambda k: f"t{k + 1:02d}"),
+                       "validation": draw_family(rng, N_VALIDATION, VALIDATION_CASES, lambda k: f"v{k + 1:02d}")}}
 
 
 def text(data: dict[str, Any] | None = None) -> str:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -87,20 +88,28 @@ def draw_corridor(rng: np.random.Generator, name: str, lanes: int, flow: float, 
             "scenario": scenario}
 
 
-def generate(master_seed: int = MASTER_SEED, n: int = N_VARIANTS, cases: int = CASES_PER_VARIANT) -> dict:
-    rng = np.random.default_rng(master_seed)
+def draw_family(rng: np.random.Generator, n: int, cases: int, name: Callable[[int], str]) -> list[dict[str, Any]]:
+    """``n`` corridors named ``name(k)``, every axis stratified over them in a shuffled pairing, each
+    with ``cases`` test cases (seed, insertion time) drawn after it (none for 0)."""
     lanes = rng.permutation(np.resize(np.array(LANES), n))
     flows = rng.permutation(np.round(np.linspace(*FLOW_RANGE, n) / 50.0) * 50.0)
     kinds = rng.permutation(np.arange(n) % 2 == 1)
     junctions = rng.permutation(np.resize(np.array(JUNCTIONS), n))
-    variants = []
+    out = []
     for k in range(n):
-        v = draw_corridor(rng, f"g{k + 1}", int(lanes[k]), float(flows[k]), bool(kinds[k]), int(junctions[k]))
-        seeds = rng.choice(SEED_BOUND, size=cases, replace=False)
-        times = np.round(rng.uniform(*INSERT_RANGE, size=cases), 1)
-        v["cases"] = [{"index": i, "sumo_seed": int(seeds[i]), "insert_time": float(times[i]), "group": i}
-                      for i in range(cases)]
-        variants.append(v)
+        v = draw_corridor(rng, name(k), int(lanes[k]), float(flows[k]), bool(kinds[k]), int(junctions[k]))
+        if cases:
+            seeds = rng.choice(SEED_BOUND, size=cases, replace=False)
+            times = np.round(rng.uniform(*INSERT_RANGE, size=cases), 1)
+            v["cases"] = [{"index": i, "sumo_seed": int(seeds[i]), "insert_time": float(times[i]), "group": i}
+                          for i in range(cases)]
+        out.append(v)
+    return out
+
+
+def generate(master_seed: int = MASTER_SEED, n: int = N_VARIANTS, cases: int = CASES_PER_VARIANT) -> dict:
+    rng = np.random.default_rng(master_seed)
+    variants = draw_family(rng, n, cases, lambda k: f"g{k + 1}")
     return {"version": VERSION, "master_seed": master_seed, "cases_per_variant": cases,
             "insert_range_s": list(INSERT_RANGE), "variants": variants}
 
