@@ -55,6 +55,21 @@ def sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+def read_parquet_meta(path: Path, key: bytes, max_bytes: int) -> tuple[Any, Any]:
+    """(frame, the JSON under ``key`` in the schema metadata, None if absent) of a shipped parquet
+    table; a ValueError saying what is wrong: not a regular file of at most ``max_bytes``, or not a
+    readable table (pyarrow's and json's errors for a damaged file have no common base)."""
+    import pyarrow.parquet as pq
+
+    if not path.is_file() or path.stat().st_size > max_bytes:
+        raise ValueError(f"not a regular file of at most {max_bytes >> 20} MiB")
+    try:
+        table = pq.read_table(path)
+        return table.to_pandas(), json.loads((table.schema.metadata or {}).get(key, b"null"))
+    except Exception as e:
+        raise ValueError(f"not a readable table ({type(e).__name__})") from None
+
+
 def refuse_links(folder: Path, what: str = "folder") -> None:
     """Raise ``Unwritable`` if ``folder`` or anything below it is a symbolic link: a run or
     output folder is written only inside itself (its parent, e.g. the logs root, may be a link)."""

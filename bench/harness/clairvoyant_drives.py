@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from ecodrive_bench.bench.harness.cases import Case
-from ecodrive_bench.bench.io import atomic_file
+from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
 
 FILE = Path(__file__).with_name("clairvoyant_drives.parquet")
 VERSION = 1  # [-] of the planner's drives: bump with any change that moves one
@@ -65,16 +65,10 @@ def save(frame: pd.DataFrame, path: Path = FILE) -> None:
 
 
 def read(path: Path = FILE) -> pd.DataFrame:
-    import pyarrow.parquet as pq
-
-    if not path.is_file() or path.stat().st_size > MAX_BYTES:
-        raise DrivesError(f"{path}: no regular drives file of at most {MAX_BYTES >> 20} MiB; rebuild it: {REBUILD}")
     try:
-        table = pq.read_table(path)
-        meta = json.loads((table.schema.metadata or {}).get(META_KEY, b"null"))
-        frame = table.to_pandas()
-    except Exception as e:  # pyarrow's and json's errors for a damaged file have no common base
-        raise DrivesError(f"{path}: not a readable drives table ({type(e).__name__}); rebuild it: {REBUILD}") from None
+        frame, meta = read_parquet_meta(path, META_KEY, MAX_BYTES)
+    except ValueError as e:
+        raise DrivesError(f"{path}: {e}; rebuild it: {REBUILD}") from None
     if not isinstance(meta, dict) or list(frame.columns) != list(COLUMNS) or meta.get("sha256") != content_sha256(frame):
         raise DrivesError(f"{path}: its rows do not match its digest or columns (edited or damaged); rebuild it: {REBUILD}")
     return frame

@@ -50,7 +50,7 @@ import pandas as pd
 
 from ecodrive_bench.bench.harness.scenarios import setting
 from ecodrive_bench.bench.hosts import ATOL, DP_RTOL, arrays_close, close
-from ecodrive_bench.bench.io import atomic_file
+from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
 from ecodrive_bench.bench.oracle import dp, mpc
 from ecodrive_bench.bench.oracle.energy import energy_wh
 from ecodrive_bench.envs.config import SIGNALS, ScenarioConfig
@@ -171,19 +171,14 @@ def row_mpc_plan(r: Any, cfg: ScenarioConfig, path: Path) -> dp.Plan:
 def read(path: Path = FILE) -> Table:
     """The table of ``path``, its format, columns and content digest checked; a ``ShippedError``
     of one line otherwise."""
-    import pyarrow.parquet as pq
 
     rebuild = f"rebuild it: {REBUILD}"
     if not path.exists():
         raise ShippedError(f"{path}: no shipped bounds; {rebuild}")
-    if not path.is_file() or path.stat().st_size > MAX_BYTES:
-        raise ShippedError(f"{path}: not a regular file of at most {MAX_BYTES >> 20} MiB; {rebuild}")
     try:
-        table = pq.read_table(path)
-        meta = json.loads((table.schema.metadata or {}).get(META_KEY, b"null"))
-        frame = table.to_pandas()
-    except Exception as e:  # pyarrow's and json's errors for a damaged file have no common base
-        raise ShippedError(f"{path}: not a readable shipped-bounds table ({type(e).__name__}); {rebuild}") from None
+        frame, meta = read_parquet_meta(path, META_KEY, MAX_BYTES)
+    except ValueError as e:
+        raise ShippedError(f"{path}: {str(e).replace('table', 'shipped-bounds table')}; {rebuild}") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         got = meta.get("format") if isinstance(meta, dict) else None
         raise ShippedError(f"{path}: shipped-bounds format {got!r} is not the supported {FORMAT}; {rebuild}")
