@@ -69,10 +69,10 @@ def headroom_line(results: pd.DataFrame, manifest: dict) -> str:
         g = shares[shares.signals == s]
         if len(g):
             b = g.loc[g.share_closed.idxmax()]
-            parts.append(f"{short}, {headroom_sentence(b)}")
+            parts.append(f"{share_text(b)} {short} ({LABELS.get(b.method, b.method)})")
     return ("Headroom: of the cost gap (E + phi T) between steady driving (baseline0, no information) and the "
-            "clairvoyant reference (the signal plans and the future traffic), the best learned method closes: "
-            + "; ".join(parts) + " (95% CI over cases and seeds).")
+            "clairvoyant reference (the signal plans and the future traffic), the best learned method closes "
+            + " and ".join(parts) + "; 95% CI over cases and seeds.")
 
 
 def _pct(x: float) -> str:
