@@ -234,8 +234,8 @@ def test_ecodrive_run_with_a_bad_case_list_is_one_line_and_writes_nothing(tmp_pa
 
 
 def test_planners_join_the_default_methods_or_the_named_ones_in_one_command(tmp_path):
-    """``--planners`` adds oracle and mpc, once, to the methods with a shipped policy or to those
-    named; without it they run only when named (``--profile generalisation`` always has them)."""
+    """``--planners`` adds oracle, mpc and clairvoyant, once, to the methods with a shipped policy or
+    to those named; without it they run only when named (``--profile generalisation`` always has them)."""
     from ecodrive_bench.bench.harness.options import parse
     from ecodrive_bench.bench.harness.run import resolve_methods
 
@@ -244,10 +244,10 @@ def test_planners_join_the_default_methods_or_the_named_ones_in_one_command(tmp_
         return list(dict.fromkeys(m for m, _, _ in runs))
 
     plain, with_planners = methods(), methods("--planners")
-    assert "oracle" not in plain and "mpc" not in plain and {"prl", "baseline"} <= set(plain)
-    assert with_planners == [*plain, "oracle", "mpc"]
-    assert methods("--methods", "baseline", "--planners") == ["baseline", "oracle", "mpc"]
-    assert methods("--methods", "mpc", "baseline", "--planners") == ["mpc", "baseline", "oracle"]
+    assert not {"oracle", "mpc", "clairvoyant"} & set(plain) and {"prl", "baseline"} <= set(plain)
+    assert with_planners == [*plain, "oracle", "mpc", "clairvoyant"]
+    assert methods("--methods", "baseline", "--planners") == ["baseline", "oracle", "mpc", "clairvoyant"]
+    assert methods("--methods", "mpc", "baseline", "--planners") == ["mpc", "baseline", "oracle", "clairvoyant"]
 
 
 def test_the_benchmark_session_adds_the_planners_unless_methods_are_named():
