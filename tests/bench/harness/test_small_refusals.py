@@ -1,0 +1,77 @@
+"""Small refusals of ``ecodrive run``, each one line and exit 2: JSON that names a key twice (a
+``--scenario`` file, a case list, a ``--set`` value); a run id or method name too long for a file
+name; a run folder's ``.lock`` that is not a regular file; an ``--sb3`` path that is no regular file
+or too large."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from ecodrive_bench.bench.harness import cases as cases_mod
+from ecodrive_bench.bench.harness.cases import CaseError, load
+from ecodrive_bench.bench.harness.options import parse
+from ecodrive_bench.bench.harness.sb3_zip import ZipError, read
+
+
+def _refused(argv: list[str], tmp_path: Path, monkeypatch, capsys) -> str:
+    """The one error line of ``ecodrive run`` options that are refused with exit 2."""
+    monkeypatch.setattr(sys, "argv", ["ecodrive run"])
+    with pytest.raises(SystemExit) as e:
+        parse(["--logs", str(tmp_path / "logs"), *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1, err
+    assert not (tmp_path / "logs").exists()
+    return err[0]
+
+
+def test_a_scenario_file_that_names_a_key_twice_is_refused(tmp_path, monkeypatch, capsys):
+    path = tmp_path / "s.json"
+    path.write_text('{"lanes": 3, "ev": {"mass": 1500, "mass": 1800}}')
+    err = _refused(["--scenario", str(path)], tmp_path, monkeypatch, capsys)
+    assert f"--scenario {path}: key 'mass' appears twice in one object" in err
+
+
+def test_a_set_value_that_names_a_key_twice_is_refused(tmp_path, monkeypatch, capsys):
+    err = _refused(["--set", 'ev={"mass": 1500, "mass": 1800}'], tmp_path, monkeypatch, capsys)
+    assert "--set ev=" in err and "key 'mass' appears twice" in err
+
+
+def test_a_case_list_that_names_a_key_twice_is_refused(tmp_path):
+    data = cases_mod.generate()
+    text = json.dumps(data, indent=1)
+    first = json.dumps(data["cases"][5], indent=1).replace("\n", "\n  ")
+    assert first in text
+    path = tmp_path / "cases.json"
+    path.write_text(text.replace(first, first[:-1].rstrip() + ', "sumo_seed": 9\n  }', 1))
+    with pytest.raises(CaseError) as e:
+        load(path)
+    assert "\n" not in str(e.value) and f"case list {path}: key 'sumo_seed' appears twice" in str(e.value)
+
+
+@pytest.mark.parametrize("kind", ["device", "fifo", "large"])
+def test_an_sb3_path_that_is_no_regular_file_or_too_large_is_refused_before_it_is_read(kind, tmp_path, monkeypatch):
+    from ecodrive_bench.bench.harness import sb3_zip
+
+    path = tmp_path / "model.zip"
+    if kind == "device":
+        path = Path("/dev/zero")
+    elif kind == "fifo":
+        os.mkfifo(path)  # opening it to read would wait for a writer
+    else:
+        monkeypatch.setattr(sb3_zip, "MAX_ZIP_BYTES", 1000)
+        path.write_bytes(bytes(1001))
+    with pytest.raises(ZipError) as e:
+        read(path)
+    msg = str(e.value)
+    assert "\n" not in msg and msg.startswith(f"--sb3 {str(path)!r}: ")
+    assert ("not a regular file" in msg) if kind != "large" else ("1001 bytes is too large" in msg)
+
+
+def test_the_cli_refuses_sb3_dev_zero_in_one_line(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("stable_baselines3")
+    err = _refused(["--sb3", "/dev/zero", "--sb3-algo", "PPO"], tmp_path, monkeypatch, capsys)
+    assert "--sb3 '/dev/zero': not a regular file; accepted: a regular zip file of at most" in err
