@@ -14,6 +14,10 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 NAME = re.compile(r"[A-Za-z0-9._-]+")
+# [characters] longest run id, job or method name. A name is a folder name and part of file names:
+# errors/<signals>-<method>-s<seed>-case-XXX.txt adds up to 40 characters, a report's scratch folder
+# .<run-id>.tmp-XXXXXXXX 14, and file systems allow 255 bytes a name (NAME's characters are one byte)
+MAX_NAME = 128
 MAX_JSON_BYTES = 1 << 20  # [bytes] largest JSON input file read (a --scenario file, a case list): 1 MiB
 MAX_JSON_DEPTH = 32  # [-] deepest nesting of arrays and objects accepted in a JSON input (a scenario needs 3)
 
@@ -68,11 +72,21 @@ def path(value: str) -> Path:
 
 
 def name(value: str) -> str:
-    """A run id or job name: it becomes a folder name under the logs root, never a path."""
-    if not NAME.fullmatch(value) or value in (".", ".."):
-        raise argparse.ArgumentTypeError(f"{value!r} is not accepted; a name is made of letters, digits, '.', '_' "
-                                         f"and '-' (no path separator, not '.' or '..')")
+    """A run id, job or method name: it becomes a folder name under the logs root, never a path."""
+    if not is_name(value):
+        raise argparse.ArgumentTypeError(f"{name_shown(value)} is not accepted; a name is made of letters, digits, '.', '_' "
+                                         f"and '-' (no path separator, not '.' or '..'), at most {MAX_NAME} characters")
     return value
+
+
+def name_shown(value: str) -> str:
+    """``value`` quoted for an error line, a long one cut (with its length)."""
+    return repr(value) if len(value) <= 40 else f"{value[:37]!r}... ({len(value)} characters)"
+
+
+def is_name(value: str) -> bool:
+    """Whether ``value`` is a name (``name``)."""
+    return bool(NAME.fullmatch(value)) and value not in (".", "..") and len(value) <= MAX_NAME
 
 
 def int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:

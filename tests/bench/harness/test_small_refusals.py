@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from ecodrive_bench.bench.args import MAX_NAME
 from ecodrive_bench.bench.harness import cases as cases_mod
 from ecodrive_bench.bench.harness.cases import CaseError, load
 from ecodrive_bench.bench.harness.options import parse
@@ -50,6 +51,19 @@ def test_a_case_list_that_names_a_key_twice_is_refused(tmp_path):
     with pytest.raises(CaseError) as e:
         load(path)
     assert "\n" not in str(e.value) and f"case list {path}: key 'sumo_seed' appears twice" in str(e.value)
+
+
+@pytest.mark.parametrize("option", ["--run-id", "--name"])
+def test_a_name_too_long_for_a_file_name_is_refused_up_front(option, tmp_path, monkeypatch, capsys):
+    extra = ["--agent", "some_module:factory"] if option == "--name" else []
+    err = _refused([option, "a" * 256, *extra], tmp_path, monkeypatch, capsys)
+    assert f"argument {option}: 'aaaa" in err and "(256 characters)" in err and f"at most {MAX_NAME} characters" in err
+    assert parse(["--logs", str(tmp_path / "logs"), option, "a" * MAX_NAME, *extra]) is not None
+
+
+def test_an_agent_factory_whose_name_is_too_long_needs_a_name(tmp_path, monkeypatch, capsys):
+    err = _refused(["--agent", "some_module:" + "f" * 300], tmp_path, monkeypatch, capsys)
+    assert "the factory's name 'fff" in err and "(300 characters)" in err and "give --name" in err
 
 
 @pytest.mark.parametrize("kind", ["device", "fifo", "large"])
