@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.args import MAX_NAME
 from ecodrive_bench.bench.harness import cases as cases_mod
 from ecodrive_bench.bench.harness.cases import CaseError, load
@@ -64,6 +65,28 @@ def test_a_name_too_long_for_a_file_name_is_refused_up_front(option, tmp_path, m
 def test_an_agent_factory_whose_name_is_too_long_needs_a_name(tmp_path, monkeypatch, capsys):
     err = _refused(["--agent", "some_module:" + "f" * 300], tmp_path, monkeypatch, capsys)
     assert "the factory's name 'fff" in err and "(300 characters)" in err and "give --name" in err
+
+
+def test_a_lock_file_that_is_a_fifo_is_refused_in_one_line(tmp_path):
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    os.mkfifo(run_dir / runlock.LOCK)
+    with pytest.raises(runlock.InUse) as e:
+        with runlock.hold(run_dir):
+            pass
+    assert str(e.value) == (f"run folder {run_dir}: its lock file .lock is a FIFO, not a regular file; remove it, "
+                            "or use another --run-id")
+
+
+def test_ecodrive_run_on_a_folder_whose_lock_is_a_fifo_exits_2(tmp_path, capsys):
+    from ecodrive_bench.bench.harness.run_command import main
+
+    os.makedirs(tmp_path / "logs" / "smoke")
+    os.mkfifo(tmp_path / "logs" / "smoke" / ".lock")
+    rc = main(["--profile", "smoke", "--logs", str(tmp_path / "logs"), "--methods", "baseline", "--signals",
+               "coordinated"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "is a FIFO, not a regular file" in err[0], err
 
 
 @pytest.mark.parametrize("kind", ["device", "fifo", "large"])
