@@ -14,6 +14,10 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 NAME = re.compile(r"[A-Za-z0-9._-]+")
+# [characters] longest run id, job or method name. A name is a folder name and part of file names:
+# errors/<signals>-<method>-s<seed>-case-XXX.txt adds up to 40 characters, a report's scratch folder
+# .<run-id>.tmp-XXXXXXXX 14, and file systems allow 255 bytes a name (NAME's characters are one byte)
+MAX_NAME = 128
 MAX_JSON_BYTES = 1 << 20  # [bytes] largest JSON input file read (a --scenario file, a case list): 1 MiB
 MAX_JSON_DEPTH = 32  # [-] deepest nesting of arrays and objects accepted in a JSON input (a scenario needs 3)
 
@@ -21,6 +25,26 @@ MAX_JSON_DEPTH = 32  # [-] deepest nesting of arrays and objects accepted in a J
 class InputError(ValueError):
     """Bad input found after parsing (a file's content); one line naming the value and the accepted
     range. A command reports it as ``prog: error: <message>`` with exit code 2 (``fail``)."""
+
+
+class DuplicateKey(ValueError):
+    """A JSON object that names one key twice (``loads``)."""
+
+
+def _unique(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object of JSON's ``object_pairs_hook``: each key once, else ``DuplicateKey``."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise DuplicateKey(f"key {one_line(repr(key), 80)} appears twice in one object (json would keep "
+                               "the last silently); accepted: each key once")
+        out[key] = value
+    return out
+
+
+def loads(text: str | bytes) -> Any:
+    """``json.loads`` that refuses an object naming a key twice (``DuplicateKey``)."""
+    return json.loads(text, object_pairs_hook=_unique)
 
 
 class Parser(argparse.ArgumentParser):
@@ -48,11 +72,21 @@ def path(value: str) -> Path:
 
 
 def name(value: str) -> str:
-    """A run id or job name: it becomes a folder name under the logs root, never a path."""
-    if not NAME.fullmatch(value) or value in (".", ".."):
-        raise argparse.ArgumentTypeError(f"{value!r} is not accepted; a name is made of letters, digits, '.', '_' "
-                                         f"and '-' (no path separator, not '.' or '..')")
+    """A run id, job or method name: it becomes a folder name under the logs root, never a path."""
+    if not is_name(value):
+        raise argparse.ArgumentTypeError(f"{name_shown(value)} is not accepted; a name is made of letters, digits, '.', '_' "
+                                         f"and '-' (no path separator, not '.' or '..'), at most {MAX_NAME} characters")
     return value
+
+
+def name_shown(value: str) -> str:
+    """``value`` quoted for an error line, a long one cut (with its length)."""
+    return repr(value) if len(value) <= 40 else f"{value[:37]!r}... ({len(value)} characters)"
+
+
+def is_name(value: str) -> bool:
+    """Whether ``value`` is a name (``name``)."""
+    return bool(NAME.fullmatch(value)) and value not in (".", "..") and len(value) <= MAX_NAME
 
 
 def int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:
@@ -107,29 +141,14 @@ def fail(prog: str, message: str) -> int:
 def read_json(path: Path, what: str, limit: int = MAX_JSON_BYTES) -> Any:
     """The JSON value in the file ``path``, read with bounds: a path that is not a regular file
     (a device, a FIFO, a folder) or is larger than ``limit`` bytes is refused before it is read,
-    and unreadable, non-UTF-8, malformed or deeper than ``MAX_JSON_DEPTH`` JSON is an ``InputError``
-    of one line that starts with ``what`` and the path."""
+    and unreadable, non-UTF-8, malformed or deeper than ``MAX_JSON_DEPTH`` JSON, or an object that
+    names a key twice, is an ``InputError`` of one line that starts with ``what`` and the path."""
     where = f"{what} {path}"
-    accepted = f"accepted: a regular JSON file of at most {limit} bytes ({limit / 2**20:g} MiB)"
+    raw = read_regular(path, where, limit, "JSON file")
     try:
-        st = os.stat(path)
-    except OSError as e:
-        raise InputError(f"{where}: not a readable JSON file ({e.strerror or type(e).__name__})") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise InputError(f"{where}: not a regular file; {accepted}")
-    if st.st_size > limit:
-        raise InputError(f"{where}: {st.st_size} bytes is too large; {accepted}")
-    try:
-        with open(path, "rb") as f:
-            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):  # replaced since the check above
-                raise InputError(f"{where}: not a regular file; {accepted}")
-            raw = f.read(limit + 1)
-    except OSError as e:
-        raise InputError(f"{where}: not a readable JSON file ({e.strerror or type(e).__name__})") from None
-    if len(raw) > limit:  # it grew since the check above
-        raise InputError(f"{where}: more than {limit} bytes; {accepted}")
-    try:
-        value = json.loads(raw.decode("utf-8"))
+        value = loads(raw.decode("utf-8"))
+    except DuplicateKey as e:
+        raise InputError(f"{where}: {e}") from None
     except UnicodeDecodeError as e:
         raise InputError(f"{where}: not a readable JSON file (not UTF-8 at byte {e.start})") from None
     except json.JSONDecodeError as e:
@@ -146,6 +165,32 @@ def read_json(path: Path, what: str, limit: int = MAX_JSON_BYTES) -> Any:
         raise InputError(f"{where}: not a readable JSON file (arrays and objects nested more than "
                          f"{MAX_JSON_DEPTH} deep; accepted: up to {MAX_JSON_DEPTH})")
     return value
+
+
+def read_regular(path: Path, where: str, limit: int, kind: str) -> bytes:
+    """The bytes of ``path``, read with bounds: a path that is not a regular file (a device such as
+    ``/dev/zero``, a FIFO, a folder) or is larger than ``limit`` bytes is refused before it is read
+    (and a file replaced or grown meanwhile, while it is): an ``InputError`` of one line that starts
+    with ``where`` and names the ``kind`` of file accepted."""
+    accepted = f"accepted: a regular {kind} of at most {limit} bytes ({limit / 2**20:g} MiB)"
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise InputError(f"{where}: not a readable {kind} ({e.strerror or type(e).__name__})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{where}: not a regular file; {accepted}")
+    if st.st_size > limit:
+        raise InputError(f"{where}: {st.st_size} bytes is too large; {accepted}")
+    try:
+        with open(path, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):  # replaced since the check above
+                raise InputError(f"{where}: not a regular file; {accepted}")
+            raw = f.read(limit + 1)
+    except OSError as e:
+        raise InputError(f"{where}: not a readable {kind} ({e.strerror or type(e).__name__})") from None
+    if len(raw) > limit:  # it grew since the check above
+        raise InputError(f"{where}: more than {limit} bytes; {accepted}")
+    return raw
 
 
 def depth(value: Any) -> int:

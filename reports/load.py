@@ -177,8 +177,8 @@ def load_steps(path: Path) -> tuple[pd.DataFrame, str]:
 def load_plan(path: Path) -> pd.DataFrame | None:
     """The planned trajectory a log carries (the ``oracle`` method's), as ``trajectory`` columns
     (time since entry, distance, speed; no cumulative energy), or None."""
-    plan = read_log(path).plan
-    if not plan:
+    plan = read_log(path).plan  # checked by the reader: a trajectory's arrays are there and equally long
+    if not plan or "time" not in plan:  # none, or the clairvoyant's record of its rounds
         return None
     t, x = np.asarray(plan["time"], float), np.asarray(plan["x"], float)
     return pd.DataFrame({"t": t - t[0], "distance": x - x[0], "speed": np.asarray(plan["speed"], float),

@@ -10,11 +10,12 @@ fell off the plan; ``leader``: the vehicle ahead forbids it), from the step log'
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pandas as pd
 
-from ecodrive_bench.bench.logs.mcaplog import read_plan, resolve_log
+from ecodrive_bench.bench.logs.mcaplog import LogError, read_plan, resolve_log
 
 TIME_SLACK = 0.05  # [-] mpc's mean travel time may exceed the baseline's by this share
 SLOWER_S = 30.0  # [s] a case where mpc is this much slower than the best learned method "broke"
@@ -71,8 +72,12 @@ def first_events(results: pd.DataFrame, run_dir: Path, signals: str, mpc: str = 
     plan), when it came [s after the departure], and the delay over the first plan's travel time [s]."""
     rows = []
     for r in results[(results.signals == signals) & (results.method == mpc)].itertuples(index=False):
-        plan = read_plan(resolve_log(run_dir, r.mcap))
-        if not plan:
+        try:
+            plan = read_plan(resolve_log(run_dir, r.mcap))
+        except LogError as e:  # a missing, damaged or refused log is left out of the evidence, and said
+            print(f"warning: {e} (left out of mpc's re-plan evidence)", file=sys.stderr)
+            continue
+        if not plan or "time" not in plan:
             continue
         first = plan["replans"][0] if plan.get("replans") else None
         rows.append({"case": r.case, "event": first["event"] if first else "none",

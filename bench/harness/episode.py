@@ -70,9 +70,9 @@ def run_episode(
         while True:
             try:
                 action = agent.act(obs, info, explore=False)
-            except Exception as e:  # the harness names the agent, case and step (bench.harness.failures)
-                e.ecodrive_step, e.ecodrive_agent = steps, True
-                raise
+            except (Exception, KeyboardInterrupt) as e:  # the harness names the agent, case and step
+                e.ecodrive_step, e.ecodrive_agent = steps, True  # (bench.harness.failures; a pool worker's
+                raise  # KeyboardInterrupt is the agent's own: bench.harness.pool)
             if log is not None:
                 log.raw_action = _flatten(action)
             if script is not None:

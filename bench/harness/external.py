@@ -26,7 +26,7 @@ from importlib import metadata
 from typing import Any
 
 from ecodrive_bench.agents.base import Agent
-from ecodrive_bench.bench.args import NAME
+from ecodrive_bench.bench.args import MAX_NAME, is_name
 from ecodrive_bench.bench.harness.errors import AgentError
 
 GROUP = "ecodrive_bench.agents"
@@ -40,15 +40,16 @@ _WARNED: set[str] = set()  # entry-point names already reported as left out
 def registered() -> dict[str, str]:
     """Agent name -> ``module:factory`` of every installed entry point in ``GROUP``. A name is a
     folder name of the run (``<run>/<signals>/<name>/``), so one that is not a plain name
-    (``bench.args.NAME``: no path separator, not ``.`` or ``..``) is left out, with one line."""
+    (``bench.args.is_name``: no path separator, not ``.`` or ``..``, at most ``MAX_NAME``
+    characters) is left out, with one line."""
     out = {}
     for ep in metadata.entry_points(group=GROUP):
-        if NAME.fullmatch(ep.name) and ep.name not in (".", ".."):
+        if is_name(ep.name):
             out[ep.name] = ep.value
         elif ep.name not in _WARNED:
             _WARNED.add(ep.name)
             print(f"warning: installed agent {ep.name!r} ({ep.value}, entry-point group {GROUP}) is left out: a method "
-                  f"name is made of letters, digits, '.', '_' and '-'", file=sys.stderr)
+                  f"name is made of letters, digits, '.', '_' and '-', at most {MAX_NAME} characters", file=sys.stderr)
     return out
 
 

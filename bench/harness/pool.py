@@ -5,7 +5,9 @@ its own pipe, so the parent always knows which task a worker was running. A work
 (SIGKILL by the OOM killer, a segfault in SUMO) is replaced by a fresh process, the other
 workers go on, and its task is run again, at most ``RETRIES`` more times. A Python exception
 raised by the task is not retried: the episodes are seeded, so the same exception would come
-again. A task that cannot be finished is given to ``on_failure`` as a ``Failure``; without it,
+again. A ``KeyboardInterrupt`` or ``SystemExit`` raised by the task's own code (workers ignore
+SIGINT, so it is no Ctrl-C) is such an exception (``TaskExit``), not a dead worker; a Ctrl-C
+reaches the parent alone, which stops the workers at once. A task that cannot be finished is given to ``on_failure`` as a ``Failure``; without it,
 the exception (or ``WorkerDied``) is raised as a ``concurrent.futures`` pool would.
 """
 from __future__ import annotations
@@ -29,6 +31,24 @@ SPAWN_DEATHS = 5  # workers that die this many times in a row before taking any 
 
 class WorkerDied(BrokenProcessPool):
     """A task's worker died ``1 + RETRIES`` times (raised when no ``on_failure`` is given)."""
+
+
+class TaskExit(Exception):
+    """A ``KeyboardInterrupt`` or ``SystemExit`` that a task raised itself (an agent's ``act``,
+    say), in its worker: a task failure like any exception, not a Ctrl-C. A worker ignores SIGINT,
+    so none of these comes from the user; the parent's own KeyboardInterrupt stops the run."""
+
+    @classmethod
+    def of(cls, e: BaseException) -> TaskExit:
+        text = str(e)
+        out = cls(f"{type(e).__name__}{': ' + text if text else ''} (raised inside the task, not a Ctrl-C)")
+        out.__dict__.update({k: v for k, v in vars(e).items() if k.startswith("ecodrive_")})
+        return out
+
+
+def reason_of(error: BaseException) -> str:
+    """A task failure's reason, one line's worth: the exception's type and text."""
+    return str(error) if isinstance(error, TaskExit) else f"{type(error).__name__}: {error}"
 
 
 class RemoteTraceback(Exception):
@@ -111,6 +131,9 @@ def _worker(conn: Any, fn: Callable[[Any], Any], parent: int) -> None:
             result = fn(task)
         except Exception as e:
             conn.send((tid, False, _portable(e), traceback.format_exc()))
+            continue
+        except (KeyboardInterrupt, SystemExit) as e:  # raised by the task's code: SIGINT is ignored here
+            conn.send((tid, False, TaskExit.of(e), traceback.format_exc()))
             continue
         try:
             conn.send((tid, True, result, ""))
@@ -220,7 +243,7 @@ def run_pool(tasks: Iterable[Any], workers: int, fn: Callable[[Any], Any],
                 elif on_failure is None:
                     raise value from RemoteTraceback(tb)
                 else:
-                    on_failure(describe(value, tb, f"{type(value).__name__}: {value}", deaths[tid] + 1, task))
+                    on_failure(describe(value, tb, reason_of(value), deaths[tid] + 1, task))
         clean = True
     except KeyboardInterrupt:  # the workers ignore SIGINT: stop them now
         for s in slots:

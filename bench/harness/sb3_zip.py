@@ -5,7 +5,8 @@ cloudpickled, base64, under a ``":serialized:"`` key), the weights as ``*.pth`` 
 and version files. SB3's own ``Algo.load`` unpickles every serialized entry with cloudpickle, and
 unpickling calls whatever the pickle names: a model file from elsewhere could run code on load.
 
-``read`` opens the zip itself (once, into memory: SB3 later reads these very bytes) and
+``read`` opens the zip itself (once, into memory: SB3 later reads these very bytes; a regular file
+of at most ``MAX_ZIP_BYTES``, checked before it is read) and
 
 - decodes only ``observation_space``, ``action_space``, ``policy_class`` and ``policy_kwargs``,
   with ``SafeUnpickler``, which resolves only the names on an allow list (gymnasium spaces, the
@@ -41,7 +42,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ecodrive_bench.bench.args import InputError, read_regular
+
 DECODED = ("observation_space", "action_space", "policy_class", "policy_kwargs")
+# [bytes] largest --sb3 zip read (into memory, once): SB3 zips of policies for this env's observation
+# are well under 10 MiB (weights and optimizer state); 256 MiB leaves room for wide networks
+MAX_ZIP_BYTES = 256 * 2**20
 MAX_DATA_BYTES = 64 * 2**20  # the JSON ``data`` entry; SB3's own are tens of kB
 # constants for the serialized entries that are never decoded (None for any other)
 CONSTANTS: dict[str, Any] = {"learning_rate": 0.0, "clip_range": 0.0, "train_freq": 1, "target_entropy": 0.0}
@@ -132,15 +138,15 @@ class Saved:
 
 def read(path: Path) -> Saved:
     """The zip at ``path``, its decodable entries decoded safely; ``ZipError`` (one line) for a
-    file that is missing, not a zip, without ``data``, or with a refused or undecodable entry."""
+    file that is missing, not a regular file, larger than ``MAX_ZIP_BYTES``, not a zip, without
+    ``data``, or with a refused or undecodable entry."""
+    try:  # a regular file of at most MAX_ZIP_BYTES, checked before it is read (not /dev/zero, a FIFO)
+        blob = read_regular(Path(path), f"--sb3 {str(path)!r}", MAX_ZIP_BYTES, "zip file")
+    except InputError as e:
+        raise ZipError(f"{e}; expected a model saved by Stable-Baselines3's model.save()") from None
     from gymnasium import spaces
     from stable_baselines3.common.policies import BasePolicy
 
-    try:
-        blob = Path(path).read_bytes()
-    except OSError as e:
-        raise ZipError(f"--sb3 {str(path)!r}: cannot read it ({e.strerror or type(e).__name__}); "
-                       f"expected a model saved by Stable-Baselines3's model.save()") from None
     try:
         with zipfile.ZipFile(io.BytesIO(blob)) as archive:
             info = archive.getinfo("data")

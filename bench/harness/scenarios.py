@@ -19,7 +19,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ecodrive_bench.bench.args import MAX_JSON_BYTES, MAX_JSON_DEPTH, InputError, depth, one_line, read_json
+from ecodrive_bench.bench.args import (
+    MAX_JSON_BYTES,
+    MAX_JSON_DEPTH,
+    DuplicateKey,
+    InputError,
+    depth,
+    loads,
+    one_line,
+    read_json,
+)
 from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
 
 
@@ -66,9 +75,11 @@ def parse_overrides(path: Path | None, items: list[str], signals: list[str], bui
         if not sep or not key or any(not part for part in key.split(".")):
             raise InputError(f"--set {shown!r}: expected FIELD=VALUE, e.g. lanes=3 or ev.mass=1500")
         try:
-            value = json.loads(raw)
+            value = loads(raw)
         except json.JSONDecodeError:
             value = raw
+        except DuplicateKey as e:
+            raise InputError(f"--set {shown}: {e}") from None
         except (RecursionError, ValueError) as e:  # nested too deeply; an integer of too many digits
             raise InputError(f"--set {shown}: VALUE is not readable ({type(e).__name__}); accepted: a JSON "
                              f"number, list or object nested at most {MAX_JSON_DEPTH} deep, or text") from None

@@ -17,15 +17,15 @@ from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.records import Message
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Message
 from mcap.well_known import MessageEncoding
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from ecodrive_bench.bench.io import exclusive_open
-from ecodrive_bench.bench.logs import schema
+from ecodrive_bench.bench.logs import bounded, content, schema
+from ecodrive_bench.bench.logs.bounded import LogError
 
 CHUNK_SIZE = 64 * 1024  # [bytes] small chunks: a killed run loses the one it was filling (and STEP_BATCH)
 # steps held before they are encoded: encoded back to back, the protobuf and MCAP code stays in the
@@ -39,10 +39,6 @@ PLAN = "plan"  # MCAP metadata record of a planned trajectory (JSON under "json"
 # serialized FileDescriptorSets, built once per process (they are the same for every file)
 _SCHEMAS = {topic: (cls.DESCRIPTOR.full_name, build_file_descriptor_set(cls).SerializeToString())
             for topic, cls in TOPICS.items()}
-
-
-class LogError(RuntimeError):
-    """A step log that cannot be read at all; the message names the file and the cause."""
 
 
 def _ns(t: float) -> int:
@@ -170,7 +166,8 @@ class LogData:
     train: list[Any] = field(default_factory=list)  # /train messages (training logs)
     fleet_vehicles: list[Any] = field(default_factory=list)  # /fleet/vehicle (mixed traffic)
     fleet_cell: Any = None  # /fleet/cell summary (mixed traffic)
-    plan: dict[str, Any] | None = None  # a planned trajectory (the oracle's), if the log has one
+    plan: dict[str, Any] | None = None  # the plan record (the oracle's and mpc's trajectory), if the log has one
+    geometry: dict[str, Any] = field(default_factory=dict)  # /meta's corridor drawing, checked ({}: none)
     complete: bool = False  # footer read and episode summary present
     warning: str = ""
 
@@ -180,7 +177,9 @@ class LogData:
 
 
 def read_log(path: str | Path) -> LogData:
-    """Read a step log, complete or truncated. Raises ``LogError`` if nothing can be read."""
+    """Read a step log, complete or truncated, once and at a bounded cost (``bench.logs.bounded``),
+    and check what it says (``bench.logs.content``). Raises ``LogError`` (one line naming the file)
+    if nothing can be read, past a limit, or for content that no log of the writer holds."""
     path = Path(path)
     if not path.exists():
         raise LogError(f"{path}: no such log file")
@@ -191,16 +190,19 @@ def read_log(path: str | Path) -> LogData:
     data = LogData(path)
     channels: dict[int, str] = {}
     footer = False
+    plan = geometry = None
     try:
         with open(path, "rb") as f:
-            for rec in StreamReader(f, validate_crcs=True).records:
+            for rec in bounded.records(path, f):
                 kind = type(rec).__name__
                 if kind == "Channel":
                     channels[rec.id] = rec.topic
                 elif kind == "Metadata" and rec.name == "ecodrive":
                     data.meta = dict(rec.metadata)
                 elif kind == "Metadata" and rec.name == PLAN:
-                    data.plan = json.loads(rec.metadata["json"])
+                    if "json" not in rec.metadata:
+                        raise LogError(f"{path}: plan: a metadata record without its 'json'; {content.WRITER}")
+                    plan = rec.metadata["json"]
                 elif kind == "Footer":
                     footer = True
                 elif isinstance(rec, Message):
@@ -219,8 +221,10 @@ def read_log(path: str | Path) -> LogData:
                         data.fleet_vehicles.append(msg)
                     elif topic == "/fleet/cell":
                         data.fleet_cell = msg
-                    else:
-                        data.metadata = msg
+                    elif data.metadata is None:
+                        data.metadata, geometry = msg, msg.geometry_json
+    except LogError:
+        raise
     except (McapError, struct.error, ValueError, EOFError, OSError) as e:  # truncated or corrupt tail
         if data.metadata is None and not data.steps:
             raise LogError(f"{path}: not a readable MCAP step log ({type(e).__name__}: "
@@ -230,6 +234,9 @@ def read_log(path: str | Path) -> LogData:
         if data.metadata is None and not data.steps:
             raise LogError(f"{path}: not a readable MCAP step log ({type(e).__name__}: {e})") from None
         data.warning = f"{path}: log is corrupt after {len(data.steps)} steps ({type(e).__name__}: {e})"
+    data.geometry = content.geometry(path, geometry or "")
+    data.plan = content.plan(path, plan) if plan is not None else None
+    content.steps(path, data.steps)
     data.complete = footer and data.episode is not None and not data.warning
     if not data.complete and not data.warning:
         data.warning = f"{path}: log is incomplete ({len(data.steps)} steps, no episode summary)"
@@ -273,41 +280,68 @@ def is_complete(path: str | Path) -> bool:
 
 
 def read_plan(path: str | Path) -> dict[str, Any] | None:
-    """The ``plan`` metadata record of a log through the MCAP index (no step is decoded), or None
-    when the log has none or cannot be read."""
-    from mcap.reader import make_reader
-
+    """The ``plan`` metadata record of a log, checked (``bench.logs.content.plan``), or None when the
+    log has none. Chunks are passed over, never decompressed. Raises ``LogError`` (one line) for a
+    log that cannot be read or whose plan no log of the writer holds."""
+    path = Path(path)
     try:
         with open(path, "rb") as f:
-            rec = next((m for m in make_reader(f).iter_metadata() if m.name == PLAN), None)
-            return json.loads(rec.metadata["json"]) if rec is not None else None
-    except Exception:  # a missing or damaged log has no plan to show
-        return None
+            for rec in bounded.records(path, f, expand=False):
+                if type(rec).__name__ == "Metadata" and rec.name == PLAN:
+                    if "json" not in rec.metadata:
+                        raise LogError(f"{path}: plan: a metadata record without its 'json'; {content.WRITER}")
+                    return content.plan(path, rec.metadata["json"])
+    except LogError:
+        raise
+    except Exception as e:  # a missing or damaged log
+        raise LogError(f"{path}: not a readable MCAP step log ({type(e).__name__}: {str(e).strip()[:200]})") from None
+    return None
 
 
 def episode_summary(path: str | Path, agent_sha256: str | None = None, eval_scenario: str | None = None,
                     legacy_scenario: str = "") -> dict[str, Any] | None:
-    """The /episode record of a finished log through the MCAP index (fast), or None when the
-    file is missing, unfinished or damaged, or (given ``agent_sha256``, ``eval_scenario``) was
-    written by another policy or on another scenario: the harness then reruns the case. A log
-    without an ``eval_scenario_hash`` counts as written on ``legacy_scenario``."""
-    from mcap.reader import make_reader
-
+    """The /episode record of a finished log, or None when the file is missing, unfinished,
+    damaged or past a limit of ``bench.logs.bounded``, or (given ``agent_sha256``,
+    ``eval_scenario``) was written by another policy or on another scenario: the harness then
+    reruns the case. A log without an ``eval_scenario_hash`` counts as written on
+    ``legacy_scenario``. Fast: the file is read once and only its last chunk is decompressed (the
+    writer's summary is the last message; a file that has it elsewhere is run again)."""
+    path = Path(path)
+    meta: dict[str, str] = {}
+    channels: dict[int, str] = {}
+    last, footer = None, False
+    budget = bounded.Budget(path)
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f, validate_crcs=True)
-            if agent_sha256 is not None or eval_scenario is not None:
-                meta = next((m.metadata for m in reader.iter_metadata() if m.name == "ecodrive"), {})
-                if agent_sha256 is not None and meta.get("agent_sha256", "") != agent_sha256:
-                    return None
-                if eval_scenario is not None and meta.get("eval_scenario_hash", legacy_scenario) != eval_scenario:
-                    return None
-            for _, _, message in reader.iter_messages(topics=["/episode"]):
-                ep = schema.Episode.FromString(message.data)
-                return {fd.name: getattr(ep, fd.name) for fd in ep.DESCRIPTOR.fields}
+            for rec in bounded.records(path, f, expand=False, budget=budget):
+                kind = type(rec).__name__
+                if kind == "Metadata" and rec.name == "ecodrive":
+                    meta = dict(rec.metadata)
+                    if not _same_provenance(meta, agent_sha256, eval_scenario, legacy_scenario):
+                        return None  # written first: nothing else is read
+                elif kind == "Chunk":
+                    last = rec
+                elif kind == "Channel":  # the summary's copies
+                    channels[rec.id] = rec.topic
+                elif kind == "Footer":
+                    footer = True
+            if last is None or not footer or not _same_provenance(meta, agent_sha256, eval_scenario, legacy_scenario):
+                return None
+        inside = bounded.chunk_records(path, last, budget)
+        channels.update({r.id: r.topic for r in inside if isinstance(r, Channel)})
+        episode = next((schema.Episode.FromString(r.data) for r in reversed(inside)
+                        if isinstance(r, Message) and channels.get(r.channel_id) == "/episode"), None)
     except Exception:  # any damage means: run the case again
         return None
-    return None
+    if episode is None:
+        return None
+    return {fd.name: getattr(episode, fd.name) for fd in episode.DESCRIPTOR.fields}
+
+
+def _same_provenance(meta: dict[str, str], agent_sha256: str | None, eval_scenario: str | None,
+                     legacy_scenario: str) -> bool:
+    return ((agent_sha256 is None or meta.get("agent_sha256", "") == agent_sha256)
+            and (eval_scenario is None or meta.get("eval_scenario_hash", legacy_scenario) == eval_scenario))
 
 
 def meta_json(obj: Any) -> str:

@@ -23,7 +23,6 @@ Entities (timeline ``sim_time``, simulation seconds):
 """
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
@@ -33,7 +32,7 @@ import numpy as np
 from ecodrive_bench.bench.args import Parser, fail
 from ecodrive_bench.bench.io import Unwritable, writable_dir
 from ecodrive_bench.bench.logs.drive import ROAD, log_ego_frame, log_time_distance, signal_links, views
-from ecodrive_bench.bench.logs.mcaplog import LogError, read_log
+from ecodrive_bench.bench.logs.mcaplog import LogData, LogError, read_log
 
 GREEN, RED, YELLOW = (40, 180, 60), (220, 40, 40), (230, 190, 30)
 TRAIL_S = 60  # [s] of ego trail
@@ -44,19 +43,18 @@ def _colour(state: str) -> tuple[int, int, int]:
     return GREEN if state in "gG" else (YELLOW if state in "yY" else RED)
 
 
-def build_recording(path: Path, rec) -> tuple[int, str]:
-    """Log the MCAP's content into ``rec``; returns (steps, warning)."""
+def build_recording(data: LogData, rec) -> tuple[int, str]:
+    """Log a step log's content (``read_log``'s, checked there) into ``rec``; returns (steps, warning)."""
     import rerun as rr
     import rerun.blueprint as rrb
 
-    data = read_log(path)
     if not data.steps:
-        raise LogError(f"{path}: the log has no steps to show")
-    geo = json.loads(data.metadata.geometry_json) if data.metadata and data.metadata.geometry_json else {}
+        raise LogError(f"{data.path}: the log has no steps to show")
+    geo = data.geometry
     steps = data.steps
     lane_y = geo.get("lane_y") or sorted({s.y for s in steps})
     half = geo.get("lane_width", 3.2) / 2
-    x_end = max(geo.get("stop_lines", [max(s.x for s in steps)])) + 200
+    x_end = max(geo.get("stop_lines") or [max(s.x for s in steps)]) + 200
     rec.log("/world/lanes", rr.LineStrips2D([[[0, y - half], [x_end, y - half]] for y in lane_y] +
                                             [[[0, lane_y[-1] + half], [x_end, lane_y[-1] + half]]],
                                             colors=(150, 150, 150)), static=True)
@@ -66,7 +64,7 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
     links = signal_links(steps)  # the ego's link index at each signal, recovered from the log
     tls_ids = geo.get("tls", sorted(links))
     times = np.array([s.time for s in steps])
-    plan = data.plan
+    plan = data.plan if data.plan and "time" in data.plan else None  # a trajectory (the clairvoyant's has none)
     plan_x = dict(zip(np.round(plan["time"], 6), plan["x"])) if plan else {}
     replans = {round(r["time"], 6): r for r in (plan or {}).get("replans", [])}  # mpc: the plan in force
     first_replan = min(replans, default=float("inf"))
@@ -79,7 +77,7 @@ def build_recording(path: Path, rec) -> tuple[int, str]:
                                          labels=["ego"]))
         rec.log("/world/trail", rr.LineStrips2D([trail], colors=(30, 120, 255)))
         now = round(s.time, 6)
-        if now in replans:  # the re-planned look-ahead, in force from this step
+        if replans.get(now, {}).get("x"):  # the re-planned look-ahead, in force from this step
             ahead = replans[now]["x"]
             rec.log("/world/plan_ahead", rr.Points2D([[x - 2.5, s.y] for x in ahead], colors=(255, 160, 0),
                                                      radii=0.6, labels=[f"re-plan ({replans[now]['event']})"] + [""] * (len(ahead) - 1)))
@@ -165,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     import rerun as rr
 
     try:
-        read_log(args.mcap)  # a file that is not a step log is refused before a viewer starts
+        data = read_log(args.mcap)  # read once; a file that is not a step log is refused before a viewer starts
         if args.save:
             if args.save.exists():
                 return fail(ap.prog, f"--save {args.save} exists; give a new path (nothing is overwritten)")
@@ -184,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
             rec.save(part)  # renamed to --save once complete: no half-written recording under its name
         else:
             rec.spawn()
-        n, warning = build_recording(args.mcap, rec)
+        n, warning = build_recording(data, rec)
         rec.flush()
         done = True
     except LogError as e:
