@@ -331,7 +331,7 @@ class EcoDriveEnv(gym.Env):
     def _info(self, m: StepMeasure | None, comps: dict, travel_time: float) -> dict[str, Any]:
         ego = self.ego
         assert ego is not None
-        return {
+        info = {
             "action_mask": ego.mask.copy(),
             "time": self.session.time(),
             "position": float(ego.kin.x),
@@ -350,8 +350,10 @@ class EcoDriveEnv(gym.Env):
             "collisions_all": self.collisions_all,
             "teleports_all": self.teleports_all,
             "case": dict(self.case),
-            **({"corridor": self.corridor} if self.family else {}),
         }
+        if self.family:
+            info["corridor"] = self.corridor
+        return info
 
     def _record(self, obs, m, action, r, comps, info) -> dict[str, Any]:
         """Everything the step logger writes (only built when a recorder is attached)."""
