@@ -167,16 +167,18 @@ def read_json(path: Path, what: str, limit: int = MAX_JSON_BYTES) -> Any:
     return value
 
 
-def read_regular(path: Path, where: str, limit: int, kind: str) -> bytes:
+def read_regular(path: Path, where: str, limit: int, kind: str, unreadable: str = "") -> bytes:
     """The bytes of ``path``, read with bounds: a path that is not a regular file (a device such as
     ``/dev/zero``, a FIFO, a folder) or is larger than ``limit`` bytes is refused before it is read
     (and a file replaced or grown meanwhile, while it is): an ``InputError`` of one line that starts
-    with ``where`` and names the ``kind`` of file accepted."""
+    with ``where`` and names the ``kind`` of file accepted; one that cannot be read says
+    ``unreadable`` (default: not a readable ``kind``) and why."""
     accepted = f"accepted: a regular {kind} of at most {limit} bytes ({limit / 2**20:g} MiB)"
+    unreadable = unreadable or f"not a readable {kind}"
     try:
         st = os.stat(path)
     except OSError as e:
-        raise InputError(f"{where}: not a readable {kind} ({e.strerror or type(e).__name__})") from None
+        raise InputError(f"{where}: {unreadable} ({e.strerror or type(e).__name__})") from None
     if not stat.S_ISREG(st.st_mode):
         raise InputError(f"{where}: not a regular file; {accepted}")
     if st.st_size > limit:
@@ -187,7 +189,7 @@ def read_regular(path: Path, where: str, limit: int, kind: str) -> bytes:
                 raise InputError(f"{where}: not a regular file; {accepted}")
             raw = f.read(limit + 1)
     except OSError as e:
-        raise InputError(f"{where}: not a readable {kind} ({e.strerror or type(e).__name__})") from None
+        raise InputError(f"{where}: {unreadable} ({e.strerror or type(e).__name__})") from None
     if len(raw) > limit:  # it grew since the check above
         raise InputError(f"{where}: more than {limit} bytes; {accepted}")
     return raw

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.agents.registry import METHODS
-from ecodrive_bench.bench.args import MAX_NAME, Parser, int_in, is_name, name, name_shown
+from ecodrive_bench.bench.args import MAX_NAME, Parser, int_in, name, name_shown
 from ecodrive_bench.bench.harness import scenarios
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.errors import AgentError
@@ -147,9 +147,9 @@ def parse(argv: list[str]) -> RunOptions:
         opts["agent"] = sb3_spec(ap, opts)
     if opts["agent"]:
         label = opts["name"] or (f"sb3-{opts['sb3_algo'].lower()}" if opts["sb3"] else opts["agent"].split(":")[-1])
-        if not is_name(label):  # the factory's name: a folder and file name of the run, as --name
-            ap.error(f"--agent {opts['agent']!r}: the factory's name {name_shown(label)} is not accepted as a method "
-                     f"name (letters, digits, '.', '_' and '-', at most {MAX_NAME} characters); give --name")
+        if len(label) > MAX_NAME:  # the factory's name is a folder and file name of the run, as --name
+            ap.error(f"--agent {opts['agent']!r}: the factory's name {name_shown(label)} is too long for a method "
+                     f"name (at most {MAX_NAME} characters); give --name")
         if label in (*METHODS, *PLANNERS) or label in opts["factories"]:
             ap.error(f"--name {label!r} is taken by a built-in or installed method; choose another")
         opts["factories"][label] = opts["agent"]

@@ -141,7 +141,7 @@ def read(path: Path) -> Saved:
     file that is missing, not a regular file, larger than ``MAX_ZIP_BYTES``, not a zip, without
     ``data``, or with a refused or undecodable entry."""
     try:  # a regular file of at most MAX_ZIP_BYTES, checked before it is read (not /dev/zero, a FIFO)
-        blob = read_regular(Path(path), f"--sb3 {str(path)!r}", MAX_ZIP_BYTES, "zip file")
+        blob = read_regular(Path(path), f"--sb3 {str(path)!r}", MAX_ZIP_BYTES, "zip file", "cannot read it")
     except InputError as e:
         raise ZipError(f"{e}; expected a model saved by Stable-Baselines3's model.save()") from None
     from gymnasium import spaces

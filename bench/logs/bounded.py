@@ -72,8 +72,8 @@ class LogError(RuntimeError):
 
 class _Clamped(io.RawIOBase):
     """A file read no further than its end: a record that claims more than the file holds gets
-    what is left (and mcap's reader then stops at the end of the file), so no read allocates
-    more than the file's size."""
+    what is left (and the next read finds the end of the file), so no read allocates more than
+    the file's size."""
 
     def __init__(self, f: IO[bytes], size: int) -> None:
         super().__init__()
@@ -132,6 +132,8 @@ def records(path: Path, f: IO[bytes], expand: bool = True, budget: Budget | None
                            f"most {MAX_RECORD_BYTES} bytes; refused")
         start = stream.count
         if opcode == Opcode.MESSAGE:
+            if length < _MESSAGE.size:
+                raise McapError(f"a message record of {length} bytes, short of its fields")
             rec = Message.read(stream, length)
         elif opcode in _READ:
             rec = _READ[opcode](stream)
@@ -194,11 +196,8 @@ def chunk_records(path: Path, chunk: Chunk, budget: Budget) -> list[McapRecord]:
             out.append(Message(channel_id=channel, log_time=log_time, data=data[at + _MESSAGE.size:end],
                                publish_time=publish_time, sequence=sequence))
         elif opcode in (Opcode.CHANNEL, Opcode.SCHEMA):
-            stream = ReadDataStream(io.BytesIO(data[at:end]))
-            out.append((Channel if opcode == Opcode.CHANNEL else Schema).read(stream))
-            if stream.count != length:
-                raise McapError(f"a record in a chunk is not the {length} bytes it claims")
-        at = end
+            out.append((Channel if opcode == Opcode.CHANNEL else Schema).read(ReadDataStream(io.BytesIO(data[at:end]))))
+        at = end  # past fields a later MCAP version may add
     return out
 
 

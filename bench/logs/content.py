@@ -11,8 +11,8 @@ checked, against the writer's own invariants (``EpisodeLog``): every step's grid
 neighbours' boxes are finite (a series of another field shows a NaN as a gap); its neighbour
 arrays are equally long; it holds as many signal states as every other step, and the signals it
 approaches (``signal.tls``, ``signal.link``) are among them, at a link that every state string has
-(the corridor's intersections share one layout). Checking costs about 5 us a step: a log of 300
-steps is read in about 4 ms instead of 2.5 ms.
+(the corridor's intersections share one layout). The checks cost about 5 us a step: ``read_log``
+takes 3.4 s of CPU for 806 logs of this project (214 steps each on average), 2.4 s before.
 """
 from __future__ import annotations
 

@@ -64,7 +64,7 @@ def test_a_name_too_long_for_a_file_name_is_refused_up_front(option, tmp_path, m
 
 def test_an_agent_factory_whose_name_is_too_long_needs_a_name(tmp_path, monkeypatch, capsys):
     err = _refused(["--agent", "some_module:" + "f" * 300], tmp_path, monkeypatch, capsys)
-    assert "the factory's name 'fff" in err and "(300 characters)" in err and "give --name" in err
+    assert "the factory's name 'fff" in err and "(300 characters) is too long" in err and "give --name" in err
 
 
 def test_a_lock_file_that_is_a_fifo_is_refused_in_one_line(tmp_path):
@@ -106,6 +106,8 @@ def test_an_sb3_path_that_is_no_regular_file_or_too_large_is_refused_before_it_i
     msg = str(e.value)
     assert "\n" not in msg and msg.startswith(f"--sb3 {str(path)!r}: ")
     assert ("not a regular file" in msg) if kind != "large" else ("1001 bytes is too large" in msg)
+    with pytest.raises(ZipError, match="model.zip': cannot read it"):  # as before
+        read(tmp_path / "gone" / "model.zip")
 
 
 def test_the_cli_refuses_sb3_dev_zero_in_one_line(tmp_path, monkeypatch, capsys):

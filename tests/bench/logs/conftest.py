@@ -109,6 +109,17 @@ def empty_records(n: int) -> tuple[bytes, int]:
     return zstandard.ZstdCompressor().compress(raw), len(raw)
 
 
+@pytest.fixture
+def no_decompression(monkeypatch):
+    """Any zstd decompression in this process fails the test (mcap's readers and ours both go
+    through these)."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("a chunk was decompressed")
+
+    for name in ("decompress", "ZstdDecompressor"):
+        monkeypatch.setattr(zstandard, name, refuse)
+
+
 @pytest.fixture(scope="session")
 def bomb(tmp_path_factory) -> Path:
     """A 33 KB step log whose one zstd chunk claims (and holds) 1 GiB of zeros."""
