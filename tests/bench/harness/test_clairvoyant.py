@@ -15,16 +15,22 @@ EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0}
 CASE = Case(index=0, sumo_seed=7, insert_time=210.0, group=0)
 
 
-@pytest.mark.slow
-def test_on_an_empty_corridor_it_drives_the_krauss_capped_plan():
-    cfg = setting("uncoordinated", EMPTY)
+def _chosen_drives(overrides: dict | None, n: int):
+    """The case prepared on ``overrides``' uncoordinated corridor, then its chosen drive ``n`` times
+    again: (config, agent, [(recording, cost)] * n)."""
+    cfg = setting("uncoordinated", overrides)
     agent = ClairvoyantAgent(cfg, shipped=None)
-    env = make_env(agent, "uncoordinated", EMPTY)
+    env = make_env(agent, "uncoordinated", overrides)
     try:
         agent.prepare(env, CASE)
-        rec, cost = agent._drive(env, CASE)  # the chosen drive, again
+        return cfg, agent, [agent._drive(env, CASE) for _ in range(n)]
     finally:
         env.close()
+
+
+@pytest.mark.slow
+def test_on_an_empty_corridor_it_drives_the_krauss_capped_plan():
+    cfg, _, [(rec, cost)] = _chosen_drives(EMPTY, 1)
     free = bound(cfg, rec.t0, "cost", krauss=True)  # the refined bound with Krauss' cap
     assert len(rec.ego_x) == len(free.x) and np.max(np.abs(rec.ego_x - free.x)) < 1e-3  # step for step (float32 requests)
     assert cost == pytest.approx(free.cost, rel=1e-6)  # SUMO's energy against the DP's model of it
@@ -33,16 +39,8 @@ def test_on_an_empty_corridor_it_drives_the_krauss_capped_plan():
 
 @pytest.mark.slow
 def test_a_chosen_drive_repeats_step_for_step_with_its_traffic():
-    cfg = setting("uncoordinated", None)
-    agent = ClairvoyantAgent(cfg, shipped=None)
-    env = make_env(agent, "uncoordinated", None)
-    try:
-        agent.prepare(env, CASE)
-        a, cost_a = agent._drive(env, CASE)
-        b, cost_b = agent._drive(env, CASE)
-    finally:
-        env.close()
-    assert cost_a == cost_b == agent.rounds[-1]["chosen_cost"] or cost_a == pytest.approx(agent.rounds[-1]["chosen_cost"], abs=1e-4)
+    _, agent, [(a, cost_a), (b, cost_b)] = _chosen_drives(None, 2)
+    assert cost_a == cost_b and cost_a == pytest.approx(agent.rounds[-1]["chosen_cost"], abs=1e-4)  # rounded there
     assert a.t0 == b.t0 and np.array_equal(a.ego_x, b.ego_x) and len(a.traffic) == len(b.traffic)
     for (ids_a, rows_a), (ids_b, rows_b) in zip(a.traffic, b.traffic):
         assert ids_a == ids_b and np.array_equal(rows_a, rows_b)
