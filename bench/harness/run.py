@@ -28,10 +28,11 @@ from ecodrive_bench.bench.harness import external, failures, scenarios
 from ecodrive_bench.bench.harness.bounds import attach
 from ecodrive_bench.bench.harness.cases import Case, load
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError
-from ecodrive_bench.bench.harness.executors import Task, run_local, run_ray
+from ecodrive_bench.bench.harness.executors import Task, episode_limit, run_local, run_ray
 from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
 from ecodrive_bench.bench.harness.planners import PLANNERS
 from ecodrive_bench.bench.harness.policies import check_policy, family_dir, policy_dir, shipped_seeds
+from ecodrive_bench.bench.harness.pool import PoolBroken
 from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions, process_age
 from ecodrive_bench.bench.harness.scenarios import Evaluation
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
@@ -177,6 +178,7 @@ def plan(opts: RunOptions, pre: Preflight) -> Plan:
     of another policy or scenario is not reused: its episode runs again)."""
     todo = Plan([], [])
     for signals in opts.signals:
+        limit = opts.episode_limit or episode_limit(pre.evals[signals])
         for method, seed in [(m, sd) for m, s, sd in pre.runs if s == signals]:
             pdir, ev = pre.pdirs[(method, signals, seed)], pre.where[(method, signals, seed)]
             sha = sha256(Path(pdir) / "policy.pt") if pdir else opts.agent_sha256.get(method, "")
@@ -191,7 +193,8 @@ def plan(opts: RunOptions, pre: Preflight) -> Plan:
                     todo.reused.append({**done, "mcap": str(path), "episode_wall_s": float("nan"), "train_seed": seed})
                 else:
                     todo.tasks.append(Task(method, signals, case, str(path), pdir, seed, opts.factories.get(method, ""),
-                                           scenario=ev.scenario, transfer=opts.transfer, meta=ev.meta(opts.transfer)))
+                                           scenario=ev.scenario, transfer=opts.transfer, meta=ev.meta(opts.transfer),
+                                           limit_s=limit))
     return todo
 
 
@@ -204,9 +207,12 @@ def execute(opts: RunOptions, todo: Plan, progress: bool = True) -> tuple[list[d
     rows = []
     with progress_bar(total=len(todo.reused) + len(todo.tasks), initial=len(todo.reused), desc="episodes",
                       unit="ep", enabled=progress) as bar:
-        for row in it:
-            rows.append(row)
-            bar.update(1)
+        try:
+            for row in it:
+                rows.append(row)
+                bar.update(1)
+        except PoolBroken as e:  # one line and a record; the finished rows are written
+            failed.broken(e)
     return rows, failed
 
 
