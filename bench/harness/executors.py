@@ -145,10 +145,10 @@ def run_task(task: Task) -> dict[str, Any]:
     env_key = (task.method, task.signals, task.scenario)
     key = (task.method, task.signals, task.policy_dir, task.scenario)
     if task.factory and key not in _AGENTS:
-        from ecodrive_bench.bench.harness.external import make
+        from ecodrive_bench.bench.harness.external import code_sha256, make
 
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
-        _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
+        _AGENTS[key] = (agent, code_sha256(task.factory, agent))  # its code's, an --sb3 zip's
     if task.method in PLANNERS and key not in _AGENTS:
         from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
         from ecodrive_bench.bench.harness.mpc import MPCAgent
