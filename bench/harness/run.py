@@ -121,10 +121,11 @@ def check_writable(run_dir: Path) -> None:
 
 
 def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
-    """Every check of a run that writes nothing: methods, factories, policies (``checked``: policy
-    folders already loaded by an earlier call), the scenario each may drive, the run folder's
-    scenario and the case list. Raises ``UsageError``, ``CheckpointError``, ``AgentError`` or
-    ``InputError`` (a bad case list)."""
+    """Every check of a run that writes nothing but the scenario cache: methods, factories, policies
+    (``checked``: policy folders already loaded by an earlier call), the scenario each may drive
+    (built, or checked in the cache), the run folder's scenario and the case list. Raises
+    ``UsageError``, ``CheckpointError``, ``AgentError`` or ``InputError`` (a bad case list, a
+    scenario cache entry that cannot be rebuilt)."""
     runs, skipped = resolve_methods(opts)
     codes = {}
     for label, spec in opts.factories.items():  # a factory that cannot build its agent fails before any episode
@@ -139,6 +140,8 @@ def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
     # a policy that may not (or cannot) drive the scenario is refused before anything is written
     where = {r: scenarios.evaluation(r[0], r[1], pdirs[r], opts.scenario, opts.transfer) for r in runs}
     check_policies(pdirs, checked)
+    for r in runs:  # a damaged scenario cache entry is rebuilt (or named) before any episode
+        scenarios.check_cached(r[0], r[1], where[r])
     one_scenario(opts.run_dir, {s: c.digest() for s, c in evals.items()})
     cases = opts.cases or load()[: PROFILES[opts.profile]]  # a variant's own (generalisation)
     one_case_set(opts.run_dir, runs, {c.index for c in cases})
