@@ -7,9 +7,11 @@ import json
 
 import pytest
 
-from ecodrive_bench.envs import scenario
 from ecodrive_bench.envs.config import ScenarioConfig
-from ecodrive_bench.envs.scenario import BUILT, ScenarioBuildError, build
+from ecodrive_bench.envs.scenario import ScenarioBuildError, build
+
+BUILT = ("corridor.nod.xml", "corridor.edg.xml", "corridor.net.xml", "signals.add.xml", "corridor.rou.xml",
+         "geometry.json", "config.json")  # what a cache entry holds besides its marker
 
 
 def _truncate(path):
@@ -39,14 +41,17 @@ def test_a_damaged_built_file_is_built_again(entry, damage, capsys):
     (folder / "notes.txt").write_text("the user's own file")
     name, spoil = DAMAGES[damage]
     spoil(folder / name)
-    assert name in scenario.damage(folder)
     files = build(cfg)
     assert {n: (folder / n).read_bytes() for n in BUILT} == original
-    assert files.stop_lines and scenario.damage(folder) == ""
+    assert files.stop_lines
     assert (folder / "notes.txt").read_text() == "the user's own file"  # nothing else touched
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(folder) in err[0] and name in err[0] and "built again" in err[0]
     assert sorted(p.name for p in folder.parent.iterdir()) == [folder.name]  # no scratch folder left
+    mtimes = {n: (folder / n).stat().st_mtime_ns for n in (*BUILT, "done")}
+    build(cfg)  # whole again: used as it is
+    assert {n: (folder / n).stat().st_mtime_ns for n in (*BUILT, "done")} == mtimes
+    assert capsys.readouterr().err == ""
 
 
 def test_an_entry_without_recorded_hashes_is_built_again(entry, capsys):
@@ -57,14 +62,6 @@ def test_an_entry_without_recorded_hashes_is_built_again(entry, capsys):
     assert (folder / "corridor.net.xml").read_bytes() == original["corridor.net.xml"]
     assert set(json.loads((folder / "done").read_text())["sha256"]) == set(BUILT)
     assert "records no sha256" in capsys.readouterr().err
-
-
-def test_a_whole_entry_is_used_as_it_is(entry, capsys):
-    cfg, folder, _ = entry
-    mtimes = {n: (folder / n).stat().st_mtime_ns for n in (*BUILT, "done")}
-    build(cfg)
-    assert {n: (folder / n).stat().st_mtime_ns for n in (*BUILT, "done")} == mtimes
-    assert capsys.readouterr().err == ""
 
 
 def test_an_entry_that_cannot_be_rebuilt_is_one_line_naming_the_file_and_folder(entry):

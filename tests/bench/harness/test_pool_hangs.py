@@ -90,11 +90,6 @@ def test_a_stopped_worker_is_killed_at_the_limit_and_the_others_go_on(tmp_path):
     assert _gone(_pid(tmp_path, "stop-a"))
 
 
-def test_without_a_limit_nothing_is_timed(tmp_path):
-    rows = list(run_pool([(str(tmp_path), "ok-a")], 1, job, limit=lambda t: None))
-    assert [r["name"] for r in rows] == ["ok-a"]
-
-
 def test_a_task_that_forks_gives_one_result(tmp_path):
     """Both processes come back from the task; only the worker replies, and the child is gone."""
     rows = list(run_pool([(str(tmp_path), "fork-a"), (str(tmp_path), "ok-b")], 1, job))
