@@ -7,8 +7,9 @@ A cache entry records the sha256 of each file it built in its ``done`` marker, a
 checks them (``damage``; a few small files, well under a millisecond). An entry whose file is
 missing, truncated or changed, or whose marker records no hashes (an entry built before they were
 recorded), is built again and its files replaced one by one, the marker last; nothing else in the
-folder is touched. An entry that cannot be rebuilt is a ``ScenarioBuildError`` naming the file,
-the folder and why.
+folder is touched. A damaged entry is one note line on stderr; one of an earlier version is
+brought up to date silently. An entry that cannot be rebuilt is a ``ScenarioBuildError`` naming
+the file, the folder and why.
 """
 from __future__ import annotations
 
@@ -40,6 +41,7 @@ NOT_BUILT = ("reward", "max_episode_time", "glosa", "obs_lanes")  # config field
 BUILT = ("corridor.nod.xml", "corridor.edg.xml", "corridor.net.xml", "signals.add.xml", "corridor.rou.xml",
          "geometry.json", "config.json")
 DONE = "done"
+UNRECORDED = f"its {DONE} marker records no sha256 of the files"  # built before they were recorded (or damaged)
 
 
 @dataclass(frozen=True)
@@ -140,7 +142,7 @@ def damage(folder: Path) -> str:
         hashes = record["sha256"]
         assert isinstance(hashes, dict) and set(BUILT) <= set(hashes)
     except (OSError, ValueError, KeyError, TypeError, AssertionError):
-        return f"its {DONE} marker records no sha256 of the files (built by an earlier version, or damaged)"
+        return UNRECORDED
     for name in BUILT:
         path = folder / name
         try:
@@ -171,7 +173,8 @@ def _rebuild(cfg: ScenarioConfig, key_fields: dict, digest: str, folder: Path, w
                                  f"remove that folder, then run again") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    print(f"note: scenario cache {folder}: {why}; built again", file=sys.stderr)
+    if why != UNRECORDED:  # an entry of an earlier version is brought up to date without a word
+        print(f"note: scenario cache {folder}: {why}; built again", file=sys.stderr)
 
 
 class _Failed(Exception):
