@@ -2,15 +2,25 @@
 
 Files go to a cache folder keyed by a digest of every input, so a build is done once per
 config and is deterministic. Nothing here starts a simulation.
+
+A cache entry records the sha256 of each file it built in its ``done`` marker, and every use
+checks them (``damage``; a few small files, well under a millisecond). An entry whose file is
+missing, truncated or changed, or whose marker records no hashes (an entry built before they were
+recorded), is built again and its files replaced one by one, the marker last; nothing else in the
+folder is touched. A damaged entry is one note line on stderr; one of an earlier version is
+brought up to date silently. An entry that cannot be rebuilt is a ``ScenarioBuildError`` naming
+the file, the folder and why.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
 import re
 import shutil
 import subprocess
+import sys
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -27,6 +37,11 @@ LANE_WIDTH = 3.2  # [m] SUMO default lane width
 BUILD_VERSION = 5  # bump when the generated files change meaning
 CACHE_APP = "ecodrive-bench"  # platformdirs application name of the user cache folder
 NOT_BUILT = ("reward", "max_episode_time", "glosa", "obs_lanes")  # config fields the files do not depend on
+# the files of a built scenario, each hashed into the entry's ``done`` marker (written last)
+BUILT = ("corridor.nod.xml", "corridor.edg.xml", "corridor.net.xml", "signals.add.xml", "corridor.rou.xml",
+         "geometry.json", "config.json")
+DONE = "done"
+UNRECORDED = f"its {DONE} marker records no sha256 of the files"  # built before they were recorded (or damaged)
 
 
 @dataclass(frozen=True)
@@ -80,28 +95,86 @@ def build(cfg: ScenarioConfig) -> ScenarioFiles:
                   if k not in NOT_BUILT and not (k in OPTIONAL_FIELDS and v is None)}
     key_fields["_build"] = BUILD_VERSION
     key_fields["_sumo"] = _sumo_version()
-    import hashlib
-
     digest = hashlib.sha256(json.dumps(key_fields, sort_keys=True).encode()).hexdigest()[:16]
     folder = cache_root() / digest
-    if not (folder / "done").exists():
+    if not (folder / DONE).exists():
         folder.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{digest}-", dir=folder.parent))
+        tmp = _build_into(cfg, key_fields, digest, folder.parent)
         try:
-            try:
-                _write_all(cfg, tmp)
-            except _Failed as e:
-                raise ScenarioBuildError(f"scenario {digest} ({_shape(cfg)}) cannot be built: {e}") from None
-            (tmp / "config.json").write_text(json.dumps(key_fields, indent=1, sort_keys=True))
-            (tmp / "done").write_text("ok\n")
             try:
                 os.rename(tmp, folder)
             except OSError:  # another process finished the same build first
-                if not (folder / "done").exists():
+                if not (folder / DONE).exists():
                     raise
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
+    elif why := damage(folder):
+        _rebuild(cfg, key_fields, digest, folder, why)
     return _files(cfg, folder)
+
+
+def _build_into(cfg: ScenarioConfig, key_fields: dict, digest: str, parent: Path) -> Path:
+    """A new folder in ``parent`` holding the built scenario and its ``done`` marker."""
+    tmp = Path(tempfile.mkdtemp(prefix=f".{digest}-", dir=parent))
+    try:
+        try:
+            _write_all(cfg, tmp)
+        except _Failed as e:
+            raise ScenarioBuildError(f"scenario {digest} ({_shape(cfg)}) cannot be built: {e}") from None
+        (tmp / "config.json").write_text(json.dumps(key_fields, indent=1, sort_keys=True))
+        hashes = {name: _sha256(tmp / name) for name in BUILT}
+        (tmp / DONE).write_text(json.dumps({"build": BUILD_VERSION, "sha256": hashes}, indent=1) + "\n")
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return tmp
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def damage(folder: Path) -> str:
+    """"" when the cache entry ``folder`` holds every file its ``done`` marker records, each with
+    its recorded sha256; else which file is damaged and how, in a few words."""
+    try:
+        record = json.loads((folder / DONE).read_text())
+        hashes = record["sha256"]
+        assert isinstance(hashes, dict) and set(BUILT) <= set(hashes)
+    except (OSError, ValueError, KeyError, TypeError, AssertionError):
+        return UNRECORDED
+    for name in BUILT:
+        path = folder / name
+        try:
+            if path.is_symlink() or not path.is_file():
+                return f"{name} is {'a link' if path.is_symlink() else 'not a file'}"
+            if _sha256(path) != hashes[name]:
+                return f"{name} is not the file built there (sha256 differs: truncated or changed)"
+        except FileNotFoundError:
+            return f"{name} is missing"
+        except OSError as e:
+            return f"{name} cannot be read ({e.strerror or e})"
+    return ""
+
+
+def _rebuild(cfg: ScenarioConfig, key_fields: dict, digest: str, folder: Path, why: str) -> None:
+    """Build the damaged entry ``folder`` again beside it and move each built file over its own,
+    the ``done`` marker last; nothing else in the folder is touched. One line on stderr."""
+    try:
+        tmp = _build_into(cfg, key_fields, digest, folder.parent)
+    except OSError as e:
+        raise ScenarioBuildError(f"scenario cache {folder}: {why}; it cannot be rebuilt ({e.strerror or e}): "
+                                 f"remove that folder, then run again") from None
+    try:
+        for name in (*BUILT, DONE):
+            os.replace(tmp / name, folder / name)
+    except OSError as e:
+        raise ScenarioBuildError(f"scenario cache {folder}: {why}; it cannot be rebuilt ({e.strerror or e}): "
+                                 f"remove that folder, then run again") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    if why != UNRECORDED:  # an entry of an earlier version is brought up to date without a word
+        print(f"note: scenario cache {folder}: {why}; built again", file=sys.stderr)
 
 
 class _Failed(Exception):

@@ -11,10 +11,16 @@ drive their own simulation. The two paths run the same SUMO build on the same in
 the same numbers (``tests/envs/test_sessions.py`` compares every step's energy); TraCI is slower
 per call, so for throughput use one process per env (``gym.make_vec(...,
 vectorization_mode="async")``).
+
+A session that holds libsumo and is garbage-collected without ``close()`` (an env dropped
+mid-episode) gives it up then (``weakref.finalize``), so the next env of the process runs there
+rather than through TraCI; not at the interpreter's exit, where the process ends anyway. (A
+TraCI-run SUMO ends by itself when its dropped connection's socket closes.)
 """
 from __future__ import annotations
 
 import time
+import weakref
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -25,7 +31,25 @@ from libsumo import constants as tc
 from .config import ScenarioConfig
 from .scenario import EGO_ROUTE, EGO_TYPE, GLOSA_TYPE, HDV_TYPE, ScenarioFiles
 
-_LIBSUMO_OWNER: SumoSession | None = None  # the session running in this process's libsumo
+_LIBSUMO_OWNER: weakref.ref[SumoSession] | None = None  # the session running in this process's libsumo
+
+
+def _libsumo_owner() -> SumoSession | None:
+    return None if _LIBSUMO_OWNER is None else _LIBSUMO_OWNER()
+
+
+def _release_libsumo() -> None:
+    """libsumo given up by a session that was garbage-collected while it held it (its finalizer;
+    also called before a start that finds such a session)."""
+    global _LIBSUMO_OWNER
+    if _LIBSUMO_OWNER is not None and _LIBSUMO_OWNER() is None:
+        _LIBSUMO_OWNER = None
+        try:
+            ls.close()
+        except Exception:  # noqa: BLE001  (nothing to give up: it was not running)
+            pass
+
+
 TRACI_CONNECT_TIMEOUT = 60.0  # [s] for a TraCI-run SUMO to load the scenario and accept the connection
 
 
@@ -107,6 +131,7 @@ class SumoSession:
         self.busy = False  # in the middle of an episode: its libsumo is not handed to another session
         self.sumo_seconds = 0.0  # [s] wall time inside SUMO since start(): loading and stepping (the floor)
         self._plans: dict[str, TlsPlan] = {}
+        self._finalizer: weakref.finalize | None = None  # gives libsumo up if this is dropped holding it
         self._context_range = max(cfg.grid_ahead, cfg.grid_behind) + 2 * cfg.vehicle_length
 
     # ------------------------------------------------------------------ lifecycle
@@ -127,12 +152,15 @@ class SumoSession:
         global _LIBSUMO_OWNER
         self.close()
         t0 = time.perf_counter()
-        owner = _LIBSUMO_OWNER
+        _release_libsumo()  # a collected owner's, if its finalizer has not run
+        owner = _libsumo_owner()
         if owner is not None and not owner.busy:
             owner.close()
-        if _LIBSUMO_OWNER is None:
+        if _libsumo_owner() is None:
             ls.start(self.command(seed))
-            _LIBSUMO_OWNER, self._api, self.backend = self, ls, "libsumo"
+            _LIBSUMO_OWNER, self._api, self.backend = weakref.ref(self), ls, "libsumo"
+            self._finalizer = weakref.finalize(self, _release_libsumo)
+            self._finalizer.atexit = False  # at the interpreter's exit the process ends anyway
         else:
             self._api, self.backend = _traci_start(self.command(seed)[1:]), "traci"
         self.busy = True
@@ -148,11 +176,14 @@ class SumoSession:
 
     def close(self) -> None:
         global _LIBSUMO_OWNER
+        if self._finalizer is not None:
+            self._finalizer.detach()
+            self._finalizer = None
         if self.running:
             self._api.close()
             self.running = False
         self.busy = False
-        if _LIBSUMO_OWNER is self:
+        if _libsumo_owner() is self:
             _LIBSUMO_OWNER = None
         self._api, self.backend = _Closed(), ""
 

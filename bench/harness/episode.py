@@ -1,6 +1,11 @@
-"""Run one episode of an agent on a fixed case, optionally logging every step to MCAP."""
+"""Run one episode of an agent on a fixed case, optionally logging every step to MCAP.
+
+The log is published only once it checks out (``bench.harness.steplogs.VerifiedLog``). A process
+that an agent forks inside ``act`` and that returns into the episode exits there at once: the
+episode and its log are its parent's alone."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +16,8 @@ from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
 from ecodrive_bench.bench.harness.scenarios import deep_merge
-from ecodrive_bench.bench.logs.mcaplog import EpisodeLog, meta_json
+from ecodrive_bench.bench.harness.steplogs import VerifiedLog
+from ecodrive_bench.bench.logs.mcaplog import meta_json
 from ecodrive_bench.envs.env import EcoDriveEnv
 from ecodrive_bench.envs.scenario import LANE_WIDTH
 from ecodrive_bench.envs.sumo import sumo_version
@@ -44,7 +50,7 @@ def run_episode(
 
     ``script`` (the lateral scenarios) has ``start(env)``, called after the reset, and
     ``before(env, step)`` / ``after(env, step)``, called around every step."""
-    log = None
+    log, pid = None, os.getpid()
     if log_path is not None:
         meta = {
             "config_json": meta_json(env.cfg.to_dict()), "method": method, "signals": env.cfg.signals,
@@ -56,7 +62,7 @@ def run_episode(
                                         "lane_width": LANE_WIDTH, "v2i_range": env.cfg.v2i_range}),
             **(log_meta or {}),
         }
-        log = EpisodeLog(log_path, meta)
+        log = VerifiedLog(log_path, meta)
         env.recorder = log.record
     try:
         obs, info = env.reset(seed=case.sumo_seed, options=case.options())
@@ -73,6 +79,8 @@ def run_episode(
             except (Exception, KeyboardInterrupt) as e:  # the harness names the agent, case and step
                 e.ecodrive_step, e.ecodrive_agent = steps, True  # (bench.harness.failures; a pool worker's
                 raise  # KeyboardInterrupt is the agent's own: bench.harness.pool)
+            if os.getpid() != pid:  # a child the agent forked came back: not its episode to go on with
+                os._exit(0)
             if log is not None:
                 log.raw_action = _flatten(action)
             if script is not None:
@@ -111,6 +119,8 @@ def run_episode(
             log.finish(summary)
         return {**summary, "sumo_s": env.session.sumo_seconds}  # [s] inside SUMO: the episode's floor
     except BaseException:
+        if os.getpid() != pid:  # the same, where the forked child raised: it writes nothing
+            os._exit(0)
         if log is not None:
             log.abort()
         raise

@@ -12,6 +12,11 @@ class UsageError(Exception):
     """Bad input to ``ecodrive run`` found after parsing; printed as one line, nothing touched."""
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread by ``ecodrive run``'s handler: the run ends as on Ctrl-C
+    (a ``BaseException``, as ``KeyboardInterrupt``: no ``except Exception`` swallows it)."""
+
+
 def install_hint(extra: str) -> str:
     """The command that adds the optional ``extra``, as the README installs the package (editable,
     from the checkout)."""

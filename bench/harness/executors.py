@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import math
 import os
 import re
 import sys
@@ -31,6 +32,13 @@ from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent
 from ecodrive_bench.bench.io import atomic_bytes
 
 EXECUTORS = ("local", "ray")
+# an episode's default wall-clock limit on the local pool (``episode_limit``): a fixed allowance for
+# what comes before its first step (a fresh worker imports torch, builds its env and agent, SUMO
+# loads; a clairvoyant planner drives the case first, 15-60 s on a loaded machine) plus an
+# allowance per step, some 30 times the slowest method's (clairvoyant: about 35 ms a step, its
+# prepare included, on a loaded 2-core machine)
+EPISODE_FIXED_S = 300.0  # [s]
+EPISODE_STEP_S = 1.0  # [s] per step of the scenario (max_episode_time / step_length)
 # a Ray head's GCS address (HOST:PORT, HOST a name, an IPv4 or a bracketed IPv6) or a Ray Client one
 ADDRESS = re.compile(r"(?:ray://)?(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?):([0-9]{1,5})")
 ADDRESSES = "auto, HOST:PORT or ray://HOST:PORT with PORT 1..65535"
@@ -105,6 +113,20 @@ class Task:
     scenario: str = ""  # JSON of the env's scenario overrides (bench.harness.scenarios), "" none
     transfer: bool = False  # the policy may drive a scenario other than its training one
     meta: tuple[tuple[str, str], ...] = ()  # extra step-log metadata (the scenarios)
+    limit_s: float = 0.0  # [s] the episode's wall-clock limit on the local pool (episode_limit); 0: none
+
+
+def episode_limit(cfg: Any) -> float:
+    """[s] the default wall-clock limit of one episode on the scenario ``cfg`` (a
+    ``ScenarioConfig``): ``EPISODE_FIXED_S`` plus ``EPISODE_STEP_S`` per step; 1200 s for the
+    paper's 900 steps."""
+    steps = math.ceil(cfg.max_episode_time / cfg.step_length - 1e-9)
+    return EPISODE_FIXED_S + EPISODE_STEP_S * steps
+
+
+def task_limit(task: Any) -> float | None:
+    """``run_pool``'s ``limit``: a ``Task``'s ``limit_s``, None for other tasks or 0."""
+    return getattr(task, "limit_s", 0.0) or None
 
 
 # per worker process: one env per (method, signals, scenario); one agent per (method, signals,
@@ -124,10 +146,10 @@ def run_task(task: Task) -> dict[str, Any]:
     env_key = (task.method, task.signals, task.scenario)
     key = (task.method, task.signals, task.policy_dir, task.scenario)
     if task.factory and key not in _AGENTS:
-        from ecodrive_bench.bench.harness.external import make
+        from ecodrive_bench.bench.harness.external import code_sha256, make
 
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
-        _AGENTS[key] = (agent, getattr(agent, "sha256", ""))  # an --sb3 zip's, "" for code
+        _AGENTS[key] = (agent, code_sha256(task.factory, agent))  # its code's, an --sb3 zip's
     if task.method in PLANNERS and key not in _AGENTS:
         from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
         from ecodrive_bench.bench.harness.mpc import MPCAgent
@@ -173,7 +195,8 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
               on_failure: Callable[[Failure], None] | None = None,
               skip: Callable[[Any], bool] | None = None) -> Iterator[dict[str, Any]]:
     """Rows of ``fn(task)`` on a pool of ``workers`` processes, as they finish; a dead worker is
-    replaced and its task rerun up to ``RETRIES`` times (``bench.harness.pool``).
+    replaced and its task rerun up to ``RETRIES`` times, and a ``Task`` past its ``limit_s``
+    fails and its worker is killed (``bench.harness.pool``).
 
     With more than one worker the step's numba kernels are compiled here, so that the workers
     load numba's disk cache rather than all compile at once (and numba's cache is not written
@@ -181,7 +204,7 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
     episode needs it), the greedy act's (seconds on a fresh install) in a thread beside them,
     while the learning methods' episodes are held back and the others run."""
     if workers <= 1:
-        return run_pool(tasks, workers, fn, on_failure, skip)
+        return run_pool(tasks, workers, fn, on_failure, skip, limit=task_limit)
     from ecodrive_bench.agents.registry import POLICY_METHODS
 
     tasks = list(tasks)
@@ -205,7 +228,7 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
     def hold(task: Any) -> bool:
         return not compiled.is_set() and getattr(task, "method", None) in POLICY_METHODS
 
-    return run_pool(tasks, workers, fn, on_failure, skip, hold=hold)
+    return run_pool(tasks, workers, fn, on_failure, skip, hold=hold, limit=task_limit)
 
 
 def compile_grid() -> None:

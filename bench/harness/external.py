@@ -14,15 +14,21 @@ The factory's ``action_interface`` attribute (or the agent class's) picks the en
 (``parameterized``, ``discrete27``, ``longitudinal``; default ``parameterized``) before the
 spaces exist. Every action the agent returns is checked against the env's action space; an
 action outside it stops the run with one line naming the value and the space.
+
+The agent's code is hashed (``code_sha256``: the files of the factory's module and of the
+agent's class; an ``--sb3`` model's zip) into every step log and the manifest, so a changed agent
+does not reuse the logs of the earlier one.
 """
 from __future__ import annotations
 
+import hashlib
 import importlib
 import os
 import re
 import sys
 from collections.abc import Callable
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.agents.base import Agent
@@ -115,6 +121,29 @@ def make(spec: str, signals: str, config: dict[str, Any] | None = None) -> tuple
         return probe, agent
     probe.close()
     return make_env(agent, signals, config), agent
+
+
+def code_sha256(spec: str, agent: Any) -> str:
+    """The sha256 of the code behind ``agent``, built from ``spec``: for ``--sb3`` its zip's
+    (the agent's ``sha256``); else over the files (name and bytes) of the factory's module, the
+    module of ``spec`` and the agent class's module, those of this package left out (the run's
+    ``git_sha`` names them). A change to any of those files changes it; other modules they
+    import do not."""
+    if spec.startswith("sb3:"):
+        return str(getattr(agent, "sha256", ""))
+    factory = load_factory(spec)
+    inner = getattr(agent, "agent", agent)  # ``Checked`` holds the user's agent
+    names = {spec.split(":")[0], getattr(factory, "__module__", None), type(inner).__module__}
+    files = sorted({str(Path(f).resolve()) for n in names if n and not n.startswith("ecodrive_bench.")
+                    and (f := getattr(sys.modules.get(n), "__file__", None))})
+    h = hashlib.sha256()
+    for f in files:
+        h.update(Path(f).name.encode() + b"\0")
+        try:
+            h.update(Path(f).read_bytes())
+        except OSError:
+            h.update(b"(unreadable)")
+    return h.hexdigest()
 
 
 class _Interface:

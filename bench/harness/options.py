@@ -8,11 +8,11 @@ from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.agents.registry import METHODS
-from ecodrive_bench.bench.args import MAX_NAME, Parser, int_in, name, name_shown
+from ecodrive_bench.bench.args import MAX_NAME, Parser, float_in, int_in, name, name_shown
 from ecodrive_bench.bench.harness import scenarios
 from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.errors import AgentError
-from ecodrive_bench.bench.harness.executors import add_options, check_options
+from ecodrive_bench.bench.harness.executors import EPISODE_FIXED_S, EPISODE_STEP_S, add_options, check_options
 from ecodrive_bench.bench.harness.external import GROUP, registered
 from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FamilyError, Variant
 from ecodrive_bench.bench.harness.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
@@ -23,9 +23,10 @@ from ecodrive_bench.envs.config import SIGNALS
 RUN_DOC = """The benchmark harness: every method over the fixed test cases, one MCAP per episode.
 
     ecodrive run [--profile smoke|paper|full|generalisation] [--executor local|ray] [--address ADDR]
-                        [--workers N] [--methods ...] [--planners] [--signals ...] [--run-id ID] [--logs DIR]
-                        [--agent MODULE:FACTORY | --sb3 MODEL.zip --sb3-algo ALGO] [--name NAME]
-                        [--scenario FILE.json] [--set FIELD=VALUE ...] [--transfer] [--variants NAME ...]
+                        [--workers N] [--episode-limit S] [--methods ...] [--planners] [--signals ...]
+                        [--run-id ID] [--logs DIR] [--agent MODULE:FACTORY | --sb3 MODEL.zip --sb3-algo ALGO]
+                        [--name NAME] [--scenario FILE.json] [--set FIELD=VALUE ...] [--transfer]
+                        [--variants NAME ...]
 
 Writes ``<logs>/<run-id>/<signals>/<method>/case-XXX.mcap``, ``results.parquet`` and
 ``manifest.json``. Rerunning the same command skips cases whose MCAP is complete and reruns the
@@ -36,9 +37,13 @@ scenario other than its training one only with ``--transfer`` (``bench.harness.s
 instead, one sub-folder per variant (``bench.harness.generalisation_run``).
 A worker that dies is replaced and its episode rerun (at most twice more); an episode that still
 fails, or whose agent raises, is one line on stderr (its traceback in ``<run>/errors/``) and no
-row. Exit codes: 0 done; 2 bad input, or the run folder in use by another command; 3 finished
-with failed episodes (rerun the command to retry them); 130 interrupted.
+row; so is an episode past its wall-clock limit (``--episode-limit``), whose worker is killed.
+Exit codes: 0 done; 2 bad input, or the run folder in use by another command; 3 finished with
+failed episodes (rerun the command to retry them); 130 interrupted (Ctrl-C); 143 terminated
+(SIGTERM).
 """
+
+MAX_LIMIT_S = 7 * 86400.0  # [s] the largest --episode-limit
 
 PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, mixed, reward and heatmap)
     "smoke": 3,
@@ -59,6 +64,7 @@ class RunOptions:
     executor: str = "local"  # local process pool, or ray
     address: str | None = None  # Ray cluster address (executor ray); None: a local Ray
     workers: int = 1  # parallel episodes
+    episode_limit: float | None = None  # [s] wall-clock limit of one episode (local pool); None: by its steps
     run_id: str = "paper"  # run folder under logs (a plain name)
     logs: Path = Path("logs")  # log root
     models: Path = MODELS  # shipped policies, <method>-<signals>/s<seed>/
@@ -118,6 +124,11 @@ def parser() -> Parser:
     ap.add_argument("--signals", nargs="+", default=list(SIGNALS), choices=list(SIGNALS), help="signal settings")
     add_options(ap)
     ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, help="parallel episodes (>= 1; default: this machine's CPUs)")
+    ap.add_argument("--episode-limit", type=float_in(0, MAX_LIMIT_S, lo_open=True), default=None, metavar="S",
+                    help="wall-clock limit of one episode in seconds, from when a worker takes it (local executor): "
+                         "an episode past it is recorded as failed (exit 3) and its worker killed (default: "
+                         f"{EPISODE_FIXED_S:g} s plus {EPISODE_STEP_S:g} s per step of the scenario, "
+                         f"{EPISODE_FIXED_S + 900 * EPISODE_STEP_S:g} s for the paper's 900 steps)")
     ap.add_argument("--run-id", type=name, default=None,
                     help="run folder under --logs: letters, digits, '.', '_', '-' (default: the profile)")
     ap.add_argument("--logs", type=Path, default=Path("logs"), help="log root (default: logs)")

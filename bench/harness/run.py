@@ -28,22 +28,20 @@ from ecodrive_bench.bench.harness import external, failures, scenarios
 from ecodrive_bench.bench.harness.bounds import attach
 from ecodrive_bench.bench.harness.cases import Case, load
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError
-from ecodrive_bench.bench.harness.executors import Task, run_local, run_ray
+from ecodrive_bench.bench.harness.executors import Task, episode_limit, run_local, run_ray
 from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
 from ecodrive_bench.bench.harness.planners import PLANNERS
 from ecodrive_bench.bench.harness.policies import check_policy, family_dir, policy_dir, shipped_seeds
+from ecodrive_bench.bench.harness.pool import PoolBroken
 from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions, process_age
+from ecodrive_bench.bench.harness.run_folder import KEEP, SCENARIO_COLUMNS, case_set_gaps, one_case_set, one_scenario
 from ecodrive_bench.bench.harness.scenarios import Evaluation
+from ecodrive_bench.bench.harness.steplogs import finished, written_by
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
-from ecodrive_bench.bench.logs.mcaplog import episode_summary, resolve_log
+from ecodrive_bench.bench.logs.mcaplog import resolve_log
 from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.envs.config import ScenarioConfig
 
-KEEP = ("method", "signals", "train_seed", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
-        "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",
-        "lane_changes_applied", "clips", "jerk_exceedances", "collisions", "teleports", "battery_consumed",
-        "battery_regenerated", "mcap", "eval_scenario_hash", "train_scenario_hash")
-SCENARIO_COLUMNS = ("eval_scenario_hash", "train_scenario_hash")  # not in tables written before them
 Run = tuple[str, str, int]  # (method, signals, training seed; -1 for a method without a policy)
 
 
@@ -57,6 +55,7 @@ class Preflight:
     where: dict[Run, Evaluation]  # each run's scenario: evaluated on, trained on
     evals: dict[str, ScenarioConfig]  # the command's scenario of each signal setting
     cases: list[Case]  # the cases of each setting
+    codes: dict[str, str] = field(default_factory=dict)  # user agent -> sha256 of its code (or --sb3 zip)
 
 
 @dataclass
@@ -122,26 +121,31 @@ def check_writable(run_dir: Path) -> None:
 
 
 def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
-    """Every check of a run that writes nothing: methods, factories, policies (``checked``: policy
-    folders already loaded by an earlier call), the scenario each may drive, the run folder's
-    scenario and the case list. Raises ``UsageError``, ``CheckpointError``, ``AgentError`` or
-    ``InputError`` (a bad case list)."""
+    """Every check of a run that writes nothing but the scenario cache: methods, factories, policies
+    (``checked``: policy folders already loaded by an earlier call), the scenario each may drive
+    (built, or checked in the cache), the run folder's scenario and the case list. Raises
+    ``UsageError``, ``CheckpointError``, ``AgentError`` or ``InputError`` (a bad case list, a
+    scenario cache entry that cannot be rebuilt)."""
     runs, skipped = resolve_methods(opts)
-    for spec in opts.factories.values():  # a factory that cannot build its agent fails before any episode
+    codes = {}
+    for label, spec in opts.factories.items():  # a factory that cannot build its agent fails before any episode
         try:
-            env, _ = external.make(spec, opts.signals[0], opts.scenario or None)
+            env, agent = external.make(spec, opts.signals[0], opts.scenario or None)
             env.close()
         except AgentError as e:
             raise UsageError(str(e)) from None
+        codes[label] = external.code_sha256(spec, agent)
     evals = {s: scenarios.setting(s, opts.scenario) for s in opts.signals}
     pdirs = {(m, s, sd): str(policy_dir(m, s, opts.models, sd)) if sd >= 0 else "" for m, s, sd in runs}
     # a policy that may not (or cannot) drive the scenario is refused before anything is written
     where = {r: scenarios.evaluation(r[0], r[1], pdirs[r], opts.scenario, opts.transfer) for r in runs}
     check_policies(pdirs, checked)
+    for r in runs:  # a damaged scenario cache entry is rebuilt (or named) before any episode
+        scenarios.check_cached(r[0], r[1], where[r])
     one_scenario(opts.run_dir, {s: c.digest() for s, c in evals.items()})
     cases = opts.cases or load()[: PROFILES[opts.profile]]  # a variant's own (generalisation)
     one_case_set(opts.run_dir, runs, {c.index for c in cases})
-    return Preflight(runs, skipped, pdirs, where, evals, cases)
+    return Preflight(runs, skipped, pdirs, where, evals, cases, codes)
 
 
 def run(opts: RunOptions, progress: bool = True, checks: Preflight | None = None) -> pd.DataFrame:
@@ -177,21 +181,31 @@ def plan(opts: RunOptions, pre: Preflight) -> Plan:
     of another policy or scenario is not reused: its episode runs again)."""
     todo = Plan([], [])
     for signals in opts.signals:
+        limit = opts.episode_limit or episode_limit(pre.evals[signals])
         for method, seed in [(m, sd) for m, s, sd in pre.runs if s == signals]:
             pdir, ev = pre.pdirs[(method, signals, seed)], pre.where[(method, signals, seed)]
-            sha = sha256(Path(pdir) / "policy.pt") if pdir else opts.agent_sha256.get(method, "")
+            sha = (sha256(Path(pdir) / "policy.pt") if pdir
+                   else pre.codes.get(method) or opts.agent_sha256.get(method, ""))
             if sha:
                 todo.shas[policy_key(method, signals, seed)] = sha
             folder = opts.run_dir / signals / method / (f"s{seed}" if seed >= 0 else "")
+            changed = 0
             for case in pre.cases:
                 path = folder / f"case-{case.index:03d}.mcap"
-                done = episode_summary(path, agent_sha256=sha, eval_scenario=ev.eval_hash,
-                                       legacy_scenario=scenarios.legacy_hash(signals))
+                done = finished(path, agent_sha256=sha, eval_scenario=ev.eval_hash,
+                                legacy_scenario=scenarios.legacy_hash(signals))
+                if done is None and method in opts.factories and written_by(path) not in (None, sha):
+                    changed += 1
                 if done is not None:
                     todo.reused.append({**done, "mcap": str(path), "episode_wall_s": float("nan"), "train_seed": seed})
                 else:
                     todo.tasks.append(Task(method, signals, case, str(path), pdir, seed, opts.factories.get(method, ""),
-                                           scenario=ev.scenario, transfer=opts.transfer, meta=ev.meta(opts.transfer)))
+                                           scenario=ev.scenario, transfer=opts.transfer, meta=ev.meta(opts.transfer),
+                                           limit_s=limit))
+            if changed:
+                print(f"note: agent {method!r} ({opts.factories[method]}) is not the one that wrote {changed} of its "
+                      f"step logs in {folder} (its code's sha256 differs): those episodes run again, and its earlier "
+                      "rows are replaced", file=sys.stderr)
     return todo
 
 
@@ -204,9 +218,12 @@ def execute(opts: RunOptions, todo: Plan, progress: bool = True) -> tuple[list[d
     rows = []
     with progress_bar(total=len(todo.reused) + len(todo.tasks), initial=len(todo.reused), desc="episodes",
                       unit="ep", enabled=progress) as bar:
-        for row in it:
-            rows.append(row)
-            bar.update(1)
+        try:
+            for row in it:
+                rows.append(row)
+                bar.update(1)
+        except PoolBroken as e:  # one line and a record; the finished rows are written
+            failed.broken(e)
     return rows, failed
 
 
@@ -304,90 +321,9 @@ def earlier_rows(run_dir: Path, df: pd.DataFrame, shas: dict[str, str] | None = 
         return pd.DataFrame(columns=list(KEEP))
     now = set(zip(df.signals, df.method, df.train_seed, df.case))
     old = old.loc[np.array([k not in now for k in zip(old.signals, old.method, old.train_seed, old.case)], dtype=bool)]
-    complete = [episode_summary(resolve_log(run_dir, mcap), agent_sha256=shas.get(policy_key(m, s, sd))) is not None
+    complete = [finished(resolve_log(run_dir, mcap), agent_sha256=shas.get(policy_key(m, s, sd))) is not None
                 for mcap, m, s, sd in zip(old.mcap, old.method, old.signals, old.train_seed)]
     return old.loc[np.array(complete, dtype=bool), list(KEEP)].reset_index(drop=True)  # by name: "return" is no identifier
-
-
-def one_scenario(run_dir: Path, hashes: dict[str, str]) -> None:
-    """A run folder holds one scenario per signal setting: a command on another one is refused
-    before it overwrites any step log (the results table says which scenario the folder has)."""
-    path = run_dir / "results.parquet"
-    try:
-        old = pd.read_parquet(path) if path.is_file() else pd.DataFrame(columns=["signals"])
-    except Exception:  # earlier_rows reports an unreadable table
-        return
-    if "signals" not in old.columns:
-        return
-    have = old.eval_scenario_hash if "eval_scenario_hash" in old.columns else old.signals.map(scenarios.legacy_hash)
-    for signals, want in hashes.items():
-        other = sorted(set(have[old.signals == signals]) - {want})
-        if other:
-            raise UsageError(f"{run_dir} holds {signals} episodes of another scenario (eval_scenario_hash "
-                             f"{', '.join(other)}, this command's is {want}); use another --run-id")
-
-
-def one_case_set(run_dir: Path, runs: list[tuple[str, str, int]], cases: set[int]) -> None:
-    """A run folder's methods drive the same cases in each setting (the report compares them case
-    by case and over the whole set). Against the cases the folder's table has in a setting, a
-    command is refused before it writes anything, as ``one_scenario``, if it runs other cases, more
-    cases while some method of the folder is not rerun, or fewer cases with a method the folder
-    does not have yet; rerunning some cases of methods the folder has is allowed. What a command
-    cannot see here (rows dropped later for a replaced policy) is caught by ``case_set_gaps``."""
-    path = run_dir / "results.parquet"
-    try:
-        old = pd.read_parquet(path) if path.is_file() else None
-    except Exception:  # earlier_rows reports an unreadable table
-        return
-    if old is None or not set(KEEP) - set(SCENARIO_COLUMNS) <= set(old.columns):  # one earlier_rows would not keep
-        return
-    for s in sorted({r[1] for r in runs}):
-        rows = old[old.signals == s]
-        have = {int(c) for c in rows.case}
-        if not have or have == cases:
-            continue
-        there = set(zip(rows.method, rows.train_seed.astype(int)))
-        mine = {(m, sd) for m, ss, sd in runs if ss == s}
-        left = sorted(there - mine) if cases > have else sorted(mine - there) if cases < have else []
-        if cases > have or cases < have:
-            if not left:
-                continue
-            who = ", ".join(_who(m, sd) for m, sd in left[:4]) + (", ..." if len(left) > 4 else "")
-            why = (f"{who} would keep only those" if cases > have else f"{who} would drive only these")
-        else:
-            why = "neither set holds the other"
-        raise UsageError(f"{run_dir} holds {s} episodes on cases {_ranges(have)}; this command runs cases "
-                         f"{_ranges(cases)} ({why}): every method of a run folder drives the same cases; "
-                         "run them all on one set, or use another --run-id")
-
-
-def case_set_gaps(df: pd.DataFrame) -> list[str]:
-    """One line per setting of ``df`` (a results table) whose methods, each training seed apart,
-    drove different cases."""
-    out = []
-    for s, g in df.groupby("signals"):
-        sets = {(m, int(sd)): {int(c) for c in c_} for (m, sd), c_ in g.case.groupby([g.method, g.train_seed])}
-        if len({frozenset(v) for v in sets.values()}) > 1:
-            parts = [f"{_who(m, sd)} {_ranges(v)}" for (m, sd), v in sorted(sets.items())]
-            out.append(f"{s}: the methods drove different cases ({'; '.join(parts[:6])}{'; ...' if len(parts) > 6 else ''})")
-    return out
-
-
-def _who(method: str, seed: int) -> str:
-    """A method with its training seed, as the messages name it ("prl s0", "baseline")."""
-    return method if seed < 0 else f"{method} s{seed}"
-
-
-def _ranges(ints: set[int]) -> str:
-    """``{0, 1, 2, 5}`` as "0-2, 5"."""
-    out, run = [], []
-    for i in sorted(ints):
-        if run and i != run[-1] + 1:
-            out.append(run)
-            run = []
-        run.append(i)
-    out.append(run)
-    return ", ".join(f"{r[0]}-{r[-1]}" if len(r) > 1 else f"{r[0]}" for r in out if r)
 
 
 def _relative(run_dir: Path, mcap: str) -> str:

@@ -1,20 +1,60 @@
 """``ecodrive run``: the profile dispatch above the two runners (one scenario:
 ``bench.harness.run``; the held-out corridors: ``bench.harness.generalisation_run``), and the
 command's exit codes. Its options: ``bench.harness.options``, which import neither torch nor the
-runners, so ``--help`` and bad options answer at once; the runners are imported after parsing."""
+runners, so ``--help`` and bad options answer at once; the runners are imported after parsing.
+
+Ctrl-C (SIGINT) and SIGTERM end the run at once, as one line: the pool kills its workers
+(``bench.harness.pool``), finished episodes are kept, exit 130 or 143."""
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
+from collections.abc import Iterator
+from typing import Any
 
 from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.args import InputError, fail
-from ecodrive_bench.bench.harness.errors import AgentError, UsageError
+from ecodrive_bench.bench.harness.errors import AgentError, Terminated, UsageError
 from ecodrive_bench.bench.harness.options import parse, parser
 from ecodrive_bench.bench.harness.policies import CheckpointError
+
+INTERRUPTED, TERMINATED = 130, 143  # 128 + SIGINT, 128 + SIGTERM, as a shell reports them
+
+
+def _terminate(signum: int, frame: Any) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def sigterm_raises() -> Iterator[None]:
+    """SIGTERM raises ``Terminated`` in the main thread meanwhile (elsewhere nothing changes)."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    with sigterm_raises():
+        try:
+            return _main(argv)
+        except KeyboardInterrupt:
+            print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)
+            return INTERRUPTED
+        except Terminated:
+            print("terminated (SIGTERM): finished episodes are kept; rerun the same command to continue",
+                  file=sys.stderr)
+            return TERMINATED
+
+
+def _main(argv: list[str]) -> int:
     opts = parse(argv)
     from ecodrive_bench.bench.harness import failures
     from ecodrive_bench.bench.harness.generalisation_run import run_family
@@ -24,9 +64,6 @@ def main(argv: list[str] | None = None) -> int:
         df = run_family(opts) if opts.profile == "generalisation" else run(opts)
     except (UsageError, CheckpointError, AgentError, InputError, runlock.InUse) as e:
         return fail(parser().prog, str(e))
-    except KeyboardInterrupt:
-        print("interrupted: finished episodes are kept; rerun the same command to continue", file=sys.stderr)
-        return 130
     by = ["variant", "signals", "method"] if "variant" in df.columns else ["signals", "method"]
     if len(df):
         print(df.groupby(by)[["energy", "travel_time", "collisions"]].mean().round(2).to_string())

@@ -113,6 +113,16 @@ def check_buildable(cfg: ScenarioConfig, where: str) -> None:
         raise InputError(f"{where}: {e}") from None
 
 
+def check_cached(method: str, signals: str, ev: Evaluation) -> None:
+    """Build (or check in the cache, rebuilding a damaged entry) the scenario ``method`` drives
+    in ``signals`` under ``ev``, as its worker will (``bench.harness.episode.make_env``): an entry
+    that cannot be rebuilt is one ``InputError`` line, before any episode."""
+    from ecodrive_bench.agents.registry import ENV_OVERRIDES
+
+    overrides = json.loads(ev.scenario) if ev.scenario else {}
+    check_buildable(setting(signals, deep_merge(overrides, ENV_OVERRIDES.get(method, {}))), f"{method}/{signals}")
+
+
 def _check(where: str, overrides: dict[str, Any], signals: list[str]) -> None:
     if "signals" in overrides:
         raise InputError(f"{where}: the signal setting is chosen with --signals, not as a scenario field")
