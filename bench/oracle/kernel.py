@@ -8,8 +8,9 @@ dependency with wheels for every platform torch has, and keeps the kernel in Pyt
 step). The arithmetic is the numpy form's, in the same order and the same float32 precision,
 with the same tie rule (the first choice that is strictly better wins), so both give the same
 values and the same plans bit for bit (tests/bench/oracle/test_kernel.py). The row loop works on
-slices, which numba compiles to plain vector loads and masked stores (about 4x the indexed form's
-speed). ``backward_step_in``, the DP's form, also skips the landings outside the next step's
+slices and is branch-free (the better value and choice are selects, stored to every row), so it
+vectorises on every x86-64 target: a conditional store of the one-byte choice has no AVX2 form,
+and LLVM would otherwise compile it to a branch per row. ``backward_step_in``, the DP's form, also skips the landings outside the next step's
 window, which the DP's buffers hold as infinite.
 
 The first call in a process compiles (about a second). numba's on-disk cache is not used: an
@@ -30,12 +31,14 @@ def _relax(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: 
     n = b - a + 1
     if n <= 0:
         return
-    src, dst, best = nxt_jn[a + jn:a + jn + n], cur_j[a:a + n], arg_j[a - lo:a - lo + n]  # slices: the loop
-    for i in range(n):  # below compiles to plain vector loads and masked stores
+    src, dst, best = nxt_jn[a + jn:a + jn + n], cur_j[a:a + n], arg_j[a - lo:a - lo + n]  # slices: contiguous
+    code = best.dtype.type(c)
+    for i in range(n):  # branch-free: selects, and a store to every row
         cand = src[i] + cost
-        if cand < dst[i]:
-            dst[i] = cand
-            best[i] = c
+        old = dst[i]
+        dst[i] = min(old, cand)  # select(cand < old, cand, old): the strictly better one
+        b = best[i]
+        best[i] = b + (code - b) * (cand < old)  # select(cand < old, c, b)
 
 
 @njit(nogil=True)
