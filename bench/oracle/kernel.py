@@ -7,11 +7,25 @@ choices that leave the speed range. numba is made for such array loops, is a wel
 dependency with wheels for every platform torch has, and keeps the kernel in Python (no build
 step). The arithmetic is the numpy form's, in the same order and the same float32 precision,
 with the same tie rule (the first choice that is strictly better wins), so both give the same
-values and the same plans bit for bit (tests/bench/oracle/test_kernel.py). The row loop works on
-slices and is branch-free (the better value and choice are selects, stored to every row), so it
-vectorises on every x86-64 target: a conditional store of the one-byte choice has no AVX2 form,
-and LLVM would otherwise compile it to a branch per row. ``backward_step_in``, the DP's form, also skips the landings outside the next step's
-window, which the DP's buffers hold as infinite.
+values and the same plans bit for bit (tests/bench/oracle/test_kernel.py). ``backward_step_in``,
+the DP's form, also skips the landings outside the next step's window, which the DP's buffers
+hold as infinite.
+
+The row loop (one speed, one choice, consecutive rows) compiles to plain vector loads, compares,
+blends and stores on any x86-64 vector unit, AVX2 as well as AVX-512:
+
+- it is branch-free: the better value is ``min`` (a select) and the choice an integer select,
+  stored to every row. A conditional store of the one-byte choice has no AVX2 instruction and
+  compiles to a branch per row there.
+- one speed's best values so far alternate between two rows of a scratch buffer: each choice
+  reads one row and writes the other (copying the rows it does not relax), then ``cur`` takes
+  the last. Storing a select of a value just loaded from the same address is what LLVM turns
+  into a masked store, native with AVX-512 but ``vmaskmovps`` on AVX2, microcoded on AMD Zen
+  1-3 (``llvm-mca -mcpu=znver3``: 12 cycles for 8 floats) and slower than a plain store on Intel.
+- indices are unsigned: numba tests a signed index for wrap-around, which keeps the loop from
+  vectorising; and the helpers are inlined by numba (``inline="always"``), because every call
+  between compiled functions increments and decrements each array argument's reference count
+  with an atomic instruction, which took about a third of a step's time.
 
 The first call in a process compiles (about a second). numba's on-disk cache is not used: an
 installed package's folder may be read-only, and a cache written under an earlier module name
@@ -22,23 +36,58 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+U1 = np.uint64(1)  # unsigned loop bounds and indices
 
-@njit(nogil=True)
-def _relax(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: int, lo: int, jn: int,
-           cost: np.float32, c: int) -> None:
-    """States of rows ``a..b`` (one speed): a landing at speed ``jn`` improves on the best so far
-    (``arg_j`` is indexed from row ``lo``; contiguous loads and stores, so the loop vectorises)."""
-    n = b - a + 1
-    if n <= 0:
-        return
-    src, dst, best = nxt_jn[a + jn:a + jn + n], cur_j[a:a + n], arg_j[a - lo:a - lo + n]  # slices: contiguous
-    code = best.dtype.type(c)
-    for i in range(n):  # branch-free: selects, and a store to every row
-        cand = src[i] + cost
-        old = dst[i]
-        dst[i] = min(old, cand)  # select(cand < old, cand, old): the strictly better one
-        b = best[i]
-        best[i] = b + (code - b) * (cand < old)  # select(cand < old, c, b)
+
+@njit(nogil=True, inline="always")
+def _relax(nxt: np.ndarray, vals: np.ndarray, arg: np.ndarray, jn: np.uint64, old: np.uint64, new: np.uint64,
+           jj: np.uint64, a: np.uint64, b: np.uint64, lo: np.uint64, cost: np.float32, code: int) -> None:
+    """Rows ``a..b`` of one speed (``jj``: its row of ``arg``), one choice landing at speed ``jn``:
+    ``vals[new] = min(vals[old], landing + cost)`` row by row, and the choice becomes ``code``
+    where the landing is strictly better (``vals``, ``arg`` indexed from row ``lo``)."""
+    for i in range(a, b + U1):  # unsigned indices: no wrap-around test, so the loop vectorises
+        cand = nxt[jn, i + jn] + cost
+        k = i - lo
+        o = vals[old, k]
+        vals[new, k] = min(o, cand)  # select(cand < o, cand, o): the strictly better one
+        x = arg[jj, k]
+        arg[jj, k] = x + (code - x) * (cand < o)  # select(cand < o, code, x)
+
+
+@njit(nogil=True, inline="always")
+def _copy(vals: np.ndarray, old: np.uint64, new: np.uint64, a: np.uint64, b: np.uint64) -> None:
+    """``vals[new, a:b] = vals[old, a:b]``."""
+    for k in range(a, b):
+        vals[new, k] = vals[old, k]
+
+
+@njit(nogil=True, inline="always")
+def _advance(nxt: np.ndarray, vals: np.ndarray, arg: np.ndarray, jn: int, p: int, jj: int, pos: int, a: int, b: int,
+             lo: int, cost: np.float32, c: int) -> int:
+    """Rows ``pos..a-1`` copied from ``vals[p]`` to ``vals[1 - p]``, rows ``a..b`` relaxed by the
+    landing at speed ``jn``; the next row to fill."""
+    a = max(a, pos)
+    if a > b:
+        return pos
+    old, new = np.uint64(p), np.uint64(1 - p)
+    _copy(vals, old, new, np.uint64(pos - lo), np.uint64(a - lo))
+    _relax(nxt, vals, arg, np.uint64(jn), old, new, np.uint64(jj), np.uint64(a), np.uint64(b), np.uint64(lo), cost,
+           arg.dtype.type(c))
+    return b + 1
+
+
+@njit(nogil=True, inline="always")
+def _relax_span(nxt: np.ndarray, vals: np.ndarray, arg: np.ndarray, jn: int, p: int, jj: int, pos: int, a: int, b: int,
+                lo: int, cost: np.float32, c: int, red_low: np.ndarray, red_top: np.ndarray) -> int:
+    """``_advance`` over rows ``a..b`` less the rows whose step crosses a red stop line (copied)."""
+    start = a
+    for s in range(red_top.shape[0]):
+        b0, b1 = max(red_low[s, jn], a), min(red_top[s], b)
+        if b0 > b1:
+            continue
+        pos = _advance(nxt, vals, arg, jn, p, jj, pos, start, b0 - 1, lo, cost, c)
+        start = max(start, b1 + 1)
+    return _advance(nxt, vals, arg, jn, p, jj, pos, start, b, lo, cost, c)
 
 
 @njit(nogil=True)
@@ -59,20 +108,6 @@ def backward_step(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi
 
 
 @njit(nogil=True)
-def _relax_span(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: int, lo: int, jn: int,
-                cost: np.float32, c: int, red_low: np.ndarray, red_top: np.ndarray) -> None:
-    """``_relax`` over rows ``a..b`` less the rows whose step crosses a red stop line."""
-    start = a
-    for s in range(red_top.shape[0]):
-        b0, b1 = max(red_low[s, jn], a), min(red_top[s], b)
-        if b0 > b1:
-            continue
-        _relax(nxt_jn, cur_j, arg_j, start, b0 - 1, lo, jn, cost, c)
-        start = max(start, b1 + 1)
-    _relax(nxt_jn, cur_j, arg_j, start, b, lo, jn, cost, c)
-
-
-@njit(nogil=True)
 def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
                      d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray,
                      nlo: int, nhi: int, njlo: int, njhi: int, i_end: int) -> None:
@@ -83,10 +118,15 @@ def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int,
     the windows are narrow (the local passes' tubes)."""
     nv = nxt.shape[0] - 1
     n_d = step_cost.shape[1]
+    if lo > hi:
+        return
+    n = hi - lo + 1
+    vals = np.empty((2, n), dtype=cur.dtype)  # one speed's best values so far (row p) and the next (1 - p)
     for j in range(jlo, jhi + 1):
-        cur[j, lo:hi + 1] = np.inf
-        arg[j - jlo, :] = 0
-        arg_j = arg[j - jlo, :]
+        jj = j - jlo
+        vals[0, :] = np.inf
+        arg[jj, :] = 0
+        p = 0
         for c in range(n_d):
             jn = j + d_min + c
             if jn < 0:
@@ -95,12 +135,19 @@ def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int,
                 break
             cost = step_cost[j, c]
             arrived = max(lo, i_end - jn)  # rows from which the landing has arrived
+            a, b = lo, lo - 1
             if njlo <= jn <= njhi and nlo <= nhi:  # landings in the next window, below the arrived ones
                 a, b = max(lo, nlo - jn), min(hi, nhi - jn, arrived - 1)
-                if a <= b:
-                    _relax_span(nxt[jn], cur[j], arg_j, a, b, lo, jn, cost, c, red_low, red_top)
+            if a > b and arrived > hi:
+                continue
+            pos = lo
+            if a <= b:
+                pos = _relax_span(nxt, vals, arg, jn, p, jj, pos, a, b, lo, cost, c, red_low, red_top)
             if arrived <= hi:
-                _relax_span(nxt[jn], cur[j], arg_j, arrived, hi, lo, jn, cost, c, red_low, red_top)
+                pos = _relax_span(nxt, vals, arg, jn, p, jj, pos, arrived, hi, lo, cost, c, red_low, red_top)
+            _copy(vals, np.uint64(p), np.uint64(1 - p), np.uint64(pos - lo), np.uint64(n))
+            p = 1 - p
+        cur[j, lo:hi + 1] = vals[p]
 
 
 @njit(nogil=True)
