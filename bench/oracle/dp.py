@@ -73,7 +73,7 @@ from ecodrive_bench.envs.config import ScenarioConfig
 from .corridor import MS, Corridor
 from .energy import energy_wh
 from .horizon import LeastCost
-from .kernel import backward_step_in, backward_step_numpy
+from .passes import KERNELS, Buffers, Solution, Window, backward
 
 OBJECTIVES = ("cost", "energy")
 HORIZON_MARGIN = 10  # [steps] added to the first guess of the "cost" horizon
@@ -86,9 +86,6 @@ VERSION = 1  # [-] of the plans and values ``bound`` returns: bump it with any c
 
 COARSEST = 7  # [-] speed cells: ``_Run._upper`` halves the lattice down to this, no further
 KRAUSS_TAU = 1.0  # [s] SUMO's default tau: the ego's reaction time in Krauss' safe speed
-# the inner loop, compiled (it skips landings outside the next step's window) or the numpy reference
-KERNELS = {"numba": backward_step_in, "numpy": backward_step_numpy}
-Window = tuple[int, int, int, int]  # rows lo..hi, speeds jlo..jhi evaluated at one step
 
 
 @dataclass(frozen=True)
@@ -229,16 +226,17 @@ class _Run:
     def __init__(self, cor: Corridor, cfg: ScenarioConfig, depart_time: float, phi: float, kernel: str) -> None:
         self.cor, self.cfg, self.depart_time, self.phi, self.kernel = cor, cfg, depart_time, phi, kernel
         self.states = 0  # evaluated, all passes
+        self.buffers: Buffers = {}  # the compiled kernel's value buffers, reused by the passes on one lattice
 
-    def backward(self, lat: _Lattice, windows: list[Window], keep: bool = False) -> _Solution:
+    def backward(self, lat: _Lattice, windows: list[Window], keep: bool = False) -> Solution:
         dt = self.cfg.step_length
         green = self.cor.green(self.depart_time + np.arange(len(windows)) * dt, dt) if self.cor.stop_lines else None
-        out = _backward(lat, green, windows, self.phi * dt, self.kernel, keep)
+        out = backward(lat, green, windows, self.phi * dt, self.kernel, keep, self.buffers)
         self.states += out.states
         return out
 
     def certified(self, lat: _Lattice, slack: int = 0, prune: bool = True,
-                  patient: bool = True) -> tuple[int, _Solution]:
+                  patient: bool = True) -> tuple[int, Solution]:
         """Global pass of the "cost" objective on a horizon that provably does not bind; ``slack``
         > 0: ``slack`` steps longer, keeping every step's values (``solve``). ``prune`` (``slack``
         0 only): the horizon comes from the cost of a plan solved on the lattice half as fine
@@ -292,14 +290,6 @@ class _Run:
         return float(energy_wh(v[:-1], v[1:], dt, self.cfg.ev).sum()) + self.phi * (len(v) - 1) * dt
 
 
-@dataclass
-class _Solution:
-    value: float  # [Wh] optimal value of the start state (float32 sums)
-    policy: list[tuple[int, int, np.ndarray] | None]  # per step: first row, first speed, best choice
-    states: int  # states evaluated
-    values: list[np.ndarray | None] | None = None  # per step: [speed, row] values of its window (``keep``)
-
-
 class _Lattice:
     """Index arithmetic of one (position, speed) grid and its per-step energy table."""
 
@@ -347,7 +337,7 @@ class _Lattice:
             lo += j
         return out
 
-    def extract(self, sol: _Solution) -> tuple[np.ndarray, np.ndarray]:
+    def extract(self, sol: Solution) -> tuple[np.ndarray, np.ndarray]:
         """Row and speed indices of the optimal plan, forwards from the start."""
         i, j, rows, speeds = 0, self.nv, [0], [self.nv]
         for entry in sol.policy:
@@ -366,48 +356,6 @@ def _margin(cost: float) -> float:
     """[Wh] more than the float32 error of a DP value near ``cost`` (sums of at most a few
     thousand float32 terms)."""
     return 1e-3 * abs(cost) + 0.1
-
-
-def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float,
-              kernel: str = "numba", keep: bool = False) -> _Solution:
-    """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start,
-    one ``bench.oracle.kernel`` step per time step; ``keep``: also return every step's values
-    (the cost-to-go table a re-planning controller reads, ``bench.oracle.mpc``)."""
-    step = KERNELS[kernel]
-    nv, n_d, i_end = lat.nv, lat.n_d, lat.i_end
-    n_rows = i_end + nv + 1  # rows >= i_end: arrived, value 0
-    nxt = np.full((nv + 1, n_rows), np.inf, dtype=np.float32)  # [speed, row]: the kernel's layout
-    nxt[:, i_end:] = 0.0
-    cur = nxt.copy()
-    reg_nxt: Window | None = None  # region of each buffer written by the last step stored there
-    reg_cur: Window | None = None
-    step_cost = np.ascontiguousarray((lat.energy + time_cost).astype(np.float32))
-    arg_type = np.int8 if n_d < 127 else np.int16
-    policy: list[tuple[int, int, np.ndarray] | None] = [None] * len(windows)
-    values: list[np.ndarray | None] | None = [None] * len(windows) if keep else None
-    no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))
-    states = 0
-    for k in range(len(windows) - 1, -1, -1):
-        if reg_cur is not None:
-            cur[reg_cur[2]:reg_cur[3] + 1, reg_cur[0]:reg_cur[1] + 1] = np.inf
-            reg_cur = None
-        lo, hi, jlo, jhi = windows[k]
-        if lo <= hi and jlo <= jhi:
-            states += (hi - lo + 1) * (jhi - jlo + 1)
-            red = no_red
-            if green is not None and not green[k].all():  # red / yellow: no crossing in this step
-                r = np.nonzero(~green[k])[0]
-                red = (lat.cross_low[r], lat.cross_top[r])
-            arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=arg_type)  # [speed, row]
-            step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red,
-                 *(reg_nxt if reg_nxt is not None else (1, 0, 1, 0)), i_end)  # nxt's finite window, empty at the end
-            reg_cur = (lo, hi, jlo, jhi)
-            policy[k] = (lo, jlo, arg)
-            if values is not None:
-                values[k] = cur[jlo:jhi + 1, lo:hi + 1].copy()
-        nxt, cur, reg_nxt, reg_cur = cur, nxt, reg_cur, reg_nxt
-    value = float(nxt[nv, 0]) if i_end > 0 else 0.0
-    return _Solution(value=value, policy=policy, states=states, values=values)
 
 
 if __name__ == "__main__":  # timing note: python -m bench.oracle.dp [depart_time ...]
