@@ -225,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{'DP cold solve / reference solve':40s} {r['cold_solve_over_numpy']:6.3f}x ({r['cold_solve_s']:.2f} s; "
               f"target <= {COLD_SOLVE_LIMIT:g}x{on}) {'ok' if good else 'MISSED'}")
         if cpu:
-            host = "" if cpu["host_cpu"] == cpu["cpu"] else f" on a {cpu['host_cpu']} host"
+            host = "" if cpu["host_cpu"] == cpu["cpu"] else f" (host: {cpu['host_cpu']})"
             print(f"{'numba compiles for':40s} {cpu['cpu']}{host}: {' '.join(cpu['vector']) or cpu['features'] or '-'}")
     if "sumo_step_us" in r:
         print(f"{'raw SUMO step':40s} {r['sumo_step_us']:6.0f} us")

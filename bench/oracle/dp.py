@@ -358,10 +358,28 @@ def _margin(cost: float) -> float:
     return 1e-3 * abs(cost) + 0.1
 
 
-if __name__ == "__main__":  # timing note: python -m bench.oracle.dp [depart_time ...]
-    import sys
+if __name__ == "__main__":  # timing: python -m ecodrive_bench.bench.oracle.dp [--signals S] [--reference] [depart_time ...]
+    import argparse
+    import statistics
 
-    for depart in [float(a) for a in sys.argv[1:]] or [200.0, 231.0, 260.0]:
-        p = bound(ScenarioConfig(), depart)
+    ap = argparse.ArgumentParser(description="The bound of each departure and its wall time (Plan.grid's wall_s, after "
+                                             "one solve that compiles the kernel); --reference: beside the reference "
+                                             "solver's (numpy kernel, unpruned), alternating, medians of --rounds.")
+    ap.add_argument("depart", type=float, nargs="*", default=[200.0, 231.0, 260.0], help="departure times [s]")
+    ap.add_argument("--signals", choices=("coordinated", "uncoordinated"), default="coordinated")
+    ap.add_argument("--reference", action="store_true", help="time the reference solver too")
+    ap.add_argument("--rounds", type=int, default=1)
+    opts = ap.parse_args()
+    cfg = ScenarioConfig(signals=opts.signals)
+    bound(cfg, opts.depart[0])
+    for depart in opts.depart:
+        walls, refs = [], []
+        for _ in range(opts.rounds):
+            p = bound(cfg, depart)
+            walls.append(p.grid["wall_s"])
+            if opts.reference:
+                refs.append(bound(cfg, depart, kernel="numpy", prune=False).grid["wall_s"])
+        wall = statistics.median(walls)
+        ref = f", reference {statistics.median(refs):.2f} s = {wall / statistics.median(refs):.3f}x" if refs else ""
         print(f"depart {depart:g} s: cost {p.cost:.3f} Wh = E {p.energy:.3f} Wh + T {p.travel_time:g} s, "
-              f"{p.grid['states']:.3g} states, {p.grid['passes']} local passes, {p.grid['wall_s']:.2f} s")
+              f"{p.grid['states']:.3g} states, {p.grid['passes']} local passes, {wall:.3f} s{ref}", flush=True)
