@@ -50,9 +50,10 @@ on the 450 m one-intersection corridor, where the end manoeuvre weighs more; the
 < 0.2 %. The local passes matched a global pass on their final lattice to 0.01 % (one-
 intersection corridor); where the cost is flat in the cruise speed they may stop a coarse cell
 from the best one (phi = 0.3: 12.3 instead of 11.9 m/s, about 0.08 % of cost). A ``"cost"`` case takes
-0.1-0.17 s on one core of the 2-core machine beside two trainings (``Plan.grid["wall_s"]``,
-``python -m bench.oracle.dp``; ``nox -s perf`` measures it against the reference solver); dt =
-0.5 s takes about 4 times as long. Not timed in tests.
+0.2-0.6 s on one core of the 2-core machine beside other jobs, 0.03-0.06x the reference solver's
+time with numba compiling for AVX2 or AVX-512 (``Plan.grid["wall_s"]``; ``python -m
+ecodrive_bench.bench.oracle.dp --reference`` times both, ``nox -s perf`` records the ratio, see
+docs/performance.md); dt = 0.5 s takes about 4 times as long. Not timed in tests.
 
 Not a constraint here, but one in SUMO: while a light is red, SUMO caps the speed so that the
 car can still stop at the line (Krauss). A plan that reaches the line at speed just as green

@@ -8,8 +8,8 @@ dependency with wheels for every platform torch has, and keeps the kernel in Pyt
 step). The arithmetic is the numpy form's, in the same order and the same float32 precision,
 with the same tie rule (the first choice that is strictly better wins), so both give the same
 values and the same plans bit for bit (tests/bench/oracle/test_kernel.py). ``backward_step_in``,
-the DP's form, also skips the landings outside the next step's window, which the DP's buffers
-hold as infinite.
+the DP's form, also takes the landings outside the next step's window as infinite and never reads
+them, so the DP's buffers need not hold them (``bench.oracle.passes``).
 
 How the step is laid out, so that it compiles to plain vector code on any x86-64 vector unit,
 AVX2 as well as AVX-512 (tests/bench/oracle/test_kernel.py builds it for AVX2 and looks for
@@ -139,11 +139,12 @@ def backward_step(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi
 def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
                      d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray,
                      nlo: int, nhi: int, njlo: int, njhi: int, i_end: int) -> None:
-    """``backward_step`` when ``nxt`` is finite only in the next step's window (rows
+    """``backward_step`` where ``nxt`` is finite only in the next step's window (rows
     ``nlo..nhi``, speeds ``njlo..njhi``; empty if ``nlo > nhi``) and on arrived rows (``>= i_end``,
-    every speed), as the DP's buffers are: landings elsewhere are infinite, never strictly better,
-    so they are skipped. The same values and choices as ``backward_step``, with less work where
-    the windows are narrow (the local passes' tubes)."""
+    every speed): the landings elsewhere are taken as infinite, never strictly better, and not
+    read, so ``nxt`` may hold anything there (the DP's and mpc's buffers keep earlier steps'
+    values). The same values and choices as ``backward_step`` on such an ``nxt``, with less work
+    where the windows are narrow (the local passes' tubes)."""
     nv = nxt.shape[0] - 1
     n_d = step_cost.shape[1]
     if lo > hi or jlo > jhi:

@@ -70,6 +70,7 @@ def test_dp_cold_solve(benchmark, driven):
         assert np.array_equal(plan.x, ref.x) and np.array_equal(plan.v, ref.v) and plan.cost == ref.cost
 
     benchmark.pedantic(pair, rounds=ROUNDS, iterations=1)
+    benchmark.extra_info["depart_s"] = depart
     benchmark.extra_info["time_s"] = float(np.median(solve_s))
     benchmark.extra_info["reference_s"] = float(np.median(reference_s))
     benchmark.extra_info["over_reference"] = float(np.median(np.array(solve_s) / np.array(reference_s)))
