@@ -152,7 +152,7 @@ def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int,
     n = hi - lo + 1
     n_pad = -(-n // ALIGN) * ALIGN  # rows n.. of the scratch: infinite landings, never read back
     jn0 = max(0, jlo + d_min)  # the next speeds reached
-    m = min(nv, jhi + d_min + n_d - 1) - jn0 + 1
+    m = max(0, min(nv, jhi + d_min + n_d - 1) - jn0 + 1)  # their count
     src = np.empty((m + 1, n_pad), dtype=nxt.dtype)
     first, last = np.empty(m + 1, dtype=np.int64), np.empty(m + 1, dtype=np.int64)
     _landings(nxt, src, first, last, lo, hi, jn0, nlo, nhi, njlo, njhi, i_end, red_low, red_top)
