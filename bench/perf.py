@@ -3,7 +3,8 @@ raw SUMO, logging overhead, the projected training run, each learner's update ag
 floor (the update's counted FLOPs at this core's measured matmul rate), each learned method's
 greedy act against a raw SUMO step, the main job's logged episodes of each method against SUMO's
 own time in them, and the DP: mpc's re-plan (median, p99) and a cold solve against the reference
-solver (numpy kernel, unpruned global pass).
+solver (numpy kernel, unpruned global pass) timed in the same rounds, beside the CPU numba
+compiled the DP for and its vector extensions.
 
     ecodrive perf .benchmarks/perf.json
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from ecodrive_bench.bench.args import Parser, fail
 
@@ -26,12 +28,47 @@ FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 ACT_LIMIT_S = 0.3e-3  # [s] a greedy batch-1 act (test_greedy_act[...], one thread)
 MAIN_JOB_LIMIT = 1.3  # [-] nox -s benchmark's goal, wall time x workers / SUMO's time; test_episode_over_floor[...]
 # measures one process's logged episodes against it (without the pool's few percent)
+VECTOR_PREFIXES = ("sse", "ssse3", "avx", "fma", "neon", "sve")  # LLVM's names of vector extensions
+TIERS = (("AVX-512", "avx512f"), ("AVX2", "avx2"), ("AVX", "avx"), ("SSE4.2", "sse4.2"), ("SVE", "sve"), ("NEON", "neon"))
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
     "env_step_over_sim_in_run": ("", "", 2.0, "env.step / its own simulationStep"),
     "logging_overhead": ("test_episode_logged", "test_episode_unlogged", 1.05, "episode with / without MCAP"),
     "log_overhead_in_run": ("", "", 1.05, "episode incl. logger / excl. logger"),
 }
+
+
+def numba_target() -> dict[str, Any]:
+    """The CPU numba compiles for in this process, as LLVM names it: ``cpu`` (the host's,
+    ``host_cpu``, unless ``NUMBA_CPU_NAME`` names another), ``features`` (the feature string numba
+    hands LLVM: the host's whole list, or ``NUMBA_CPU_FEATURES`` where set, which adjusts the named
+    CPU's own) and ``vector``, the vector extensions that string turns on. Read from numba's
+    configuration and llvmlite, which numba compiles with: the DP's kernel runs what they select,
+    whatever else the CPU has."""
+    from llvmlite import binding as llvm
+    from numba.core import config
+    from numba.core.codegen import get_host_cpu_features
+
+    features = config.CPU_FEATURES if config.CPU_FEATURES is not None else get_host_cpu_features()
+    vector = sorted(f[1:] for f in features.split(",") if f.startswith("+") and f[1:].startswith(VECTOR_PREFIXES))
+    host = llvm.get_host_cpu_name()
+    return {"cpu": config.CPU_NAME or host, "host_cpu": host, "features": features, "vector": vector}
+
+
+def tier(vector: list[str]) -> str:
+    """The widest vector instruction set in ``vector`` (LLVM's feature names), e.g. ``AVX2``."""
+    return next((name for name, feature in TIERS if feature in vector), "no vector extension listed")
+
+
+def target(path: Path) -> dict[str, Any] | None:
+    """``numba_target()`` as the run that wrote the JSON recorded it (tests/benchmarks/conftest.py)."""
+    data = json.loads(path.read_text())
+    info = data.get("machine_info") if isinstance(data, dict) else None
+    found = info.get("numba") if isinstance(info, dict) else None
+    if not (isinstance(found, dict) and all(isinstance(found.get(k), str) for k in ("cpu", "host_cpu", "features"))
+            and isinstance(found.get("vector"), list)):
+        return None
+    return found
 
 
 def ratios(path: Path) -> dict[str, float]:
@@ -89,9 +126,10 @@ def ratios(path: Path) -> dict[str, float]:
         out["replan_p99_ms"] = extra["test_dp_replan"]["p99_s"] * 1e3
         if "test_dp_cold_solve" in med:
             out["replan_over_cold_solve"] = extra["test_dp_replan"]["median_s"] / med["test_dp_cold_solve"]
-    if "test_dp_cold_solve" in med and "test_dp_cold_solve_numpy" in med:
-        out["cold_solve_over_numpy"] = med["test_dp_cold_solve"] / med["test_dp_cold_solve_numpy"]
-        out["cold_solve_s"] = med["test_dp_cold_solve"]
+    cold = extra.get("test_dp_cold_solve", {})
+    if "over_reference" in cold:  # the rounds' ratios: each cold solve against the reference solve after it
+        out["cold_solve_over_numpy"] = cold["over_reference"]
+        out["cold_solve_s"] = cold["time_s"]
     if "test_learner_update[prl]" in med and "test_training_env_step" in med:
         per_step = mean["test_learner_update[prl]"] + mean["test_training_env_step"]
         out["updates_per_s"] = 1.0 / mean["test_learner_update[prl]"]
@@ -182,8 +220,13 @@ def main(argv: list[str] | None = None) -> int:
     if "cold_solve_over_numpy" in r:
         good = r["cold_solve_over_numpy"] <= COLD_SOLVE_LIMIT
         ok &= good
+        cpu = target(args.benchmark_json)
+        on = f"; numba: {cpu['cpu']}, {tier(cpu['vector'])}" if cpu else ""
         print(f"{'DP cold solve / reference solve':40s} {r['cold_solve_over_numpy']:6.3f}x ({r['cold_solve_s']:.2f} s; "
-              f"target <= {COLD_SOLVE_LIMIT:g}x) {'ok' if good else 'MISSED'}")
+              f"target <= {COLD_SOLVE_LIMIT:g}x{on}) {'ok' if good else 'MISSED'}")
+        if cpu:
+            host = "" if cpu["host_cpu"] == cpu["cpu"] else f" (host: {cpu['host_cpu']})"
+            print(f"{'numba compiles for':40s} {cpu['cpu']}{host}: {' '.join(cpu['vector']) or cpu['features'] or '-'}")
     if "sumo_step_us" in r:
         print(f"{'raw SUMO step':40s} {r['sumo_step_us']:6.0f} us")
     for key in sorted(k for k in r if k.startswith("episode_over_floor_")):  # one process: no pool overhead

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dp import GRID_EPS, _Lattice
+from .lattice import GRID_EPS, Lattice
 from .mpc import HEADWAY, MIN_GAP
 
 MARGIN = 1.0  # [m] kept beyond SUMO's minGap and Krauss' safe distance: the plan's rows are rounded
@@ -101,12 +101,12 @@ def ahead_future(tracks: Tracks | None, k: int, steps: int, ids: tuple[str, ...]
     return rear, speed
 
 
-def gap_caps(rear: np.ndarray, speed: np.ndarray, decel: float, x0: float) -> Callable[[_Lattice, int], np.ndarray]:
+def gap_caps(rear: np.ndarray, speed: np.ndarray, decel: float, x0: float) -> Callable[[Lattice, int], np.ndarray]:
     """``caps(lat, m)``: the highest row of each speed at look-ahead step m behind ``rear[m]``
     (``MIN_GAP + MARGIN`` and Krauss' safe distance), for ``mpc.replan``."""
     cache: dict[tuple[int, int], np.ndarray] = {}
 
-    def caps(lat: _Lattice, m: int) -> np.ndarray:
+    def caps(lat: Lattice, m: int) -> np.ndarray:
         key = (lat.nv, m)
         if key not in cache:
             v = np.arange(lat.nv + 1) * lat.dv

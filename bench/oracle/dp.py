@@ -50,9 +50,10 @@ on the 450 m one-intersection corridor, where the end manoeuvre weighs more; the
 < 0.2 %. The local passes matched a global pass on their final lattice to 0.01 % (one-
 intersection corridor); where the cost is flat in the cruise speed they may stop a coarse cell
 from the best one (phi = 0.3: 12.3 instead of 11.9 m/s, about 0.08 % of cost). A ``"cost"`` case takes
-0.1-0.17 s on one core of the 2-core machine beside two trainings (``Plan.grid["wall_s"]``,
-``python -m bench.oracle.dp``; ``nox -s perf`` measures it against the reference solver); dt =
-0.5 s takes about 4 times as long. Not timed in tests.
+0.2-0.6 s on one core of the 2-core machine beside other jobs, 0.03-0.06x the reference solver's
+time with numba compiling for AVX2 or AVX-512 (``Plan.grid["wall_s"]``; ``python -m
+ecodrive_bench.bench.oracle.dp --reference`` times both, ``nox -s perf`` records the ratio, see
+docs/performance.md); dt = 0.5 s takes about 4 times as long. Not timed in tests.
 
 Not a constraint here, but one in SUMO: while a light is red, SUMO caps the speed so that the
 car can still stop at the line (Krauss). A plan that reaches the line at speed just as green
@@ -73,22 +74,18 @@ from ecodrive_bench.envs.config import ScenarioConfig
 from .corridor import MS, Corridor
 from .energy import energy_wh
 from .horizon import LeastCost
-from .kernel import backward_step_in, backward_step_numpy
+from .lattice import GRID_EPS, Lattice, Solution, Window
+from .passes import KERNELS, Buffers, backward
 
 OBJECTIVES = ("cost", "energy")
 HORIZON_MARGIN = 10  # [steps] added to the first guess of the "cost" horizon
 LATE_STEPS = 5  # [steps] a local pass may arrive this much later than the plan it refines
 STALL = 1e-4  # [-] local passes stop when the cost falls by less than this fraction
-GRID_EPS = 1e-9  # [-] slack for float rounding in grid index arithmetic
 MAX_HORIZON = 86400.0  # [s] the "cost" horizon stops growing here
 VERSION = 1  # [-] of the plans and values ``bound`` returns: bump it with any change that alters one, so
 # the bounds shipped with the fixed cases (bench.harness.shipped_bounds) miss and are solved again
 
 COARSEST = 7  # [-] speed cells: ``_Run._upper`` halves the lattice down to this, no further
-KRAUSS_TAU = 1.0  # [s] SUMO's default tau: the ego's reaction time in Krauss' safe speed
-# the inner loop, compiled (it skips landings outside the next step's window) or the numpy reference
-KERNELS = {"numba": backward_step_in, "numpy": backward_step_numpy}
-Window = tuple[int, int, int, int]  # rows lo..hi, speeds jlo..jhi evaluated at one step
 
 
 @dataclass(frozen=True)
@@ -172,7 +169,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
     grid = grid or Grid()
     started = time.perf_counter()
     run = _Run(cor, cfg, depart_time, cfg.reward.phi if objective == "cost" else 0.0, kernel)
-    lat = _Lattice(cor, cfg, grid.n_v, krauss)
+    lat = Lattice(cor, cfg, grid.n_v, krauss)
     if objective == "energy":
         horizon = int(math.floor(float(time_limit) / cfg.step_length + GRID_EPS))
         sol = run.backward(lat, lat.windows(horizon))
@@ -185,7 +182,7 @@ def solve(cor: Corridor, cfg: ScenarioConfig, depart_time: float, objective: str
     return refine(run, lat, rows, speeds, horizon, grid, krauss, objective, started, table)
 
 
-def refine(run: _Run, lat: _Lattice, rows: np.ndarray, speeds: np.ndarray, horizon: int, grid: Grid, krauss: bool,
+def refine(run: _Run, lat: Lattice, rows: np.ndarray, speeds: np.ndarray, horizon: int, grid: Grid, krauss: bool,
            objective: str, started: float, table: tuple[Any, Any, int] | None = None) -> Plan:
     """The local passes of ``grid.levels`` from a global-lattice plan (row and speed indices on
     ``lat``, arriving within ``horizon`` steps), as a ``Plan``."""
@@ -193,7 +190,7 @@ def refine(run: _Run, lat: _Lattice, rows: np.ndarray, speeds: np.ndarray, horiz
     value = coarse = run.objective(speeds, lat)
     passes = 0
     for factor, tube_x, tube_v in grid.levels:  # local passes, each seeded with the plan in hand
-        fine = _Lattice(cor, cfg, grid.n_v * factor, krauss)
+        fine = Lattice(cor, cfg, grid.n_v * factor, krauss)
         rows, speeds = rows * (fine.nv // lat.nv), speeds * (fine.nv // lat.nv)
         tube = (math.ceil(tube_x / fine.dx), math.ceil(tube_v / fine.dv))
         for _ in range(grid.passes):
@@ -229,16 +226,17 @@ class _Run:
     def __init__(self, cor: Corridor, cfg: ScenarioConfig, depart_time: float, phi: float, kernel: str) -> None:
         self.cor, self.cfg, self.depart_time, self.phi, self.kernel = cor, cfg, depart_time, phi, kernel
         self.states = 0  # evaluated, all passes
+        self.buffers: Buffers = {}  # the compiled kernel's value buffers, reused by the passes on one lattice
 
-    def backward(self, lat: _Lattice, windows: list[Window], keep: bool = False) -> _Solution:
+    def backward(self, lat: Lattice, windows: list[Window], keep: bool = False) -> Solution:
         dt = self.cfg.step_length
         green = self.cor.green(self.depart_time + np.arange(len(windows)) * dt, dt) if self.cor.stop_lines else None
-        out = _backward(lat, green, windows, self.phi * dt, self.kernel, keep)
+        out = backward(lat, green, windows, self.phi * dt, self.kernel, keep, self.buffers)
         self.states += out.states
         return out
 
-    def certified(self, lat: _Lattice, slack: int = 0, prune: bool = True,
-                  patient: bool = True) -> tuple[int, _Solution]:
+    def certified(self, lat: Lattice, slack: int = 0, prune: bool = True,
+                  patient: bool = True) -> tuple[int, Solution]:
         """Global pass of the "cost" objective on a horizon that provably does not bind; ``slack``
         > 0: ``slack`` steps longer, keeping every step's values (``solve``). ``prune`` (``slack``
         0 only): the horizon comes from the cost of a plan solved on the lattice half as fine
@@ -269,14 +267,14 @@ class _Run:
                 horizon = max(horizon + 1, least.last_steps(float(sol.value)))
         raise ValueError(f"no plan certified within {MAX_HORIZON:g} s")
 
-    def _upper(self, lat: _Lattice) -> float | None:
+    def _upper(self, lat: Lattice) -> float | None:
         """E + phi T [Wh] of the optimal plan on the lattice with twice the speed cell (its
         states lie on ``lat``, so the plan is one of ``lat``'s), solved the same way in turn;
         None where ``lat`` has no such coarser lattice, the coarser one cannot both speed up and
         slow down within a step, or it has no plan within its first horizon."""
         if lat.nv % 2 or lat.nv // 2 < COARSEST:
             return None
-        coarse = _Lattice(self.cor, self.cfg, lat.nv // 2, lat.krauss)
+        coarse = Lattice(self.cor, self.cfg, lat.nv // 2, lat.krauss)
         if coarse.d_max < 1 or coarse.d_min > -1:
             return None
         try:
@@ -285,81 +283,11 @@ class _Run:
             return None
         return self.objective(coarse.extract(sol)[1], coarse)
 
-    def objective(self, speeds: np.ndarray, lat: _Lattice) -> float:
+    def objective(self, speeds: np.ndarray, lat: Lattice) -> float:
         """E + phi T [Wh] of a path of speed indices, in float64."""
         v = speeds * lat.dv
         dt = self.cfg.step_length
         return float(energy_wh(v[:-1], v[1:], dt, self.cfg.ev).sum()) + self.phi * (len(v) - 1) * dt
-
-
-@dataclass
-class _Solution:
-    value: float  # [Wh] optimal value of the start state (float32 sums)
-    policy: list[tuple[int, int, np.ndarray] | None]  # per step: first row, first speed, best choice
-    states: int  # states evaluated
-    values: list[np.ndarray | None] | None = None  # per step: [speed, row] values of its window (``keep``)
-
-
-class _Lattice:
-    """Index arithmetic of one (position, speed) grid and its per-step energy table."""
-
-    def __init__(self, cor: Corridor, cfg: ScenarioConfig, n_v: int, krauss: bool = False) -> None:
-        dt = cfg.step_length
-        self.nv, self.krauss = n_v, krauss
-        self.dv = cfg.speed_limit / n_v  # [m/s]
-        self.dx = self.dv * dt  # [m]
-        self.d_min = math.ceil(cfg.a_min * dt / self.dv - GRID_EPS)  # [speed cells per step]
-        self.d_max = math.floor(cfg.a_max * dt / self.dv + GRID_EPS)
-        self.n_d = self.d_max - self.d_min + 1
-        self.i_end = math.ceil((cor.x_end - cor.x0) / self.dx - GRID_EPS)  # first row that has arrived
-        j = np.arange(n_v + 1)
-        j_next = j[:, None] + np.arange(self.d_min, self.d_max + 1)[None, :]
-        ok = (j_next >= 0) & (j_next <= n_v)
-        step = energy_wh(j[:, None] * self.dv, np.clip(j_next, 0, n_v) * self.dv, dt, cfg.ev)
-        self.energy = np.where(ok, step, np.inf)  # [Wh] (speed, acceleration choice)
-        # the step from row i to next speed j' crosses stop line m (x_i < s <= x_i + j' dx) iff
-        # cross_low[m, j'] <= i <= cross_top[m]
-        q = (np.asarray(cor.stop_lines, dtype=float) - cor.x0) / self.dx
-        self.cross_top = (np.ceil(q - GRID_EPS) - 1).astype(np.int64)
-        self.cross_low = np.ceil(q[:, None] - j[None, :] - GRID_EPS).astype(np.int64).reshape(len(q), n_v + 1)
-        if krauss:  # while red, SUMO lets the ego take speed v' only if it can still stop at the line:
-            # gap >= v'^2 / (2 b) + tau v' (b = -a_min); so landings at v' closer than that are forbidden too
-            v = j * self.dv
-            gap = v ** 2 / (2.0 * -cfg.a_min) + KRAUSS_TAU * v  # [m]
-            first = np.floor(q[:, None] - gap[None, :] / self.dx + GRID_EPS).astype(np.int64) + 1
-            self.cross_low = np.minimum(self.cross_low, first.reshape(len(q), n_v + 1))
-
-    def windows(self, horizon: int, tube: tuple[np.ndarray, np.ndarray, int, int] | None = None) -> list[Window]:
-        """States worth evaluating at each step: rows forward-reachable from the start (full
-        speed ahead / full braking), not arrived, able to arrive by ``horizon``; within
-        ``tube = (rows, speeds, half-width rows, half-width speeds)`` of a plan if given."""
-        out, lo, j = [], 0, self.nv
-        for k in range(horizon):
-            w = [max(lo, self.i_end - (horizon - k) * self.nv), min(k * self.nv, self.i_end - 1), 0, self.nv]
-            if tube is not None:
-                rows, speeds, wr, wv = tube
-                c = min(k, len(rows) - 1)
-                r = min(int(rows[c]), self.i_end - 1)
-                js = int(speeds[c])
-                w = [max(w[0], r - wr), min(w[1], r + wr), max(0, js - wv), min(self.nv, js + wv)]
-            out.append((w[0], w[1], w[2], w[3]))
-            j = max(0, j + self.d_min)
-            lo += j
-        return out
-
-    def extract(self, sol: _Solution) -> tuple[np.ndarray, np.ndarray]:
-        """Row and speed indices of the optimal plan, forwards from the start."""
-        i, j, rows, speeds = 0, self.nv, [0], [self.nv]
-        for entry in sol.policy:
-            assert entry is not None, "the optimal plan left the evaluated states"
-            lo, jlo, arg = entry
-            j += int(arg[j - jlo, i - lo]) + self.d_min
-            i += j
-            rows.append(i)
-            speeds.append(j)
-            if i >= self.i_end:
-                break
-        return np.array(rows), np.array(speeds)
 
 
 def _margin(cost: float) -> float:
@@ -368,52 +296,28 @@ def _margin(cost: float) -> float:
     return 1e-3 * abs(cost) + 0.1
 
 
-def _backward(lat: _Lattice, green: np.ndarray | None, windows: list[Window], time_cost: float,
-              kernel: str = "numba", keep: bool = False) -> _Solution:
-    """Value iteration from step ``len(windows)`` (not arrived = infeasible) back to the start,
-    one ``bench.oracle.kernel`` step per time step; ``keep``: also return every step's values
-    (the cost-to-go table a re-planning controller reads, ``bench.oracle.mpc``)."""
-    step = KERNELS[kernel]
-    nv, n_d, i_end = lat.nv, lat.n_d, lat.i_end
-    n_rows = i_end + nv + 1  # rows >= i_end: arrived, value 0
-    nxt = np.full((nv + 1, n_rows), np.inf, dtype=np.float32)  # [speed, row]: the kernel's layout
-    nxt[:, i_end:] = 0.0
-    cur = nxt.copy()
-    reg_nxt: Window | None = None  # region of each buffer written by the last step stored there
-    reg_cur: Window | None = None
-    step_cost = np.ascontiguousarray((lat.energy + time_cost).astype(np.float32))
-    arg_type = np.int8 if n_d < 127 else np.int16
-    policy: list[tuple[int, int, np.ndarray] | None] = [None] * len(windows)
-    values: list[np.ndarray | None] | None = [None] * len(windows) if keep else None
-    no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))
-    states = 0
-    for k in range(len(windows) - 1, -1, -1):
-        if reg_cur is not None:
-            cur[reg_cur[2]:reg_cur[3] + 1, reg_cur[0]:reg_cur[1] + 1] = np.inf
-            reg_cur = None
-        lo, hi, jlo, jhi = windows[k]
-        if lo <= hi and jlo <= jhi:
-            states += (hi - lo + 1) * (jhi - jlo + 1)
-            red = no_red
-            if green is not None and not green[k].all():  # red / yellow: no crossing in this step
-                r = np.nonzero(~green[k])[0]
-                red = (lat.cross_low[r], lat.cross_top[r])
-            arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=arg_type)  # [speed, row]
-            step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red,
-                 *(reg_nxt if reg_nxt is not None else (1, 0, 1, 0)), i_end)  # nxt's finite window, empty at the end
-            reg_cur = (lo, hi, jlo, jhi)
-            policy[k] = (lo, jlo, arg)
-            if values is not None:
-                values[k] = cur[jlo:jhi + 1, lo:hi + 1].copy()
-        nxt, cur, reg_nxt, reg_cur = cur, nxt, reg_cur, reg_nxt
-    value = float(nxt[nv, 0]) if i_end > 0 else 0.0
-    return _Solution(value=value, policy=policy, states=states, values=values)
+if __name__ == "__main__":  # timing: python -m ecodrive_bench.bench.oracle.dp [--signals S] [--reference] [depart_time ...]
+    import argparse
+    import statistics
 
-
-if __name__ == "__main__":  # timing note: python -m bench.oracle.dp [depart_time ...]
-    import sys
-
-    for depart in [float(a) for a in sys.argv[1:]] or [200.0, 231.0, 260.0]:
-        p = bound(ScenarioConfig(), depart)
+    ap = argparse.ArgumentParser(description="The bound of each departure and its wall time (Plan.grid's wall_s, after "
+                                             "one solve that compiles the kernel); --reference: beside the reference "
+                                             "solver's (numpy kernel, unpruned), alternating, medians of --rounds.")
+    ap.add_argument("depart", type=float, nargs="*", default=[200.0, 231.0, 260.0], help="departure times [s]")
+    ap.add_argument("--signals", choices=("coordinated", "uncoordinated"), default="coordinated")
+    ap.add_argument("--reference", action="store_true", help="time the reference solver too")
+    ap.add_argument("--rounds", type=int, default=1)
+    opts = ap.parse_args()
+    cfg = ScenarioConfig(signals=opts.signals)
+    bound(cfg, opts.depart[0])
+    for depart in opts.depart:
+        walls, refs = [], []
+        for _ in range(opts.rounds):
+            p = bound(cfg, depart)
+            walls.append(p.grid["wall_s"])
+            if opts.reference:
+                refs.append(bound(cfg, depart, kernel="numpy", prune=False).grid["wall_s"])
+        wall = statistics.median(walls)
+        ref = f", reference {statistics.median(refs):.2f} s = {wall / statistics.median(refs):.3f}x" if refs else ""
         print(f"depart {depart:g} s: cost {p.cost:.3f} Wh = E {p.energy:.3f} Wh + T {p.travel_time:g} s, "
-              f"{p.grid['states']:.3g} states, {p.grid['passes']} local passes, {p.grid['wall_s']:.2f} s")
+              f"{p.grid['states']:.3g} states, {p.grid['passes']} local passes, {wall:.3f} s{ref}", flush=True)

@@ -7,10 +7,34 @@ choices that leave the speed range. numba is made for such array loops, is a wel
 dependency with wheels for every platform torch has, and keeps the kernel in Python (no build
 step). The arithmetic is the numpy form's, in the same order and the same float32 precision,
 with the same tie rule (the first choice that is strictly better wins), so both give the same
-values and the same plans bit for bit (tests/bench/oracle/test_kernel.py). The row loop works on
-slices, which numba compiles to plain vector loads and masked stores (about 4x the indexed form's
-speed). ``backward_step_in``, the DP's form, also skips the landings outside the next step's
-window, which the DP's buffers hold as infinite.
+values and the same plans bit for bit (tests/bench/oracle/test_kernel.py). ``backward_step_in``,
+the DP's form, also takes the landings outside the next step's window as infinite and never reads
+them, so the DP's buffers need not hold them (``bench.oracle.passes``).
+
+How the step is laid out, so that it compiles to plain vector code on any x86-64 vector unit,
+AVX2 as well as AVX-512 (tests/bench/oracle/test_kernel.py builds it for AVX2 and looks for
+masked stores):
+
+- ``_landings`` gathers, once per step, each next speed's landing values into rows aligned with
+  the states' rows (``src[jn, k]``: the landing from row ``lo + k``), infinite where the step
+  skips the landing (outside the next window and not arrived, or across a red stop line). Every
+  choice then reads a plain row range, and an infinite landing never replaces the best.
+- ``_relax4`` relaxes four choices, in ascending order, in one pass over one speed's rows: the
+  best value and choice so far are loaded and stored once per pass and carried in registers
+  through the four. It is branch-free (``min`` and selects), and the choice is kept as an int32
+  beside the float32 value so that its select is the same 32-bit blend (narrowing the compare to
+  one byte per row took a third of an AVX2 loop's instructions).
+- Whole vectors: a pass starts and ends on a multiple of ``ALIGN`` rows (the landings beyond a
+  group's rows, and the scratch rows past the window, are infinite), so the loop runs no scalar
+  remainder, which took about a tenth of a step.
+- No masked stores: LLVM turns a store of a select of the value just loaded from the same address
+  into a masked store, native with AVX-512 but ``vmaskmovps`` with AVX2, microcoded on AMD Zen 1-3
+  (``llvm-mca -mcpu=znver3``: 12 cycles for 8 floats). The value stored here is the last of four
+  selects, which it leaves as a blend and a plain store.
+- Unsigned indices: numba tests a signed index for wrap-around, which keeps a loop from
+  vectorising. And the helpers are inlined by numba (``inline="always"``): each call between
+  compiled functions increments and decrements every array argument's reference count with an
+  atomic instruction, which took about a third of a step's time.
 
 The first call in a process compiles (about a second). numba's on-disk cache is not used: an
 installed package's folder may be read-only, and a cache written under an earlier module name
@@ -21,21 +45,77 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+U1 = np.uint64(1)  # unsigned loop bounds and indices
+GROUP = 4  # choices relaxed in one pass over the rows (``_relax4``)
+ALIGN = 16  # [rows] the passes start and end on multiples of this (at least the widest vector): no scalar remainder
 
-@njit(nogil=True)
-def _relax(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: int, lo: int, jn: int,
-           cost: np.float32, c: int) -> None:
-    """States of rows ``a..b`` (one speed): a landing at speed ``jn`` improves on the best so far
-    (``arg_j`` is indexed from row ``lo``; contiguous loads and stores, so the loop vectorises)."""
-    n = b - a + 1
-    if n <= 0:
+
+@njit(nogil=True, inline="always")
+def _copy_row(nxt: np.ndarray, src: np.ndarray, jn: int, q: int, a: int, b: int, lo: int) -> None:
+    """``src[q, a - lo:b - lo + 1] = nxt[jn, a + jn:b + jn + 1]`` (unsigned indices)."""
+    if a > b:
         return
-    src, dst, best = nxt_jn[a + jn:a + jn + n], cur_j[a:a + n], arg_j[a - lo:a - lo + n]  # slices: the loop
-    for i in range(n):  # below compiles to plain vector loads and masked stores
-        cand = src[i] + cost
-        if cand < dst[i]:
-            dst[i] = cand
-            best[i] = c
+    ujn, uq, ulo = np.uint64(jn), np.uint64(q), np.uint64(lo)
+    for i in range(np.uint64(a), np.uint64(b) + U1):
+        src[uq, i - ulo] = nxt[ujn, i + ujn]
+
+
+@njit(nogil=True, inline="always")
+def _landings(nxt: np.ndarray, src: np.ndarray, first: np.ndarray, last: np.ndarray, lo: int, hi: int, jn0: int,
+              nlo: int, nhi: int, njlo: int, njhi: int, i_end: int, red_low: np.ndarray, red_top: np.ndarray) -> None:
+    """``src[q, k]``: the value of landing at speed ``jn0 + q`` from row ``lo + k``, infinite where
+    ``backward_step_in`` skips it (outside the next window and not arrived, or across a red stop
+    line); ``first[q]..last[q]``: the rows ``k`` that may be finite (empty: ``first > last``).
+    The last row of ``src`` is infinite: the landing of no choice."""
+    n, m = hi - lo + 1, src.shape[0] - 1
+    for q in range(m + 1):
+        jn = jn0 + q
+        arrived = max(lo, i_end - jn)  # rows from which the landing has arrived
+        a, b = lo, lo - 1
+        if q < m and njlo <= jn <= njhi and nlo <= nhi:  # landings in the next window, below the arrived ones
+            a, b = max(lo, nlo - jn), min(hi, nhi - jn, arrived - 1)
+        f = a - lo if a <= b else n
+        t = b - lo if a <= b else -1
+        if q < m and arrived <= hi:
+            f, t = min(f, arrived - lo), hi - lo
+        first[q], last[q] = f, t
+        if f > t and q < m:
+            continue  # never read
+        src[q, :] = np.inf
+        if q == m:
+            continue
+        _copy_row(nxt, src, jn, q, a, b, lo)
+        _copy_row(nxt, src, jn, q, arrived, hi, lo)
+        for s in range(red_top.shape[0]):
+            for i in range(max(red_low[s, jn], lo), min(red_top[s], hi) + 1):
+                src[q, i - lo] = np.inf
+
+
+@njit(nogil=True, inline="always")
+def _relax4(src: np.ndarray, vals: np.ndarray, args: np.ndarray, rows: np.ndarray, costs: np.ndarray,
+            codes: np.ndarray, a: np.uint64, b: np.uint64) -> None:
+    """Rows ``a..b-1`` of one speed, four choices in order (landings ``src[rows[g]]`` at
+    ``costs[g]``): each that is strictly better than the best so far (``vals``) replaces it and
+    its code (``codes[g]``) the choice (``args``). Branch-free: ``min`` and selects."""
+    r0, r1, r2, r3 = rows[0], rows[1], rows[2], rows[3]
+    w0, w1, w2, w3 = costs[0], costs[1], costs[2], costs[3]
+    c0, c1, c2, c3 = codes[0], codes[1], codes[2], codes[3]
+    for k in range(a, b):  # unsigned: no wrap-around test on the indices, so the loop vectorises
+        o = vals[k]
+        x = args[k]
+        v = src[r0, k] + w0
+        x = c0 if v < o else x
+        o = min(o, v)  # select(v < o, v, o)
+        v = src[r1, k] + w1
+        x = c1 if v < o else x
+        o = min(o, v)
+        v = src[r2, k] + w2
+        x = c2 if v < o else x
+        o = min(o, v)
+        v = src[r3, k] + w3
+        x = c3 if v < o else x
+        vals[k] = min(o, v)
+        args[k] = x
 
 
 @njit(nogil=True)
@@ -56,48 +136,57 @@ def backward_step(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi
 
 
 @njit(nogil=True)
-def _relax_span(nxt_jn: np.ndarray, cur_j: np.ndarray, arg_j: np.ndarray, a: int, b: int, lo: int, jn: int,
-                cost: np.float32, c: int, red_low: np.ndarray, red_top: np.ndarray) -> None:
-    """``_relax`` over rows ``a..b`` less the rows whose step crosses a red stop line."""
-    start = a
-    for s in range(red_top.shape[0]):
-        b0, b1 = max(red_low[s, jn], a), min(red_top[s], b)
-        if b0 > b1:
-            continue
-        _relax(nxt_jn, cur_j, arg_j, start, b0 - 1, lo, jn, cost, c)
-        start = max(start, b1 + 1)
-    _relax(nxt_jn, cur_j, arg_j, start, b, lo, jn, cost, c)
-
-
-@njit(nogil=True)
 def backward_step_in(nxt: np.ndarray, cur: np.ndarray, arg: np.ndarray, lo: int, hi: int, jlo: int, jhi: int,
                      d_min: int, step_cost: np.ndarray, red_low: np.ndarray, red_top: np.ndarray,
                      nlo: int, nhi: int, njlo: int, njhi: int, i_end: int) -> None:
-    """``backward_step`` when ``nxt`` is finite only in the next step's window (rows
+    """``backward_step`` where ``nxt`` is finite only in the next step's window (rows
     ``nlo..nhi``, speeds ``njlo..njhi``; empty if ``nlo > nhi``) and on arrived rows (``>= i_end``,
-    every speed), as the DP's buffers are: landings elsewhere are infinite, never strictly better,
-    so they are skipped. The same values and choices as ``backward_step``, with less work where
-    the windows are narrow (the local passes' tubes)."""
+    every speed): the landings elsewhere are taken as infinite, never strictly better, and not
+    read, so ``nxt`` may hold anything there (the DP's and mpc's buffers keep earlier steps'
+    values). The same values and choices as ``backward_step`` on such an ``nxt``, with less work
+    where the windows are narrow (the local passes' tubes)."""
     nv = nxt.shape[0] - 1
     n_d = step_cost.shape[1]
+    if lo > hi or jlo > jhi:
+        return
+    n = hi - lo + 1
+    n_pad = -(-n // ALIGN) * ALIGN  # rows n.. of the scratch: infinite landings, never read back
+    jn0 = max(0, jlo + d_min)  # the next speeds reached
+    m = max(0, min(nv, jhi + d_min + n_d - 1) - jn0 + 1)  # their count
+    src = np.empty((m + 1, n_pad), dtype=nxt.dtype)
+    first, last = np.empty(m + 1, dtype=np.int64), np.empty(m + 1, dtype=np.int64)
+    _landings(nxt, src, first, last, lo, hi, jn0, nlo, nhi, njlo, njhi, i_end, red_low, red_top)
+    vals = np.empty(n_pad, dtype=cur.dtype)  # one speed's best values so far
+    args = np.empty(n_pad, dtype=np.int32)  # and choices
+    chosen = np.empty(n_d, dtype=np.int64)
+    ulo = np.uint64(lo)
+    rows = np.empty(GROUP, dtype=np.uint64)
+    costs = np.empty(GROUP, dtype=step_cost.dtype)
+    codes = np.empty(GROUP, dtype=np.int32)
     for j in range(jlo, jhi + 1):
-        cur[j, lo:hi + 1] = np.inf
-        arg[j - jlo, :] = 0
-        arg_j = arg[j - jlo, :]
+        vals[:] = np.inf
+        args[:] = 0
+        count = 0  # the choices with a landing that may be finite, ascending
         for c in range(n_d):
-            jn = j + d_min + c
-            if jn < 0:
-                continue
-            if jn > nv:
-                break
-            cost = step_cost[j, c]
-            arrived = max(lo, i_end - jn)  # rows from which the landing has arrived
-            if njlo <= jn <= njhi and nlo <= nhi:  # landings in the next window, below the arrived ones
-                a, b = max(lo, nlo - jn), min(hi, nhi - jn, arrived - 1)
-                if a <= b:
-                    _relax_span(nxt[jn], cur[j], arg_j, a, b, lo, jn, cost, c, red_low, red_top)
-            if arrived <= hi:
-                _relax_span(nxt[jn], cur[j], arg_j, arrived, hi, lo, jn, cost, c, red_low, red_top)
+            q = j + d_min + c - jn0
+            if 0 <= q < m and first[q] <= last[q]:
+                chosen[count] = c
+                count += 1
+        for g0 in range(0, count, GROUP):
+            a, b = n, -1
+            for g in range(GROUP):
+                rows[g], costs[g], codes[g] = m, 0.0, 0  # no choice: the infinite row
+                if g0 + g < count:
+                    c = chosen[g0 + g]
+                    q = j + d_min + c - jn0
+                    rows[g], costs[g], codes[g] = q, step_cost[j, c], c
+                    a, b = min(a, first[q]), max(b, last[q])
+            a, b = a // ALIGN * ALIGN, min(n_pad, -(-(b + 1) // ALIGN) * ALIGN)  # the landings outside a..b are infinite
+            _relax4(src, vals, args, rows, costs, codes, np.uint64(a), np.uint64(b))
+        uj, ujj = np.uint64(j), np.uint64(j - jlo)
+        for k in range(np.uint64(n)):
+            cur[uj, k + ulo] = vals[k]
+            arg[ujj, k] = args[k]
 
 
 @njit(nogil=True)

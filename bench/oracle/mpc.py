@@ -37,8 +37,9 @@ import numpy as np
 
 from ecodrive_bench.envs.config import ScenarioConfig
 
-from .dp import GRID_EPS, MS, Corridor, Grid, Plan, Window, _Lattice, _Run, refine, solve
+from .dp import MS, Corridor, Grid, Plan, _Run, refine, solve
 from .kernel import backward_step, backward_step_in, mask_caps, mask_gap
+from .lattice import GRID_EPS, Lattice, Window
 
 VERSION = 1  # [-] of the first plans and re-plans: bumped with any change that moves one (the shipped first plans' key)
 LOOKAHEAD = 10  # [steps] the leader-constrained part of a re-plan
@@ -69,7 +70,7 @@ class Table:
     cor: Corridor
     cfg: ScenarioConfig
     depart_time: float  # [s]
-    lat: _Lattice
+    lat: Lattice
     windows: list[Window]
     values: list[np.ndarray | None]  # [speed, row] float32 [Wh]
     choices: list[np.ndarray | None]  # [speed, row] acceleration choice index
@@ -171,7 +172,7 @@ def periodic(cor: Corridor, cfg: ScenarioConfig, grid: Grid | None = None) -> Ta
         return None
     started = time.perf_counter()
     period = next(iter(cycles)) // dt_ms
-    lat = _Lattice(cor, cfg, grid.n_v, krauss=True)
+    lat = Lattice(cor, cfg, grid.n_v, krauss=True)
     nv, i_end, dt = lat.nv, lat.i_end, cfg.step_length
     green = (cor.green(np.arange(period) * dt, dt) if cor.stop_lines else np.ones((period, 0), dtype=bool))
     cost = np.ascontiguousarray((lat.energy + cfg.reward.phi * dt).astype(np.float32))
@@ -243,7 +244,7 @@ def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
 
 def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
            lookahead: int = LOOKAHEAD, headway: float = HEADWAY, leader_accel: float = LEADER_ACCEL,
-           length: int | None = None, caps: Callable[[_Lattice, int], np.ndarray] | None = None) -> Replan | None:
+           length: int | None = None, caps: Callable[[Lattice, int], np.ndarray] | None = None) -> Replan | None:
     """The least-cost plan from the ego's state (``x`` [m], ``v`` [m/s]) at step ``k`` after the
     departure, keeping the gap to ``leader`` over the look-ahead; None when no plan arrives within
     the table's horizon. ``length``: only the plan's first ``length`` entries (at least 2; its
@@ -275,7 +276,7 @@ def replan(tab: Table, k: int, x: float, v: float, leader: Leader | None = None,
 
 def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: float | None,
            leader_speed: float, headway: float, leader_accel: float, length: int | None = None,
-           caps: Callable[[_Lattice, int], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, float, int] | None:
+           caps: Callable[[Lattice, int], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, float, int] | None:
     lat, nv = tab.lat, tab.lat.nv
     if i0 >= lat.i_end:
         return np.array([i0]), np.array([j0]), 0.0, 0

@@ -1,11 +1,16 @@
-"""ecodrive_bench.bench.perf's arithmetic on a pytest-benchmark JSON (no timing here)."""
+"""ecodrive_bench.bench.perf's arithmetic on a pytest-benchmark JSON (no timing here), and the CPU numba
+compiles for, which the JSON records."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
-from ecodrive_bench.bench.perf import STEPS_PER_EPISODE, main, ratios
+from ecodrive_bench.bench.perf import STEPS_PER_EPISODE, main, numba_target, ratios, target, tier
 
 
 def _bench(name: str, median: float, mean: float | None = None, **extra) -> dict:
@@ -148,20 +153,65 @@ def test_greedy_act_against_a_sumo_step(tmp_path, capsys):
 
 
 def test_dp_replan_and_cold_solve_lines(tmp_path, capsys):
-    data = {"benchmarks": [
-        _bench("test_dp_cold_solve", 0.8),
-        _bench("test_dp_cold_solve_numpy", 1.6),
+    data = {"benchmarks": [  # the cold solve's round is the solve and the reference solve after it
+        _bench("test_dp_cold_solve", 2.4, time_s=0.8, reference_s=1.6, over_reference=0.52),
         _bench("test_dp_replan", 0.2, replans=200, median_s=0.001, p99_s=0.05),
     ]}
     path = tmp_path / "perf.json"
     path.write_text(json.dumps(data))
     r = ratios(path)
     assert r["replan_median_ms"] == pytest.approx(1.0) and r["replan_p99_ms"] == pytest.approx(50.0)
-    assert r["replan_over_cold_solve"] == pytest.approx(0.001 / 0.8)
-    assert r["cold_solve_over_numpy"] == pytest.approx(0.5)
+    assert r["replan_over_cold_solve"] == pytest.approx(0.001 / 0.8)  # the solve's own time, not the round's
+    assert r["cold_solve_over_numpy"] == 0.52 and r["cold_solve_s"] == 0.8  # the rounds' ratio, as recorded
     assert main([str(path)]) == 1  # the re-plan meets its goal, the cold solve misses 10x
     out = capsys.readouterr().out
     assert "mpc re-plan" in out and "ok" in out.splitlines()[0] and "MISSED" in out.splitlines()[1]
+    assert "numba" not in out  # an older file: no CPU recorded
+
+
+AVX2 = {"NUMBA_CPU_NAME": "haswell", "NUMBA_CPU_FEATURES": "+avx2,+fma,-avx512f"}  # docs/performance.md's AVX2 target
+
+
+def test_the_dp_ratio_is_printed_beside_numbas_cpu(tmp_path, capsys):
+    data = {"benchmarks": [_bench("test_dp_cold_solve", 1.0, time_s=0.05, reference_s=0.95, over_reference=0.053)],
+            "machine_info": {"numba": {"cpu": "haswell", "host_cpu": "emeraldrapids", "features": AVX2["NUMBA_CPU_FEATURES"],
+                                       "vector": ["avx2", "fma"]}}}
+    path = tmp_path / "perf.json"
+    path.write_text(json.dumps(data))
+    assert main([str(path)]) == 0
+    dp, cpu = capsys.readouterr().out.splitlines()
+    assert dp.startswith("DP cold solve / reference solve") and "0.053x" in dp and "numba: haswell, AVX2) ok" in dp
+    assert cpu.split() == ["numba", "compiles", "for", "haswell", "(host:", "emeraldrapids):", "avx2", "fma"]
+    data["machine_info"]["numba"] = {"cpu": "znver3"}  # not what numba_target writes: left out
+    path.write_text(json.dumps(data))
+    assert main([str(path)]) == 0 and "numba" not in capsys.readouterr().out
+
+
+def test_numba_target_is_what_numba_compiles_for():
+    """This process's target is the host's unless numba's variables name another; the vector
+    extensions are the feature string's, and the widest names the tier."""
+    here = numba_target()
+    assert here["cpu"] == (os.environ.get("NUMBA_CPU_NAME") or here["host_cpu"])
+    assert set(here["vector"]) <= {f[1:] for f in here["features"].split(",")}
+    code = "import json; from ecodrive_bench.bench.perf import numba_target; print(json.dumps(numba_target()))"
+    out = subprocess.run([sys.executable, "-c", code], env={**os.environ, **AVX2}, capture_output=True, text=True,
+                         check=True, timeout=120).stdout
+    avx2 = json.loads(out)
+    assert avx2["cpu"] == "haswell" and avx2["features"] == AVX2["NUMBA_CPU_FEATURES"] and avx2["vector"] == ["avx2", "fma"]
+    assert tier(avx2["vector"]) == "AVX2" and tier(["avx2", "avx512f", "sse4.2"]) == "AVX-512" and tier([]) != "AVX2"
+
+
+@pytest.mark.slow
+def test_the_benchmark_json_records_numbas_cpu(tmp_path):
+    """``nox -s perf``'s JSON carries ``numba_target()`` in its machine info (tests/benchmarks/conftest.py),
+    here from one cheap benchmark of the suite."""
+    path = tmp_path / "perf.json"
+    root = Path(__file__).parents[2]
+    subprocess.run([sys.executable, "-m", "pytest", "tests/benchmarks/test_perf_train.py::test_matmul_rate", "-q",
+                    "-p", "no:cacheprovider", "--benchmark-only", f"--benchmark-json={path}"],
+                   cwd=root, env={**os.environ, **AVX2}, capture_output=True, text=True, check=True, timeout=600)
+    assert target(path) == {"cpu": "haswell", "host_cpu": numba_target()["host_cpu"],
+                            "features": AVX2["NUMBA_CPU_FEATURES"], "vector": ["avx2", "fma"]}
 
 
 def test_episode_floor_lines_give_the_ratio_with_a_free_act(tmp_path, capsys):

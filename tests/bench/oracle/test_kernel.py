@@ -3,10 +3,17 @@
 random steps and on whole solves; the pruned global pass against the unpruned one."""
 from __future__ import annotations
 
+import json
+import os
+import platform
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
-from ecodrive_bench.bench.oracle.dp import Corridor, Grid, solve
+from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.oracle.dp import Corridor, Grid, bound, solve
 from ecodrive_bench.bench.oracle.horizon import LeastCost
 from ecodrive_bench.bench.oracle.kernel import backward_step, backward_step_in, backward_step_numpy, mask_gap
 from ecodrive_bench.envs.config import ScenarioConfig
@@ -71,6 +78,58 @@ def test_whole_solves_are_identical(objective, limit):
     np.testing.assert_array_equal(a.x, b.x)
     refined = solve(cor, cfg, 57.0, objective, limit, grid=Grid().refine(), kernel="numba")
     assert refined.cost <= a.cost + 1e-9
+
+
+# the paper's corridor: departures of the fixed cases' range in both signal settings
+PAPER = [("uncoordinated", 206.4), ("uncoordinated", 260.0), ("coordinated", 231.0)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signals,depart", PAPER)
+def test_paper_plans_equal_the_reference_solver(signals, depart):
+    """The compiled, pruned solve against the reference solver (numpy kernel, unpruned), bit for bit."""
+    cfg = setting(signals, None)
+    a, b = bound(cfg, depart), bound(cfg, depart, kernel="numpy", prune=False)
+    for field in ("t", "x", "v", "a", "crossings"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert (a.cost, a.energy, a.grid["objective"]) == (b.cost, b.energy, b.grid["objective"])
+
+
+AVX2 = {"NUMBA_CPU_NAME": "haswell", "NUMBA_CPU_FEATURES": "+avx2,+fma,-avx512f"}  # docs/performance.md's AVX2 target
+SOLVE_ON_AVX2 = """
+import json, sys
+import numpy as np
+from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.oracle.dp import bound
+from ecodrive_bench.bench.oracle.kernel import backward_step_in
+plans = {}
+for signals, depart in json.loads(sys.argv[1]):
+    p = bound(setting(signals, None), depart)
+    plans[f"{signals} {depart}"] = [p.t, p.x, p.v, p.a, p.crossings, np.array([p.cost, p.energy])]
+np.savez(sys.argv[2], **{f"{k} {i}": v for k, arrays in plans.items() for i, v in enumerate(arrays)})
+asm = " ".join(backward_step_in.inspect_asm().values())
+print(json.dumps({"masked_stores": asm.count("maskmov"), "ymm": asm.count("ymm"), "zmm": asm.count("zmm"),
+                  "mask_registers": asm.count("{%k")}))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"), reason="an x86-64 target")
+def test_an_avx2_build_gives_the_same_plans_without_masked_stores(tmp_path):
+    """numba compiling for an AVX2 CPU (no AVX-512) in a fresh process: the kernel has no masked
+    stores (``vmaskmovps`` is microcoded on AMD Zen 1-3), still uses 256-bit vectors, and the plans
+    are this process's bit for bit."""
+    out = subprocess.run([sys.executable, "-c", SOLVE_ON_AVX2, json.dumps(PAPER), str(tmp_path / "plans.npz")],
+                         env={**os.environ, **AVX2}, capture_output=True, text=True, check=True, timeout=600)
+    asm = json.loads(out.stdout.splitlines()[-1])
+    assert asm["masked_stores"] == 0 and asm["ymm"] > 0 and asm["zmm"] == 0 and asm["mask_registers"] == 0, asm
+    avx2 = np.load(tmp_path / "plans.npz")
+    for signals, depart in PAPER:
+        p = bound(setting(signals, None), depart)
+        here = [p.t, p.x, p.v, p.a, p.crossings, np.array([p.cost, p.energy])]
+        for i, arr in enumerate(here):
+            got = avx2[f"{signals} {depart} {i}"]
+            assert got.dtype == arr.dtype and got.tobytes() == arr.tobytes(), (signals, depart, i)
 
 
 def test_an_unknown_kernel_is_refused():
