@@ -188,7 +188,7 @@ class PDQNAgent(OnDevice):
     def freeze(self) -> None:
         """Greedy acts use the weights as they are now, without checking them for edits at each act
         (``NumpyNets.freeze``), until the next update, ``load_state_dict`` or device move: for an
-        agent that only acts (``bench.harness.policies.policy_agent``)."""
+        agent that only acts (``bench.methods.policies.policy_agent``)."""
         self._numpy.freeze()
 
     def act(self, obs, info, explore: bool = False):

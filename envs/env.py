@@ -285,7 +285,7 @@ class EcoDriveEnv(gym.Env):
     def traffic(self) -> tuple[tuple[str, ...], np.ndarray]:
         """The other vehicles heading east now: their ids and one row each of front bumper x, y [m],
         length [m], speed [m/s] (``SumoSession.eastbound``); for a planner that records the case's
-        traffic (``bench.harness.clairvoyant``), never for an agent."""
+        traffic (``bench.methods.clairvoyant_agent``), never for an agent."""
         return self.session.eastbound(EGO_ID)
 
     def close(self) -> None:

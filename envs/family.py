@@ -11,8 +11,8 @@ perception, so one policy observes them all). Three splits, disjoint by construc
 
 The data files live beside this module (``families/train.json`` holds the first two splits,
 ``families/heldout.json`` the third, with its test cases); the generators that write them, and
-the checks that they equal their generator's output, are ``bench.harness.families`` and
-``bench.harness.generalisation`` (``ecodrive cases --family train|test --check|--write``). This
+the checks that they equal their generator's output, are ``bench.cases.train_family`` and
+``bench.cases.heldout`` (``ecodrive cases --family train|test --check|--write``). This
 module only reads them, so the env stays below the benchmark's layers.
 """
 from __future__ import annotations

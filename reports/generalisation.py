@@ -1,5 +1,5 @@
 """The report's generalisation section: how each method does on the held-out corridors of
-``ecodrive run --profile generalisation`` (``bench.harness.generalisation``), against SUMO's
+``ecodrive run --profile generalisation`` (``bench.cases.heldout``), against SUMO's
 driver on the same corridor and cases, beside its in-distribution change (a paper run).
 
 Reads only the generalisation run's ``generalisation.parquet`` and ``manifest.json``.

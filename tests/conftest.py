@@ -16,7 +16,7 @@ os.environ.setdefault("XDG_DATA_HOME", str(_XDG / "data"))
 
 @pytest.fixture(scope="session")
 def cases():
-    from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.cases.case import load
 
     return load()
 

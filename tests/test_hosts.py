@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ecodrive_bench.bench import hosts
-from ecodrive_bench.bench.harness import shipped_bounds
+from ecodrive_bench.bench.cases import shipped_bounds
 
 ENERGIES = """
 import numpy as np, sys

@@ -13,7 +13,7 @@ import numpy as np
 
 from ecodrive_bench.agents import BaselineAgent
 from ecodrive_bench.bench.args import Parser, int_in
-from ecodrive_bench.bench.harness.cases import load
+from ecodrive_bench.bench.cases.case import load
 from ecodrive_bench.bench.harness.episode import make_env, run_episode
 from ecodrive_bench.bench.harness.scenarios import parse_overrides
 from ecodrive_bench.bench.paper import TABLE4

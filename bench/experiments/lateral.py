@@ -34,10 +34,10 @@ import pandas as pd
 
 from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.args import Parser, fail, int_in, name
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.episode import make_env, run_episode
-from ecodrive_bench.bench.harness.scripted import brake, place_ahead, release
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
+from ecodrive_bench.bench.methods.scripted import brake, place_ahead, release
 from ecodrive_bench.envs.config import ScenarioConfig
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0, "max_episode_time": 300.0}
@@ -79,7 +79,7 @@ class Script:
 
     def start(self, env) -> None:
         """Each vehicle enters ``gap`` m ahead of the ego after the next step
-        (``bench.harness.scripted.place_ahead``)."""
+        (``bench.methods.scripted.place_ahead``)."""
         s, cfg = env.session, env.cfg
         lane, v = env.ego.kin.lane, env.ego.kin.speed
         for sv in self.vehicles:
@@ -277,7 +277,7 @@ def task_agent(task: LateralTask, env: Any) -> tuple[Agent, str]:
     """(agent, policy sha256) of a task: a rule-based agent, or a learning one holding its
     verified policy (a file that cannot be loaded is a ``CheckpointError`` naming it)."""
     from ecodrive_bench.agents.registry import POLICY_METHODS, make_agent
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_agent
+    from ecodrive_bench.bench.methods.policies import load_policy, policy_agent
 
     spaces = (env.observation_space, env.action_space)
     if task.method not in POLICY_METHODS:
@@ -305,9 +305,9 @@ def main(argv: list[str] | None = None) -> int:
 
     from ecodrive_bench.agents.registry import METHODS
     from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local, run_ray
-    from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError
     from ecodrive_bench.bench.io import sha256
     from ecodrive_bench.bench.logs.mcaplog import episode_summary
+    from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError
 
     ap = Parser(description="Run the lateral scenarios A and B (section 5.4) for each method, every shipped "
                             "training seed of a learning method.")
@@ -365,7 +365,7 @@ def lateral_seeds(methods: list[str], models: Path,
     learning methods skipped for want of one). A learning method without one is a
     ``CheckpointError`` when ``explicit`` (named in --methods), else skipped."""
     from ecodrive_bench.agents.registry import POLICY_METHODS
-    from ecodrive_bench.bench.harness.policies import CheckpointError, family_dir, shipped_seeds
+    from ecodrive_bench.bench.methods.policies import CheckpointError, family_dir, shipped_seeds
 
     seeds: dict[str, list[int | None]] = {
         m: list(shipped_seeds(m, "uncoordinated", models)) if m in POLICY_METHODS else [None] for m in methods}
@@ -380,7 +380,7 @@ def lateral_seeds(methods: list[str], models: Path,
 def lateral_tasks(seeds: dict[str, list[int | None]], models: Path, root: Path) -> list[LateralTask]:
     """Every (scenario, method, seed) task, each policy loaded into its agent once here first
     (``check_policy``): a file that cannot drive is a ``CheckpointError`` before anything runs."""
-    from ecodrive_bench.bench.harness.policies import check_policy, policy_dir
+    from ecodrive_bench.bench.methods.policies import check_policy, policy_dir
 
     dirs = {(m, sd): "" if sd is None else str(policy_dir(m, "uncoordinated", models, sd))
             for m, sds in seeds.items() for sd in sds}

@@ -82,7 +82,7 @@ def column(grid: np.ndarray, col: int, behind: float, cell: float) -> str:
 
 
 def policy_agent(method: str, seed: int, env) -> Any:
-    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.methods.policies import policy_dir
 
     task = L.LateralTask("A", method, str(policy_dir(method, "uncoordinated", seed=seed)), "", seed)
     return L.task_agent(task, env)[0]
@@ -208,7 +208,7 @@ def traffic_events(method: str, seed: int | None, episodes: int, rng_seed: int =
     import torch
 
     from ecodrive_bench.bench.harness.episode import make_env
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir
+    from ecodrive_bench.bench.methods.policies import load_policy, policy_dir
     from ecodrive_bench.envs.env import EGO_ID
 
     torch.set_num_threads(1)
@@ -271,7 +271,7 @@ def traffic_summary(df: pd.DataFrame) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     from ecodrive_bench.bench.args import Parser, int_in
-    from ecodrive_bench.bench.harness.policies import shipped_seeds
+    from ecodrive_bench.bench.methods.policies import shipped_seeds
 
     ap = Parser(description="Scenario A step by step: the observation, the mask, the critic, training traffic.")
     ap.add_argument("--out", type=Path, default=Path("/tmp/lateral-why"), help="output folder")

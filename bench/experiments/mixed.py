@@ -28,10 +28,10 @@ import pandas as pd
 
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
 from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local, run_ray
-from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, policy_dir
 from ecodrive_bench.bench.harness.provenance import git_sha
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import read_log, write_records
+from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, policy_dir
 from ecodrive_bench.bench.progress import bar
 from ecodrive_bench.envs.config import SIGNALS
 from ecodrive_bench.envs.sumo import SPEED_MODE_SAFE  # the safety layer every CV drives under, recorded per cell
@@ -76,8 +76,8 @@ def run_cell(cell: Cell) -> dict[str, Any]:
     import torch
 
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.policies import acting_config, load_policy
     from ecodrive_bench.bench.logs import schema
+    from ecodrive_bench.bench.methods.policies import acting_config, load_policy
     from ecodrive_bench.envs.fleet import Fleet
 
     torch.set_num_threads(1)

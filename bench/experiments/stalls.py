@@ -21,8 +21,8 @@ import pandas as pd
 
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
 from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, MASTER_SEED, cell_scenario
-from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, acting_config, load_policy, policy_dir
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
+from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, acting_config, load_policy, policy_dir
 from ecodrive_bench.envs.action import LATERAL
 from ecodrive_bench.envs.config import SIGNALS
 

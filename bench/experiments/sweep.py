@@ -49,9 +49,9 @@ import pandas as pd
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in, name, prog_name
 from ecodrive_bench.bench.experiments import store
 from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local
-from ecodrive_bench.bench.harness.policies import CheckpointError
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import episode_summary
+from ecodrive_bench.bench.methods.policies import CheckpointError
 from ecodrive_bench.bench.progress import bar
 from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, recipe
 from ecodrive_bench.envs.config import REWARDS, SIGNALS, ConfigError, RewardConfig, ScenarioConfig, accepted_range
@@ -89,9 +89,9 @@ def run_job(job: Job, work: Path | None = None) -> dict[str, Any]:
     import torch
 
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.cases.case import load
     from ecodrive_bench.bench.harness.episode import make_env, run_episode
-    from ecodrive_bench.bench.harness.policies import acting_config, load_policy, policy_dir
+    from ecodrive_bench.bench.methods.policies import acting_config, load_policy, policy_dir
     from ecodrive_bench.bench.training.train import train
 
     torch.set_num_threads(1)
@@ -161,7 +161,7 @@ def shipped_training(job: Job, scenario: dict[str, Any], models: Path | None = N
     episodes, when the job trains by the recipe on that scenario (``scenario``: the job's) with the
     same validation cases (the reward study's r, phi = 1 cell; the heatmap's (40, 30)). Such a
     job takes the shipped policy and its training metrics instead of training it again."""
-    from ecodrive_bench.bench.harness.policies import MODELS, policy_dir
+    from ecodrive_bench.bench.methods.policies import MODELS, policy_dir
     from ecodrive_bench.bench.training.train_all import is_reference_seed
     from ecodrive_bench.envs.config import diff
 

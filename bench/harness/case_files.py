@@ -2,13 +2,13 @@
 
     ecodrive cases --write|--check [--family train|test | --bounds] [--workers N]
 
-The fixed test cases (``bench/harness/cases.json``, ``bench.harness.cases``); with
+The fixed test cases (``bench/cases/cases.json``, ``bench.cases.case``); with
 ``--family test`` (or ``--generalisation``), the family of held-out corridors
-(``envs/families/heldout.json``, ``bench.harness.generalisation``); with ``--family train``, the
+(``envs/families/heldout.json``, ``bench.cases.heldout``); with ``--family train``, the
 training family and its validation split (``envs/families/train.json``,
-``bench.harness.families``), which must share no corridor with the held-out one; with ``--bounds``, the DP's bounds, the oracle's plans and
-mpc's first plans for the fixed cases (``bench/harness/shipped_bounds.parquet``,
-``bench.harness.shipped_bounds``).
+``bench.cases.train_family``), which must share no corridor with the held-out one; with ``--bounds``, the DP's bounds, the oracle's plans and
+mpc's first plans for the fixed cases (``bench/cases/shipped_bounds.parquet``,
+``bench.cases.shipped_bounds``).
 ``--check`` alone checks cases.json and the shipped bounds: the DP re-solves a fixed sample of
 2 cases per setting (under a minute) and each stored value or plan that differs is one line.
 ``--write --bounds`` runs the baseline over every fixed case, then the DP (about 20 minutes
@@ -25,63 +25,63 @@ import tempfile
 from pathlib import Path
 
 from ecodrive_bench.bench.args import InputError, Parser, fail, int_in
-from ecodrive_bench.bench.harness import cases, families, generalisation
+from ecodrive_bench.bench.cases import case, heldout, train_family
 from ecodrive_bench.bench.hosts import DP_RTOL
 
 
 def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
     """The command; ``bounds_file``: the shipped bounds' file (default
-    ``bench.harness.shipped_bounds.FILE``)."""
+    ``bench.cases.shipped_bounds.FILE``)."""
     ap = Parser(description=__doc__)
     g = ap.add_mutually_exclusive_group(required=True)
-    g.add_argument("--write", action="store_true", help="regenerate bench/harness/cases.json")
+    g.add_argument("--write", action="store_true", help="regenerate bench/cases/cases.json")
     g.add_argument("--check", action="store_true",
-                   help="check bench/harness/cases.json against the generator and the shipped bounds against the DP")
+                   help="check bench/cases/cases.json against the generator and the shipped bounds against the DP")
     which = ap.add_mutually_exclusive_group()
     which.add_argument("--generalisation", action="store_true",
                        help="write or check the held-out family instead (envs/families/heldout.json, "
-                            "bench.harness.generalisation); the same as --family test")
+                            "bench.cases.heldout); the same as --family test")
     which.add_argument("--family", choices=("train", "test"), default=None,
                        help="write or check a corridor family instead: train (the training and validation splits, "
-                            "envs/families/train.json, bench.harness.families) or test (the held-out family)")
+                            "envs/families/train.json, bench.cases.train_family) or test (the held-out family)")
     which.add_argument("--clairvoyant", action="store_true",
                        help="write or check the clairvoyant drives of the fixed cases only "
-                            "(bench/harness/clairvoyant_drives.parquet, bench.harness.clairvoyant)")
+                            "(bench/cases/clairvoyant_drives.parquet, bench.methods.clairvoyant_agent)")
     which.add_argument("--bounds", action="store_true",
-                       help="write or check the shipped bounds only (bench/harness/shipped_bounds.parquet, "
-                            "bench.harness.shipped_bounds)")
+                       help="write or check the shipped bounds only (bench/cases/shipped_bounds.parquet, "
+                            "bench.cases.shipped_bounds)")
     ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, metavar="N",
                     help="parallel episodes and DP solves of --write --bounds (>= 1)")
     args = ap.parse_args(argv)
     if args.generalisation or args.family == "test":
-        return generalisation.main(args.write)
+        return heldout.main(args.write)
     if args.family == "train":
-        return families.main(args.write)
+        return train_family.main(args.write)
     if args.bounds:
         return bounds(ap.prog, args.write, args.workers, bounds_file)
     if args.clairvoyant:
         return clairvoyant(ap.prog, args.write, args.workers)
-    data = cases.generate()
+    data = case.generate()
     text = json.dumps(data, indent=1) + "\n"
     if args.write:
-        cases.CASES_FILE.write_text(text)
-        print(f"wrote {len(data['cases'])} cases to {cases.CASES_FILE}")
+        case.CASES_FILE.write_text(text)
+        print(f"wrote {len(data['cases'])} cases to {case.CASES_FILE}")
         return 0
-    ok = cases.CASES_FILE.exists() and cases.CASES_FILE.read_text() == text
+    ok = case.CASES_FILE.exists() and case.CASES_FILE.read_text() == text
     print("cases.json matches the generator" if ok else "cases.json differs from the generator")
     return bounds(ap.prog, False, args.workers, bounds_file) or clairvoyant(ap.prog, False, 1) or (0 if ok else 1)
 
 
 def clairvoyant(prog: str, write: bool, workers: int) -> int:
     """Write or check the shipped clairvoyant drives: 0, or 2 after one line per problem."""
-    from ecodrive_bench.bench.harness import clairvoyant as cv
-    from ecodrive_bench.bench.harness import clairvoyant_drives as drives
+    from ecodrive_bench.bench.cases import clairvoyant_drives as drives
+    from ecodrive_bench.bench.methods import clairvoyant_agent
 
     path = drives.FILE
     if not write and not path.exists():
         print(f"{path.name}: not shipped; every clairvoyant case is planned in the run")
         return 0
-    lines = write_clairvoyant(path, workers) if write else cv.check(path)
+    lines = write_clairvoyant(path, workers) if write else clairvoyant_agent.check(path)
     for line in lines:
         fail(prog, line)
     if not lines:
@@ -94,13 +94,13 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
     """Plan every fixed case of both settings and ship the chosen drives (about 10 s a case)."""
     import pandas as pd
 
-    from ecodrive_bench.bench.harness import clairvoyant_drives as drives
-    from ecodrive_bench.bench.harness.clairvoyant import solve
+    from ecodrive_bench.bench.cases import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.executors import run_local
+    from ecodrive_bench.bench.methods.clairvoyant_agent import solve
     from ecodrive_bench.bench.progress import bar
     from ecodrive_bench.envs.config import SIGNALS
 
-    tasks = [(s, c) for s in SIGNALS for c in cases.load()]
+    tasks = [(s, c) for s in SIGNALS for c in case.load()]
     rows = list(bar(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
                     enabled=progress))
     drives.save(pd.DataFrame(rows), path)
@@ -109,7 +109,7 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
 
 def bounds(prog: str, write: bool, workers: int, path: Path | None) -> int:
     """Write or check the shipped bounds: 0, or 2 after one line per problem."""
-    from ecodrive_bench.bench.harness import shipped_bounds
+    from ecodrive_bench.bench.cases import shipped_bounds
     from ecodrive_bench.bench.harness.errors import UsageError
 
     path = path or shipped_bounds.FILE
@@ -132,11 +132,11 @@ def write_bounds(path: Path, workers: int, progress: bool = True) -> list[str]:
     lines ([]: written); after an error nothing is written."""
     import pandas as pd
 
-    from ecodrive_bench.bench.harness.bounds import solve_entry, tasks_for
+    from ecodrive_bench.bench.cases.bounds import solve_entry, tasks_for
+    from ecodrive_bench.bench.cases.shipped_bounds import REBUILD, save
     from ecodrive_bench.bench.harness.executors import run_local
     from ecodrive_bench.bench.harness.options import RunOptions
     from ecodrive_bench.bench.harness.run import run
-    from ecodrive_bench.bench.harness.shipped_bounds import REBUILD, save
     from ecodrive_bench.bench.progress import bar
     from ecodrive_bench.envs.config import SIGNALS
 

@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from ecodrive_bench.agents.base import Agent
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
 from ecodrive_bench.bench.harness.scenarios import deep_merge
 from ecodrive_bench.bench.harness.steplogs import VerifiedLog

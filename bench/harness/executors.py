@@ -25,11 +25,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.errors import install_hint
-from ecodrive_bench.bench.harness.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 from ecodrive_bench.bench.io import atomic_bytes
+from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 
 EXECUTORS = ("local", "ray")
 # an episode's default wall-clock limit on the local pool (``episode_limit``): a fixed allowance for
@@ -109,7 +109,7 @@ class Task:
     path: str  # MCAP to write
     policy_dir: str  # models/<method>-<signals>/s<seed> for learning methods, "" otherwise
     train_seed: int = -1  # the policy's training seed; -1 for rule-based methods
-    factory: str = ""  # a user agent's package.module:factory (bench.harness.external), "" otherwise
+    factory: str = ""  # a user agent's package.module:factory (bench.methods.external), "" otherwise
     scenario: str = ""  # JSON of the env's scenario overrides (bench.harness.scenarios), "" none
     transfer: bool = False  # the policy may drive a scenario other than its training one
     meta: tuple[tuple[str, str], ...] = ()  # extra step-log metadata (the scenarios)
@@ -146,14 +146,14 @@ def run_task(task: Task) -> dict[str, Any]:
     env_key = (task.method, task.signals, task.scenario)
     key = (task.method, task.signals, task.policy_dir, task.scenario)
     if task.factory and key not in _AGENTS:
-        from ecodrive_bench.bench.harness.external import code_sha256, make
+        from ecodrive_bench.bench.methods.external import code_sha256, make
 
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
         _AGENTS[key] = (agent, code_sha256(task.factory, agent))  # its code's, an --sb3 zip's
     if task.method in PLANNERS and key not in _AGENTS:
-        from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
-        from ecodrive_bench.bench.harness.mpc import MPCAgent
-        from ecodrive_bench.bench.harness.oracle import OracleAgent
+        from ecodrive_bench.bench.methods.clairvoyant_agent import ClairvoyantAgent
+        from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
+        from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 
         planner = {ORACLE: OracleAgent, MPC: MPCAgent, CLAIRVOYANT: ClairvoyantAgent}[task.method]
         _ENVS[env_key] = env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
@@ -177,10 +177,10 @@ def run_task(task: Task) -> dict[str, Any]:
 
 def task_agent(task: Task, env: Any) -> tuple[Any, str]:
     """(agent, policy sha256) of a built-in method on ``env``: a rule-based one, or a learning
-    one holding its verified policy (``bench.harness.policies``; a policy that cannot be loaded
+    one holding its verified policy (``bench.methods.policies``; a policy that cannot be loaded
     is a ``CheckpointError`` naming the file)."""
     from ecodrive_bench.agents.registry import POLICY_METHODS, make_agent
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_agent, policy_spaces
+    from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_spaces
 
     if task.method not in POLICY_METHODS:
         return make_agent(task.method, env.observation_space, env.action_space), ""
@@ -256,7 +256,7 @@ def run_ray(tasks: Iterable[Any], address: str | None, workers: int, fn: Callabl
         import ray
     except ImportError:
         raise SystemExit(f"error: --executor ray needs Ray: {install_hint('distributed')}") from None
-    from ecodrive_bench.bench.harness.external import agent_folder
+    from ecodrive_bench.bench.methods.external import agent_folder
 
     root = str(Path(__file__).resolve().parents[2])
     if not ray.is_initialized():

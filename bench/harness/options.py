@@ -9,15 +9,15 @@ from typing import Any
 
 from ecodrive_bench.agents.registry import METHODS
 from ecodrive_bench.bench.args import MAX_NAME, Parser, float_in, int_in, name, name_shown
+from ecodrive_bench.bench.cases.case import Case
+from ecodrive_bench.bench.cases.heldout import CASES_PER_VARIANT, FamilyError, Variant
 from ecodrive_bench.bench.harness import scenarios
-from ecodrive_bench.bench.harness.cases import Case
 from ecodrive_bench.bench.harness.errors import AgentError
 from ecodrive_bench.bench.harness.executors import EPISODE_FIXED_S, EPISODE_STEP_S, add_options, check_options
-from ecodrive_bench.bench.harness.external import GROUP, registered
-from ecodrive_bench.bench.harness.generalisation import CASES_PER_VARIANT, FamilyError, Variant
-from ecodrive_bench.bench.harness.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
-from ecodrive_bench.bench.harness.policies import MODELS
-from ecodrive_bench.bench.harness.sb3 import ALGOS as SB3_ALGOS
+from ecodrive_bench.bench.methods.external import GROUP, registered
+from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
+from ecodrive_bench.bench.methods.policies import MODELS
+from ecodrive_bench.bench.methods.sb3 import ALGOS as SB3_ALGOS
 from ecodrive_bench.envs.config import SIGNALS
 
 RUN_DOC = """The benchmark harness: every method over the fixed test cases, one MCAP per episode.
@@ -33,7 +33,7 @@ Writes ``<logs>/<run-id>/<signals>/<method>/case-XXX.mcap``, ``results.parquet``
 rest, so a killed run loses nothing that finished. Evaluation is greedy. ``--scenario`` and
 ``--set`` evaluate on another corridor (one per run folder and setting); a policy drives a
 scenario other than its training one only with ``--transfer`` (``bench.harness.scenarios``).
-``--profile generalisation`` runs over the held-out corridors of ``bench.harness.generalisation``
+``--profile generalisation`` runs over the held-out corridors of ``bench.cases.heldout``
 instead, one sub-folder per variant (``bench.harness.generalisation_run``).
 A worker that dies is replaced and its episode rerun (at most twice more); an episode that still
 fails, or whose agent raises, is one line on stderr (its traceback in ``<run>/errors/``) and no
@@ -49,7 +49,7 @@ PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, 
     "smoke": 3,
     "paper": 100,
     "full": 100,
-    "generalisation": CASES_PER_VARIANT,  # per variant and setting, over bench.harness.generalisation's family
+    "generalisation": CASES_PER_VARIANT,  # per variant and setting, over bench.cases.heldout's family
 }
 
 
@@ -171,10 +171,10 @@ def parse(argv: list[str]) -> RunOptions:
         if opts["scenario"] or opts["set_scenario"]:
             ap.error("--profile generalisation evaluates on its family's corridors; --scenario and --set "
                      "are for the other profiles")
-        from ecodrive_bench.bench.harness import generalisation
+        from ecodrive_bench.bench.cases import heldout
 
         try:
-            opts["family"] = generalisation.select(generalisation.load(), opts["variants"])
+            opts["family"] = heldout.select(heldout.load(), opts["variants"])
         except FamilyError as e:
             ap.error(str(e))
         opts["transfer"] = True
@@ -190,13 +190,13 @@ def parse(argv: list[str]) -> RunOptions:
 
 
 def sb3_spec(ap: Parser, opts: dict[str, Any]) -> str:
-    """The factory spec of ``--sb3 --sb3-algo`` (``bench.harness.sb3``), the zip read and checked
+    """The factory spec of ``--sb3 --sb3-algo`` (``bench.methods.sb3``), the zip read and checked
     now: bad input is one line before anything runs."""
     if opts["agent"]:
         ap.error("--sb3 and --agent each add one agent; give one of them")
     if not (opts["sb3"] and opts["sb3_algo"]):
         ap.error(f"--sb3 MODEL.zip and --sb3-algo go together; --sb3-algo is one of {', '.join(SB3_ALGOS)}")
-    from ecodrive_bench.bench.harness import sb3
+    from ecodrive_bench.bench.methods import sb3
 
     try:
         saved = sb3.inspect(opts["sb3"], opts["sb3_algo"])

@@ -24,14 +24,12 @@ import pandas as pd
 
 from ecodrive_bench.agents.registry import METHODS, POLICY_METHODS
 from ecodrive_bench.bench import runlock
-from ecodrive_bench.bench.harness import external, failures, scenarios
-from ecodrive_bench.bench.harness.bounds import attach
-from ecodrive_bench.bench.harness.cases import Case, load
+from ecodrive_bench.bench.cases.bounds import attach
+from ecodrive_bench.bench.cases.case import Case, load
+from ecodrive_bench.bench.harness import failures, scenarios
 from ecodrive_bench.bench.harness.errors import AgentError, UsageError
 from ecodrive_bench.bench.harness.executors import Task, episode_limit, run_local, run_ray
 from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
-from ecodrive_bench.bench.harness.planners import PLANNERS
-from ecodrive_bench.bench.harness.policies import check_policy, family_dir, policy_dir, shipped_seeds
 from ecodrive_bench.bench.harness.pool import PoolBroken
 from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions, process_age
 from ecodrive_bench.bench.harness.run_folder import KEEP, SCENARIO_COLUMNS, case_set_gaps, one_case_set, one_scenario
@@ -39,6 +37,9 @@ from ecodrive_bench.bench.harness.scenarios import Evaluation
 from ecodrive_bench.bench.harness.steplogs import finished, written_by
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import resolve_log
+from ecodrive_bench.bench.methods import external
+from ecodrive_bench.bench.methods.planners import PLANNERS
+from ecodrive_bench.bench.methods.policies import check_policy, family_dir, policy_dir, shipped_seeds
 from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.envs.config import ScenarioConfig
 
@@ -104,7 +105,7 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
 def check_policies(pdirs: dict[tuple[str, str, int], str], checked: set[str] | None = None) -> None:
     """Load every policy of the command into its agent once, here in the parent: a file that
     cannot drive is a ``CheckpointError`` before the run folder is made or any episode starts
-    (``bench.harness.policies.check_policy``). Folders in ``checked`` are skipped and added to it."""
+    (``bench.methods.policies.check_policy``). Folders in ``checked`` are skipped and added to it."""
     checked = set() if checked is None else checked
     for (method, _, _), pdir in pdirs.items():
         if pdir and pdir not in checked:

@@ -5,7 +5,7 @@ VALUE is read as JSON where it parses, ``spacings=[300,600,440,500]``, else as t
 
 A learning method's policy drives only the scenario it was trained on (the signals, the GLOSA
 device and the reward aside) unless ``--transfer`` is given: then any scenario whose observation
-it can take, a road with fewer lanes included (``bench.harness.policies.transfer_overrides``).
+it can take, a road with fewer lanes included (``bench.methods.policies.transfer_overrides``).
 Each episode's step log and result row name both scenarios by digest (``ScenarioConfig.digest``):
 ``eval_scenario_hash``, the command's scenario of the setting (before a method's own overrides,
 e.g. GLOSA's device; the log's ``config_json`` has the env's exact config), and
@@ -159,7 +159,7 @@ def evaluation(method: str, signals: str, policy: str, overrides: dict[str, Any]
     """The evaluation of ``method`` (its policy folder ``policy``, "" for none) on the command's
     scenario; a ``CheckpointError`` when the policy may not or cannot drive it."""
     from ecodrive_bench.agents.registry import ENV_OVERRIDES
-    from ecodrive_bench.bench.harness.policies import check_scenario, read_manifest, trained_scenario
+    from ecodrive_bench.bench.methods.policies import check_scenario, read_manifest, trained_scenario
 
     extras, train = {}, None
     if policy:

@@ -15,7 +15,7 @@ the vehicle's rear,
     gap >= tau v + (v^2 - v_l^2) / (2 b),
 
 which is exactly ``v <= v_safe`` of SUMO's Krauss model (tau = ``HEADWAY``, b = -a_min), so a plan
-that keeps it is not clipped by the safety layer. The harness (``bench.harness.clairvoyant``)
+that keeps it is not clipped by the safety layer. The harness (``bench.methods.clairvoyant_agent``)
 records, drives, and records again.
 """
 from __future__ import annotations

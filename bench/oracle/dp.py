@@ -83,7 +83,7 @@ LATE_STEPS = 5  # [steps] a local pass may arrive this much later than the plan 
 STALL = 1e-4  # [-] local passes stop when the cost falls by less than this fraction
 MAX_HORIZON = 86400.0  # [s] the "cost" horizon stops growing here
 VERSION = 1  # [-] of the plans and values ``bound`` returns: bump it with any change that alters one, so
-# the bounds shipped with the fixed cases (bench.harness.shipped_bounds) miss and are solved again
+# the bounds shipped with the fixed cases (bench.cases.shipped_bounds) miss and are solved again
 
 COARSEST = 7  # [-] speed cells: ``_Run._upper`` halves the lattice down to this, no further
 

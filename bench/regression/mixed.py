@@ -17,7 +17,7 @@ import pandas as pd
 
 from ecodrive_bench.bench.experiments.mixed import CI_DEMAND, CI_DURATION, CI_MPRS, Cell, _done, run_cell
 from ecodrive_bench.bench.harness.executors import run_local
-from ecodrive_bench.bench.harness.policies import MODELS, policy_dir
+from ecodrive_bench.bench.methods.policies import MODELS, policy_dir
 from ecodrive_bench.bench.paper import FLEET_SAVING as PAPER_FLEET_SAVING
 from ecodrive_bench.bench.paper import HDV_TOL, SPEED_LOSS_TOL
 from ecodrive_bench.bench.progress import bar as progress_bar

@@ -2,7 +2,7 @@
 
 With probability RATE per training episode, a scripted vehicle enters the ego's lane ahead of it
 and brakes, as HDV1 does in the lateral scenario A (section 5.4; ``bench.experiments.lateral``),
-with the same placement and braking rules (``bench.harness.scripted``). In the paper's training
+with the same placement and braking rules (``bench.methods.scripted``). In the paper's training
 traffic a leader that brakes hard beside a lane the mask allows, not at a red light, is rare
 (docs/experiments.md, "Scenario A, step by step"); this puts such events into the training
 distribution. The MDP is the paper's: observation, action, reward and safety layer are untouched;
@@ -41,8 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.harness.policies import CheckpointError
-from ecodrive_bench.bench.harness.scripted import brake, place_ahead, release
+from ecodrive_bench.bench.methods.policies import CheckpointError
+from ecodrive_bench.bench.methods.scripted import brake, place_ahead, release
 from ecodrive_bench.envs.observation import HEADING_EAST, occupancy_grid
 from ecodrive_bench.envs.vehicle import LATERAL_START
 

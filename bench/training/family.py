@@ -2,7 +2,7 @@
 
 A generalist is trained with ``EcoDrive-v0(family="train")``: each episode's corridor is drawn
 from the env's generator after the episode's seed, so a resumed run draws the same corridors. Its
-checkpoints are scored on the validation split (``bench.harness.families``: 8 corridors x 3 cases,
+checkpoints are scored on the validation split (``bench.cases.train_family``: 8 corridors x 3 cases,
 never a test case and never a training corridor; all 24 unless ``--validation-cases`` asks fewer),
 by the same criteria as a specialist's, and the
 chosen one ships under the method's own name, ``<method>-family`` (``models/prl-family-<signals>/``).
@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.harness import families
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases import train_family
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.episode import make_env, run_episode
 from ecodrive_bench.bench.io import sha256
 from ecodrive_bench.envs.family import OBS_LANES, TRAIN_FILE, Corridor
@@ -30,15 +30,15 @@ def method_name(method: str, family: str | None) -> str:
 
 def identity(family: str) -> dict[str, Any]:
     """What a checkpoint and a manifest record of the family: a changed family file is another run."""
-    return {"split": family, "file": TRAIN_FILE.name, "version": families.VERSION,
-            "master_seed": families.MASTER_SEED, "sha256": sha256(TRAIN_FILE)}
+    return {"split": family, "file": TRAIN_FILE.name, "version": train_family.VERSION,
+            "master_seed": train_family.MASTER_SEED, "sha256": sha256(TRAIN_FILE)}
 
 
 def cases(n: int | None = None) -> list[tuple[Corridor, list[Case]]]:
     """The first ``n`` validation cases (all for None), taken round-robin over the corridors (case 0
     of every corridor, then case 1, ...), grouped by corridor."""
-    todo = families.validation_set()
-    order = [(i, j) for j in range(families.VALIDATION_CASES) for i in range(len(todo))][:n]
+    todo = train_family.validation_set()
+    order = [(i, j) for j in range(train_family.VALIDATION_CASES) for i in range(len(todo))][:n]
     return [(c, [cs[j] for i2, j in order if i2 == i]) for i, (c, cs) in enumerate(todo) if any(i2 == i for i2, _ in order)]
 
 

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.args import Parser, fail, int_in
-from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
+from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, load_policy, policy_dir
 from ecodrive_bench.envs.action import LATERAL
 
 HEADS = {-1: "left", 0: "stay", 1: "right"}

@@ -42,13 +42,13 @@ import torch
 from ecodrive_bench.agents.device import parse as parse_device
 from ecodrive_bench.agents.registry import LEARNING, make_agent
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
-from ecodrive_bench.bench.harness import families
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases import train_family
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.episode import deep_merge, make_env, run_episode
-from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
 from ecodrive_bench.bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import write_train_log
+from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.bench.training import family as generalist
 from ecodrive_bench.bench.training.braking import NO_SCRIPT, RATE_RANGE, BrakingLeaders
@@ -57,7 +57,7 @@ from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, is_recipe, r
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, added_values, backfill, flat
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
-VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/harness/cases.json's test cases)
+VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/cases/cases.json's test cases)
 # an empty $ECODRIVE_RUNS counts as unset, as $ECODRIVE_CACHE does (it would mean the current folder)
 RUNS = Path(os.environ.get("ECODRIVE_RUNS") or Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train")
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
@@ -324,7 +324,7 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
         name = generalist.method_name(method, family)
         vcases = ({"corridors": len(generalist.cases(validation_cases)),
                    "cases": sum(len(c) for _, c in generalist.cases(validation_cases)),
-                   "master_seed": families.MASTER_SEED} if family else
+                   "master_seed": train_family.MASTER_SEED} if family else
                   {"cases": validation_cases or VALIDATION_CASES, "master_seed": VALIDATION_SEED})
         manifest = {
             "method": name, **({"base_method": method, "family": identity["family"]} if family else {}),
@@ -396,7 +396,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
     ap.add_argument("--validation-cases", type=int_in(0, 100), default=None,
                     help=f"validation cases scored at every checkpoint (0-100; 0 exports the final policy; default "
-                         f"{VALIDATION_CASES}, with --family all {families.N_VALIDATION * families.VALIDATION_CASES} "
+                         f"{VALIDATION_CASES}, with --family all {train_family.N_VALIDATION * train_family.VALIDATION_CASES} "
                          f"of the validation corridors)")
     ap.add_argument("--select", default="objective", choices=list(SELECTION),
                     help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")

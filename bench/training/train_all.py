@@ -33,7 +33,7 @@ from ecodrive_bench.agents.device import parse as parse_device
 from ecodrive_bench.agents.registry import LEARNING
 from ecodrive_bench.bench.args import Parser, fail, int_in
 from ecodrive_bench.bench.harness.executors import Files, add_options, check_options, collect, land, run_ray
-from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, policy_dir, read_manifest
+from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, policy_dir, read_manifest
 from ecodrive_bench.bench.training.recipes import is_recipe, recipe
 from ecodrive_bench.bench.training.train import RUNS
 from ecodrive_bench.envs.config import SIGNALS

@@ -12,8 +12,8 @@ import ecodrive_bench.envs  # noqa: F401
 from ecodrive_bench.agents.nets import linear_epsilon
 from ecodrive_bench.agents.registry import LEARNING, make_agent
 from ecodrive_bench.bench.harness.episode import make_env
-from ecodrive_bench.bench.harness.policies import CheckpointError, load_policy, policy_dir
 from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.methods.policies import CheckpointError, load_policy, policy_dir
 from ecodrive_bench.bench.training.train import snapshot, train, validate
 from ecodrive_bench.envs.config import ScenarioConfig
 from ecodrive_bench.envs.validation import ConfigError
@@ -402,7 +402,7 @@ def test_train_all_paper_schedule_needs_its_own_models_folder(tmp_path, capsys):
 
 
 def test_validation_cases_are_not_test_cases():
-    from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.cases.case import load
     from ecodrive_bench.bench.training.train import validation_cases
     from ecodrive_bench.envs.config import ScenarioConfig
 

@@ -208,7 +208,7 @@ def test_shipped_policies_act_as_the_torch_forward_on_real_observations(method, 
     the numpy path; at every step the torch forward picks the same discrete choice and an
     acceleration within ``ACCEL_ATOL``."""
     from ecodrive_bench.bench.harness.episode import make_env
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_agent, policy_dir, policy_spaces
+    from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_dir, policy_spaces
 
     folder = policy_dir(method, "uncoordinated")
     if not (folder / "manifest.json").is_file():

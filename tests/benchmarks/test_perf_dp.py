@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from ecodrive_bench.bench.harness.mpc import MPCAgent
+from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
 from ecodrive_bench.bench.oracle import mpc
 from ecodrive_bench.bench.oracle.dp import bound
 

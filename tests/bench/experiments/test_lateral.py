@@ -88,7 +88,7 @@ def _shipped_prl(name: str, script: type | None = None) -> list[dict]:
     ``lateral.Script``, e.g. a control of ``lateral_why``)."""
     from ecodrive_bench.agents.registry import make_agent
     from ecodrive_bench.bench.experiments import lateral
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir, shipped_seeds
+    from ecodrive_bench.bench.methods.policies import load_policy, policy_dir, shipped_seeds
 
     out = []
     for seed in shipped_seeds("prl", "uncoordinated"):
@@ -141,7 +141,7 @@ def test_lateral_command_drives_every_shipped_seed(tmp_path):
     import shutil
 
     from ecodrive_bench.bench.experiments.lateral import main
-    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.methods.policies import policy_dir
     from ecodrive_bench.reports.build import build
 
     models = tmp_path / "models"
@@ -164,7 +164,7 @@ def _lateral_copy(tmp_path):
     """A models root with a copy of the shipped uncoordinated PRL seed 0, and that seed's folder."""
     import shutil
 
-    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.methods.policies import policy_dir
 
     models = tmp_path / "models"
     folder = policy_dir("prl", "uncoordinated", models)
@@ -273,7 +273,7 @@ def test_the_lateral_worker_refuses_a_wrong_structure_as_a_checkpoint_error(tmp_
     from types import SimpleNamespace
 
     from ecodrive_bench.bench.experiments.lateral import LateralTask, task_agent
-    from ecodrive_bench.bench.harness.policies import CheckpointError, policy_spaces, read_manifest
+    from ecodrive_bench.bench.methods.policies import CheckpointError, policy_spaces, read_manifest
 
     _, folder = _lateral_copy(tmp_path)
     path = _wrong_structure(folder, tmp_path)

@@ -101,7 +101,7 @@ def test_stall_trace_records_what_the_policy_did(tmp_path):
     import pytest
 
     from ecodrive_bench.bench.experiments.stalls import HEADS, main, trace
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_dir, save_policy
+    from ecodrive_bench.bench.methods.policies import load_policy, policy_dir, save_policy
     from ecodrive_bench.envs.action import LATERAL
 
     models = tmp_path / "models"
@@ -231,7 +231,7 @@ def test_cv_brakes_for_an_hdv_stopping_at_yellow(tmp_path):
     at a yellow light at its decel of 4.5 m/s^2, 13 m ahead of a CV whose decel (the action bound)
     is 4 m/s^2. The safety layer (speed mode 27) lets SUMO brake it as hard as its safe speed asks,
     so it stops short (with speed mode 31 it could brake no harder than 4 m/s^2 and would hit it)."""
-    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.methods.policies import policy_dir
 
     cell = Cell("uncoordinated", 0.6, 200, 0, 520.0, str(tmp_path / "cell.mcap"),
                 str(policy_dir("prl", "uncoordinated")))

@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from ecodrive_bench.bench.experiments import stalls
-from ecodrive_bench.bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.methods.policies import CheckpointError
 
 
 @pytest.fixture(autouse=True)

@@ -71,7 +71,7 @@ def test_a_job_that_is_a_shipped_seeds_training_takes_its_policy(tmp_path, monke
     the job evaluates the shipped policy and keeps its training metrics instead of training again.
     Any other value (here the episode truncation) makes it a job of its own."""
     from ecodrive_bench.bench.harness.episode import make_env
-    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.methods.policies import policy_dir
 
     monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")
     argv = ["reward", "--forms", "r", "--phi", "1", "--seeds", "0", "--cases", "1", "--workers", "1",

@@ -159,8 +159,8 @@ def test_rows_of_a_replaced_policy_are_not_kept_beside_the_new_ones(tmp_path):
     other rows (the old policy's) leave the table, so the manifest's sha256 covers every row."""
     import shutil
 
-    from ecodrive_bench.bench.harness.cases import load as load_cases
-    from ecodrive_bench.bench.harness.policies import policy_dir
+    from ecodrive_bench.bench.cases.case import load as load_cases
+    from ecodrive_bench.bench.methods.policies import policy_dir
 
     models = tmp_path / "models"
     shutil.copytree(policy_dir("prl", "coordinated"), policy_dir("prl", "coordinated", models))

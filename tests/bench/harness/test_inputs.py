@@ -1,5 +1,5 @@
 """Bad input files are refused in one line naming the file, the entry, the value and the accepted
-range, before anything is read without bounds or written: a case list (``bench.harness.cases.load``,
+range, before anything is read without bounds or written: a case list (``bench.cases.case.load``,
 the generalisation family's cases), a ``--scenario`` file and a ``--set`` value."""
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 
 from ecodrive_bench.bench.args import MAX_JSON_BYTES, InputError
-from ecodrive_bench.bench.harness import cases as cases_mod
-from ecodrive_bench.bench.harness import generalisation
-from ecodrive_bench.bench.harness.cases import CaseError, check_cases, load
+from ecodrive_bench.bench.cases import case as cases_mod
+from ecodrive_bench.bench.cases import heldout
+from ecodrive_bench.bench.cases.case import CaseError, check_cases, load
+from ecodrive_bench.bench.cases.heldout import FamilyError
 from ecodrive_bench.bench.harness.errors import UsageError
-from ecodrive_bench.bench.harness.generalisation import FamilyError
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.scenarios import parse_overrides
 
@@ -131,18 +131,18 @@ def test_a_case_list_that_is_not_one_is_refused_before_it_is_read(kind, tmp_path
 
 
 def test_a_bad_case_in_the_family_file_is_named(tmp_path):
-    data = json.loads(generalisation.text())
+    data = json.loads(heldout.text())
     data["variants"][1]["cases"][3]["sumo_seed"] = "7"
     bad = tmp_path / "generalisation.json"
     bad.write_text(json.dumps(data, indent=1) + "\n")
     with pytest.raises(FamilyError) as e:
-        generalisation.load(bad)
+        heldout.load(bad)
     name = data["variants"][1]["name"]
     assert f"variant {name}: case #3 (index 3): sumo_seed='7'" in str(e.value) and "[0, 2**31-1)" in str(e.value)
     data["variants"][0]["cases"][2]["index"] = 1
     bad.write_text(json.dumps(data, indent=1) + "\n")
     with pytest.raises(FamilyError, match=r"case #2 \(index 1\): index=1 is also case #1's"):
-        generalisation.load(bad)
+        heldout.load(bad)
 
 
 def _scenario_file(kind, tmp_path):

@@ -1,4 +1,4 @@
-"""Fuzz of the input parsers of the harness: the case-list loader (``bench.harness.cases.load`` /
+"""Fuzz of the input parsers of the harness: the case-list loader (``bench.cases.case.load`` /
 ``check_cases``) and the scenario options (``bench.harness.scenarios.parse_overrides``: a
 ``--scenario`` file and ``--set`` items). Each either returns checked values or raises its one-line
 error (``CaseError`` / ``InputError``), never another exception. Fixed, derandomized budgets keep
@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from ecodrive_bench.bench.args import InputError
-from ecodrive_bench.bench.harness.cases import (
+from ecodrive_bench.bench.cases.case import (
     CASE_KEYS,
     INSERT_RANGE,
     SEED_BOUND,

@@ -13,10 +13,10 @@ import pytest
 
 from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.args import MAX_NAME
-from ecodrive_bench.bench.harness import cases as cases_mod
-from ecodrive_bench.bench.harness.cases import CaseError, load
+from ecodrive_bench.bench.cases import case as cases_mod
+from ecodrive_bench.bench.cases.case import CaseError, load
 from ecodrive_bench.bench.harness.options import parse
-from ecodrive_bench.bench.harness.sb3_zip import ZipError, read
+from ecodrive_bench.bench.methods.sb3_zip import ZipError, read
 
 
 def _refused(argv: list[str], tmp_path: Path, monkeypatch, capsys) -> str:
@@ -91,7 +91,7 @@ def test_ecodrive_run_on_a_folder_whose_lock_is_a_fifo_exits_2(tmp_path, capsys)
 
 @pytest.mark.parametrize("kind", ["device", "fifo", "large"])
 def test_an_sb3_path_that_is_no_regular_file_or_too_large_is_refused_before_it_is_read(kind, tmp_path, monkeypatch):
-    from ecodrive_bench.bench.harness import sb3_zip
+    from ecodrive_bench.bench.methods import sb3_zip
 
     path = tmp_path / "model.zip"
     if kind == "device":

@@ -10,19 +10,19 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ecodrive_bench.bench.harness.bounds import BoundTask
+from ecodrive_bench.bench.cases.bounds import BoundTask
 from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import parse
-from ecodrive_bench.bench.harness.policies import (
+from ecodrive_bench.bench.harness.run import run
+from ecodrive_bench.bench.harness.run_command import main
+from ecodrive_bench.bench.logs.mcaplog import episode_summary, read_log
+from ecodrive_bench.bench.methods.policies import (
     CheckpointError,
     check_scenario,
     policy_dir,
     policy_spaces,
     read_manifest,
 )
-from ecodrive_bench.bench.harness.run import run
-from ecodrive_bench.bench.harness.run_command import main
-from ecodrive_bench.bench.logs.mcaplog import episode_summary, read_log
 from ecodrive_bench.envs.config import ScenarioConfig
 from ecodrive_bench.envs.env import EcoDriveEnv
 
@@ -162,7 +162,7 @@ def test_a_transferred_policy_keeps_the_spaces_it_trained_with():
 
 def test_the_bound_is_solved_on_the_runs_scenario(monkeypatch):
     import ecodrive_bench.bench.oracle.dp as dp
-    from ecodrive_bench.bench.harness import bounds
+    from ecodrive_bench.bench.cases import bounds
 
     seen = []
 

@@ -1,5 +1,5 @@
 """Writes stay inside their folder: a planted symbolic link is replaced or refused, never written
-through, and a method label never becomes a path (``bench.io``, ``bench.harness.external``)."""
+through, and a method label never becomes a path (``bench.io``, ``bench.methods.external``)."""
 from __future__ import annotations
 
 import os
@@ -84,7 +84,7 @@ def test_a_linked_run_or_method_folder_is_refused_in_one_line(tmp_path, capsys, 
 
 
 def test_an_entry_point_name_that_is_a_path_is_left_out(tmp_path, monkeypatch, capsys):
-    from ecodrive_bench.bench.harness import external
+    from ecodrive_bench.bench.methods import external
 
     info = tmp_path / "evil-0.1.dist-info"
     info.mkdir()

@@ -86,7 +86,7 @@ def test_killed_run_leaves_readable_part(tmp_path, cases):
     script = textwrap.dedent(f"""
         import os, signal
         from ecodrive_bench.agents import BaselineAgent
-        from ecodrive_bench.bench.harness.cases import load
+        from ecodrive_bench.bench.cases.case import load
         from ecodrive_bench.bench.harness.episode import make_env
         from ecodrive_bench.bench.logs import mcaplog
         agent = BaselineAgent(); env = make_env(agent, "uncoordinated")

@@ -96,7 +96,7 @@ def test_a_save_path_that_is_no_rrd_is_one_line(save, words, log, tmp_path, monk
 @pytest.fixture(scope="module")
 def oracle(tmp_path_factory, cases):
     """An oracle episode alone on the corridor (its log carries the plan) and its saved recording."""
-    from ecodrive_bench.bench.harness.oracle import OracleAgent
+    from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 
     out = tmp_path_factory.mktemp("oracle")
     env = make_env(OracleAgent, "coordinated", {"arterial_flow": 0.0, "side_flow": 0.0})
@@ -443,8 +443,8 @@ def test_the_recording_draws_the_drive_in_the_web_viewer(baseline_rrd_path, tmp_
 def test_mpc_draws_the_plan_in_force_from_each_replan(cases, tmp_path):
     """An mpc episode in traffic: each re-plan's look-ahead is drawn at its step, and the first
     plan's ghost stops where the re-planning starts."""
-    from ecodrive_bench.bench.harness.mpc import MPCAgent
     from ecodrive_bench.bench.logs.mcaplog import read_log
+    from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
 
     env = make_env(MPCAgent, "uncoordinated", None)
     try:

@@ -1,4 +1,4 @@
-"""The closed-loop planner (bench.oracle.mpc) and the ``mpc`` method (bench.harness.mpc): a
+"""The closed-loop planner (bench.oracle.mpc) and the ``mpc`` method (bench.methods.mpc_agent): a
 re-plan from a state on the plan returns the rest of it, the vehicle ahead is kept at its gap,
 the plan alone in SUMO is driven exactly, and no red is run in traffic."""
 from __future__ import annotations
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from ecodrive_bench.bench.harness.episode import run_episode
-from ecodrive_bench.bench.harness.mpc import MPCAgent
 from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
 from ecodrive_bench.bench.oracle import mpc
 from ecodrive_bench.bench.oracle.dp import Corridor, bound, solve
 from ecodrive_bench.envs.config import ScenarioConfig

@@ -81,8 +81,8 @@ def test_a_shipped_policy_that_cannot_drive_is_one_error_line(tmp_path, monkeypa
     import torch
 
     import ecodrive_bench.bench.harness.options as br
-    from ecodrive_bench.bench.harness.policies import policy_dir
     from ecodrive_bench.bench.io import sha256
+    from ecodrive_bench.bench.methods.policies import policy_dir
     from ecodrive_bench.bench.regression.check import main
 
     models = tmp_path / "models"

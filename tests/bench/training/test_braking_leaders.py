@@ -13,9 +13,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.episode import make_env, run_episode
-from ecodrive_bench.bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.methods.policies import CheckpointError
 from ecodrive_bench.bench.training import braking
 from ecodrive_bench.bench.training.braking import (
     BRAKE_AFTER,

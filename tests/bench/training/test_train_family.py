@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 import torch
 
-from ecodrive_bench.bench.harness import families
-from ecodrive_bench.bench.harness.policies import CheckpointError
+from ecodrive_bench.bench.cases import train_family
+from ecodrive_bench.bench.methods.policies import CheckpointError
 from ecodrive_bench.bench.training import family as generalist
 from ecodrive_bench.bench.training.train import main, train
 
@@ -34,7 +34,7 @@ def test_a_family_run_resumes_exactly_and_ships_under_its_own_name(tmp_path):
     assert a["identity"]["family"] == generalist.identity("train")
     m = json.loads((tmp_path / "models" / "prl-family-uncoordinated" / "s1" / "manifest.json").read_text())
     assert m["method"] == "prl-family" and m["base_method"] == "prl" and m["family"]["split"] == "train"
-    assert m["validation"]["corridors"] == 1 and m["validation"]["master_seed"] == families.MASTER_SEED
+    assert m["validation"]["corridors"] == 1 and m["validation"]["master_seed"] == train_family.MASTER_SEED
     with pytest.raises(CheckpointError, match="differs in family"):  # a specialist run cannot take it over
         train("prl", "uncoordinated", 4, seed=1, out=tmp_path / "full", models=None,
               **{**KW, "family": None, "validation_cases": 0})
@@ -42,7 +42,7 @@ def test_a_family_run_resumes_exactly_and_ships_under_its_own_name(tmp_path):
 
 def test_validation_cases_go_round_robin_over_the_validation_corridors():
     every = generalist.cases()
-    assert len(every) == families.N_VALIDATION and sum(len(c) for _, c in every) == 24
+    assert len(every) == train_family.N_VALIDATION and sum(len(c) for _, c in every) == 24
     first8 = generalist.cases(8)
     assert len(first8) == 8 and all(len(c) == 1 and c[0].index == 0 for _, c in first8)
     assert [len(c) for _, c in generalist.cases(10)][:3] == [2, 2, 1]

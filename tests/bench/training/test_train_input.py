@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from ecodrive_bench.bench.harness.policies import CheckpointError, load_torch, policy_dir
+from ecodrive_bench.bench.methods.policies import CheckpointError, load_torch, policy_dir
 from ecodrive_bench.bench.training import train_all
 from ecodrive_bench.bench.training.train import main, read_checkpoint, train
 

@@ -1,4 +1,4 @@
-"""The clairvoyant drives of the fixed cases, shipped beside them: ``bench/harness/clairvoyant_drives.parquet``.
+"""The clairvoyant drives of the fixed cases, shipped beside them: ``bench/cases/clairvoyant_drives.parquet``.
 
 Planning a case costs ``clairvoyant`` ``ROUNDS`` drives of it and a re-plan per step (6-15 s on one
 core), against a fraction of a second for every other method's episode. The drive it chooses is
@@ -7,7 +7,7 @@ setting and shipped as its actions (lane decision and acceleration per step): a 
 drives the episode with them, the same episode step for step, at the cost of any episode.
 
 A row answers a case only if its key is the case's: ``scenario_digest``
-(``bench.harness.shipped_bounds.problem_digest``: the scenario and the built corridor), the
+(``bench.cases.shipped_bounds.problem_digest``: the scenario and the built corridor), the
 planner's ``VERSION``, and the case's SUMO seed and insertion time. Anything else (another corridor,
 the generalisation profile) is planned in the run. The table's content digest is checked on
 reading; an edited or damaged file is one line on stderr and every case is planned.
@@ -15,7 +15,7 @@ reading; an edited or damaged file is one line on stderr and every case is plann
     ecodrive cases --write --clairvoyant [--workers N]   # every fixed case of both settings
     ecodrive cases --check                               # re-plans CHECK_PER_SETTING cases per setting
 
-(``bench.harness.clairvoyant.write`` and ``check``). The check compares the lane decisions exactly and the accelerations and the cost within the
+(``bench.methods.clairvoyant_agent.write`` and ``check``). The check compares the lane decisions exactly and the accelerations and the cost within the
 cross-host tolerances (``bench.hosts``).
 """
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
 
 FILE = Path(__file__).with_name("clairvoyant_drives.parquet")
@@ -79,7 +79,7 @@ _TABLES: dict[Path, dict[tuple, tuple[list[int], list[float]]] | None] = {}
 
 def lookup(cfg: Any, case: Case, path: Path = FILE) -> list[tuple[int, float]] | None:
     """The shipped actions of ``case`` on ``cfg``'s problem; None: not shipped (plan it)."""
-    from ecodrive_bench.bench.harness.shipped_bounds import problem_digest
+    from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
 
     if path not in _TABLES:
         try:
@@ -97,7 +97,7 @@ def lookup(cfg: Any, case: Case, path: Path = FILE) -> list[tuple[int, float]] |
 
 def entry(signals: str, case: Case, cfg: Any, agent: Any) -> dict[str, Any]:
     """A row from a prepared ``ClairvoyantAgent`` (its chosen drive)."""
-    from ecodrive_bench.bench.harness.shipped_bounds import problem_digest
+    from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
 
     chosen = agent.rounds[-1]
     return {"signals": signals, "case": case.index, "sumo_seed": case.sumo_seed, "insert_time": float(case.insert_time),

@@ -6,7 +6,7 @@ and ``energy_bound``, the least energy that arrives no later than SUMO's driver 
 did on that case, an equal-time comparison. Solutions are kept in ``<run>/bounds.parquet``,
 rewritten as each case finishes (a killed run loses only the cases in flight), and reused by a
 rerun (the DP takes a few seconds per case); its progress with an ETA is on stderr (``bench.progress``). A case
-whose problem the bounds shipped with the fixed cases answer (``bench.harness.shipped_bounds``:
+whose problem the bounds shipped with the fixed cases answer (``bench.cases.shipped_bounds``:
 same scenario, DP version and grid, departure and time limit) is read from there, not solved;
 its row says so in ``bound_source`` ("shipped", else "solved") and keeps in ``bound_wall_s`` the
 DP's seconds where it was solved.
@@ -66,7 +66,7 @@ def solve(task: BoundTask) -> dict[str, Any]:
 def solve_entry(task: BoundTask) -> dict[str, Any]:
     """Both bounds of one case as a row of the shipped bounds, with the cost plan and mpc's first
     plan (runs in a worker; ``ecodrive cases --write --bounds``)."""
-    from ecodrive_bench.bench.harness.shipped_bounds import entry
+    from ecodrive_bench.bench.cases.shipped_bounds import entry
     from ecodrive_bench.bench.oracle import mpc
     from ecodrive_bench.bench.oracle.dp import Corridor
 
@@ -77,7 +77,7 @@ def solve_entry(task: BoundTask) -> dict[str, Any]:
 
 def shipped_row(table: Any, task: BoundTask) -> dict[str, Any] | None:
     """The row ``solve(task)`` would give (its time aside), read from the shipped bounds
-    (``bench.harness.shipped_bounds.Table``); None when they do not answer both of its bounds."""
+    (``bench.cases.shipped_bounds.Table``); None when they do not answer both of its bounds."""
     from ecodrive_bench.bench.harness.scenarios import setting
 
     cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
@@ -106,10 +106,10 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
            scenario: dict[str, Any] | None = None, progress: bool = True,
            shipped: Path | None = None) -> pd.DataFrame:
     """``results`` with the bound columns of its case, reading what the shipped bounds answer
-    (``shipped``: their file, default ``bench.harness.shipped_bounds.FILE``) and solving (with
+    (``shipped``: their file, default ``bench.cases.shipped_bounds.FILE``) and solving (with
     ``runner(tasks, workers, fn)``, an executor of ``bench.harness.executors``) the rest of what
     ``bounds.parquet`` lacks, on the run's ``scenario`` (overrides; one per run folder)."""
-    from ecodrive_bench.bench.harness import shipped_bounds
+    from ecodrive_bench.bench.cases import shipped_bounds
 
     path = run_dir / "bounds.parquet"
     done = pd.read_parquet(path) if path.is_file() else pd.DataFrame(columns=COLUMNS)

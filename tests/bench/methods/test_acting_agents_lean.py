@@ -9,7 +9,7 @@ SCRIPT = """
 import sys
 import numpy as np
 from ecodrive_bench.bench.harness.episode import make_env
-from ecodrive_bench.bench.harness.policies import load_policy, policy_agent, policy_dir, policy_spaces
+from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_dir, policy_spaces
 for m in ("prl", "mpdqn", "dqn", "ddpg"):
     folder = policy_dir(m, "uncoordinated")
     state, man = load_policy(folder, m)

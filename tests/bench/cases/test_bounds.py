@@ -48,7 +48,7 @@ def test_bounds_are_written_case_by_case_so_a_kill_keeps_the_finished_ones(tmp_p
     three cases, the two are kept, and the rerun solves only the third."""
     import pytest
 
-    from ecodrive_bench.bench.harness.bounds import COLUMNS, BoundTask, attach
+    from ecodrive_bench.bench.cases.bounds import COLUMNS, BoundTask, attach
 
     results = pd.DataFrame({"method": ["baseline"] * 3, "signals": ["coordinated"] * 3, "case": [0, 1, 2],
                             "depart_time": [200.0, 210.0, 220.0], "travel_time": [190.0, 191.0, 192.0],

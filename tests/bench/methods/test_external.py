@@ -8,10 +8,10 @@ import textwrap
 import pandas as pd
 import pytest
 
-from ecodrive_bench.bench.harness.external import AgentError, build, load_factory
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import run
 from ecodrive_bench.bench.harness.run_command import main
+from ecodrive_bench.bench.methods.external import AgentError, build, load_factory
 
 AGENT = textwrap.dedent('''
     import numpy as np
@@ -130,7 +130,7 @@ def test_the_documented_agent_builds_under_each_action_interface(tmp_path, monke
     import re
     from pathlib import Path
 
-    from ecodrive_bench.bench.harness.external import interface_of
+    from ecodrive_bench.bench.methods.external import interface_of
 
     doc = (Path(__file__).parents[3] / "docs" / "your-agent.md").read_text()
     code = re.search(r"```python\n(# myagents.py.*?)```", doc, re.S).group(1)

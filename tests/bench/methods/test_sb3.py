@@ -111,8 +111,8 @@ def test_a_trained_ppo_model_lands_in_the_results_beside_the_baseline(sb3, tmp_p
     ("DQN", "discrete27", "MultiInputPolicy"), ("PPO", "longitudinal", "MultiInputPolicy"),
 ])
 def test_every_algorithm_acts_greedily_inside_the_space(algo, action, policy, sb3, env_spaces, tmp_path):
-    from ecodrive_bench.bench.harness import sb3 as adapter
-    from ecodrive_bench.bench.harness.external import build, interface_of, load_factory
+    from ecodrive_bench.bench.methods import sb3 as adapter
+    from ecodrive_bench.bench.methods.external import build, interface_of, load_factory
 
     obs, act = env_spaces[action]
     path = saved(sb3, tmp_path / "m.zip", algo, *(flat(env_spaces[action]) if policy == "MlpPolicy" else (obs, act)),
@@ -185,8 +185,8 @@ def test_a_planted_payload_in_a_decoded_entry_is_refused_and_never_runs(key, sb3
 def test_a_payload_in_any_other_entry_is_never_unpickled(sb3, env_spaces, tmp_path):
     """The schedules and buffers are replaced unread, a JSON "env" is dropped; SB3's own load, the
     control, runs the payload."""
-    from ecodrive_bench.bench.harness import sb3 as adapter
-    from ecodrive_bench.bench.harness.external import build
+    from ecodrive_bench.bench.methods import sb3 as adapter
+    from ecodrive_bench.bench.methods.external import build
 
     marker = tmp_path / "ran"
     good = saved(sb3, tmp_path / "good.zip", "PPO", *flat(env_spaces["longitudinal"]))
@@ -227,7 +227,7 @@ def test_bad_input_is_one_line_and_writes_nothing(args, words, sb3, env_spaces, 
 def test_without_sb3_the_package_imports_and_sb3_is_one_line(tmp_path):
     """Runs whether or not SB3 is installed: the import is blocked in a fresh interpreter."""
     code = ("import sys; sys.modules['stable_baselines3'] = None; sys.argv[0] = 'ecodrive run'; "
-            "import bench.cli, bench.harness.run_command, bench.harness.sb3; "
+            "import bench.cli, bench.harness.run_command, bench.methods.sb3; "
             f"bench.harness.run_command.main(['--sb3', 'model.zip', '--sb3-algo', 'PPO', "
             f"'--logs', {str(tmp_path / 'logs')!r}])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
@@ -239,9 +239,9 @@ def test_without_sb3_the_package_imports_and_sb3_is_one_line(tmp_path):
 
 def test_sb3_cannot_unpickle_even_an_entry_left_out_of_custom_objects(sb3, env_spaces, tmp_path):
     """The second lock: during the load SB3's cloudpickle is swapped for one that refuses."""
-    from ecodrive_bench.bench.harness import sb3 as adapter
-    from ecodrive_bench.bench.harness.external import AgentError
-    from ecodrive_bench.bench.harness.sb3_zip import read
+    from ecodrive_bench.bench.methods import sb3 as adapter
+    from ecodrive_bench.bench.methods.external import AgentError
+    from ecodrive_bench.bench.methods.sb3_zip import read
 
     marker = tmp_path / "ran"
     bad = planted(saved(sb3, tmp_path / "good.zip", "PPO", *flat(env_spaces["longitudinal"])), tmp_path / "bad.zip",

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ecodrive_bench.bench.harness.cases import Case
-from ecodrive_bench.bench.harness.clairvoyant import ClairvoyantAgent
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.episode import make_env
 from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.methods.clairvoyant_agent import ClairvoyantAgent
 from ecodrive_bench.bench.oracle.dp import bound
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0}

@@ -19,7 +19,7 @@ and drives once more, up to ``ROUNDS`` drives; the episode replays the round who
 (E + phi T): its actions, one by one, which drive that very episode again, since a case is
 deterministic.
 
-For the fixed cases the chosen drives are shipped (``bench.harness.clairvoyant_drives``): ``prepare``
+For the fixed cases the chosen drives are shipped (``bench.cases.clairvoyant_drives``): ``prepare``
 reads the case's actions instead of planning, where they answer its problem.
 
 It drives the ``parameterized`` action: the lane decision (the LC2013 mask may refuse it) and the
@@ -34,12 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.harness import clairvoyant_drives as drives
-from ecodrive_bench.bench.harness import shipped_bounds
-from ecodrive_bench.bench.harness.cases import Case
-from ecodrive_bench.bench.harness.not_learning import NotLearning
-from ecodrive_bench.bench.harness.planners import CLAIRVOYANT as NAME
+from ecodrive_bench.bench.cases import clairvoyant_drives as drives
+from ecodrive_bench.bench.cases import shipped_bounds
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.hosts import ENERGY_RTOL, close
+from ecodrive_bench.bench.methods.not_learning import NotLearning
+from ecodrive_bench.bench.methods.planners import CLAIRVOYANT as NAME
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
 from ecodrive_bench.bench.oracle.dp import Corridor
@@ -63,7 +63,7 @@ class ClairvoyantAgent(NotLearning):
 
     def __init__(self, cfg: ScenarioConfig, shipped: Path | None = drives.FILE) -> None:
         self.cfg = cfg
-        self.shipped = shipped  # the shipped drives of the fixed cases (bench.harness.clairvoyant_drives); None: plan
+        self.shipped = shipped  # the shipped drives of the fixed cases (bench.cases.clairvoyant_drives); None: plan
         self.cor = Corridor.from_config(cfg)
         self.env: Any = None
         self.tracks: Tracks | None = None  # the recorded future the next drive uses
@@ -206,7 +206,7 @@ def solve(task: tuple[str, Case]) -> dict[str, Any]:
 
 def check(path: Path = drives.FILE, per_setting: int = drives.CHECK_PER_SETTING) -> list[str]:
     """One line per drift ([]: none) on a sample of the shipped cases, planned again."""
-    from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.cases.case import load
 
     try:
         frame = drives.read(path)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from ecodrive_bench.bench.harness import cases, clairvoyant_drives
+from ecodrive_bench.bench.cases import case, clairvoyant_drives
 from ecodrive_bench.bench.harness.scenarios import setting
 from ecodrive_bench.bench.regression.check import CI_CASES, REFERENCE
 
@@ -19,13 +19,13 @@ CASE_SHARE = 0.9  # [-] ... and no more expensive than each learned method's see
 
 def test_the_file_covers_every_fixed_case_and_answers_its_lookups():
     frame = clairvoyant_drives.read()
-    fixed = {c.index for c in cases.load()}
+    fixed = {c.index for c in case.load()}
     for s in ("coordinated", "uncoordinated"):
         assert set(frame[frame.signals == s].case) == fixed
-    case = cases.load()[0]
-    actions = clairvoyant_drives.lookup(setting("uncoordinated", None), case)
+    first = case.load()[0]
+    actions = clairvoyant_drives.lookup(setting("uncoordinated", None), first)
     assert actions and all(k in (0, 1, 2) for k, _ in actions)
-    assert clairvoyant_drives.lookup(setting("uncoordinated", {"spacing": 500.0}), case) is None  # another problem
+    assert clairvoyant_drives.lookup(setting("uncoordinated", {"spacing": 500.0}), first) is None  # another problem
 
 
 @pytest.mark.parametrize("signals", ["coordinated", "uncoordinated"])
@@ -45,6 +45,6 @@ def test_an_edited_file_is_one_line_and_every_case_is_planned(tmp_path, capsys):
     frame = clairvoyant_drives.read()
     frame.loc[0, "cost"] += 1.0
     frame.to_parquet(bad)
-    assert clairvoyant_drives.lookup(setting("uncoordinated", None), cases.load()[0], bad) is None
+    assert clairvoyant_drives.lookup(setting("uncoordinated", None), case.load()[0], bad) is None
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "every clairvoyant case is planned" in err[0]

@@ -1,6 +1,6 @@
 """A Stable-Baselines3 model in the benchmark: ``ecodrive run --sb3 model.zip --sb3-algo PPO``.
 
-The model becomes a user agent (``bench.harness.external``): its factory spec is
+The model becomes a user agent (``bench.methods.external``): its factory spec is
 ``sb3:ALGO:/abs/path.zip``, which ``external.load_factory`` hands to ``factory`` here, so the
 harness runs it exactly like an ``--agent`` (checked actions, MCAP logs, rows in the results).
 
@@ -12,7 +12,7 @@ harness runs it exactly like an ``--agent`` (checked actions, MCAP logs, rows in
   space is the env's flattened one (trained behind ``FlattenObservation``). Any other space is
   refused with a line naming both.
 - Actions are greedy (``predict(deterministic=True)``).
-- The zip is read by ``bench.harness.sb3_zip``: nothing in it is unpickled except the spaces and
+- The zip is read by ``bench.methods.sb3_zip``: nothing in it is unpickled except the spaces and
   the policy's class and kwargs, through an allow list.
 
 What it cannot: observation wrappers other than ``FlattenObservation`` (frame stacking, a
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.harness.errors import AgentError, install_hint
-from ecodrive_bench.bench.harness.sb3_zip import Saved, ZipError, read
+from ecodrive_bench.bench.methods.sb3_zip import Saved, ZipError, read
 
 ALGOS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")  # Stable-Baselines3's algorithms (not sb3-contrib)
 PREFIX = "sb3:"

@@ -1,6 +1,6 @@
 """Fixed test cases: (SUMO seed, ego insertion time) pairs shared by every method.
 
-The list is generated from a documented master seed and stored in ``bench/harness/cases.json`` (a
+The list is generated from a documented master seed and stored in ``bench/cases/cases.json`` (a
 versioned file in the repo). ``ecodrive cases --write`` regenerates it; ``--check``
 verifies the stored file matches the generator (``bench.harness.case_files``).
 """

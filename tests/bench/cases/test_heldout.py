@@ -11,10 +11,10 @@ import sys
 import pandas as pd
 import pytest
 
-from ecodrive_bench.bench.harness import generalisation
-from ecodrive_bench.bench.harness.cases import load as load_cases
+from ecodrive_bench.bench.cases import heldout
+from ecodrive_bench.bench.cases.case import load as load_cases
+from ecodrive_bench.bench.cases.heldout import FamilyError, load, select
 from ecodrive_bench.bench.harness.errors import UsageError
-from ecodrive_bench.bench.harness.generalisation import FamilyError, load, select
 from ecodrive_bench.bench.harness.generalisation_run import run_family
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import resolve_methods
@@ -25,17 +25,17 @@ PAPER = ScenarioConfig()
 
 
 def test_the_stored_family_is_the_generators_and_every_variant_is_a_valid_unseen_corridor():
-    assert generalisation.main(write=False) == 0
-    assert generalisation.FAMILY_FILE.read_text() == generalisation.text()
+    assert heldout.main(write=False) == 0
+    assert heldout.FAMILY_FILE.read_text() == heldout.text()
     family = load()
-    assert len(family) == generalisation.N_VARIANTS and len({v.name for v in family}) == len(family)
+    assert len(family) == heldout.N_VARIANTS and len({v.name for v in family}) == len(family)
     fixed = {(c.sumo_seed, c.insert_time) for c in load_cases()}
     for v in family:
-        assert len(v.cases) == generalisation.CASES_PER_VARIANT and not {(c.sumo_seed, c.insert_time) for c in v.cases} & fixed
+        assert len(v.cases) == heldout.CASES_PER_VARIANT and not {(c.sumo_seed, c.insert_time) for c in v.cases} & fixed
         for s in SIGNALS:
             cfg = v.config(s)
             assert cfg.digest() != ScenarioConfig(signals=s).digest()
-            assert cfg.n_intersections in generalisation.JUNCTIONS and cfg.grid_shape[0] == PAPER.grid_shape[0]
+            assert cfg.n_intersections in heldout.JUNCTIONS and cfg.grid_shape[0] == PAPER.grid_shape[0]
             assert cfg.step_length == PAPER.step_length and 3 <= cfg.lanes <= 5
             assert 600 <= cfg.arterial_flow <= 1400 and len(set(cfg.spacings)) > 1
     assert {v.scenario["lanes"] for v in family} == {3, 4, 5}
@@ -43,13 +43,13 @@ def test_the_stored_family_is_the_generators_and_every_variant_is_a_valid_unseen
 
 
 def test_a_tampered_or_stale_family_file_is_refused(tmp_path):
-    data = json.loads(generalisation.text())
+    data = json.loads(heldout.text())
     data["variants"][0]["scenario"]["arterial_flow"] = 1500.0
     bad = tmp_path / "generalisation.json"
     bad.write_text(json.dumps(data, indent=1) + "\n")
     with pytest.raises(FamilyError, match="differs from the generator"):
         load(bad)
-    assert generalisation.main(write=False, path=bad) == 1
+    assert heldout.main(write=False, path=bad) == 1
     bad.write_text(json.dumps({**data, "version": 99}))
     with pytest.raises(FamilyError, match="version 99"):
         load(bad)
@@ -81,8 +81,8 @@ def test_bad_input_is_one_line_exit_2(args, words, tmp_path, monkeypatch, capsys
 
 def test_a_tampered_family_file_stops_the_profile_in_one_line(tmp_path, monkeypatch, capsys):
     bad = tmp_path / "generalisation.json"
-    bad.write_text(generalisation.text().replace("\"lanes\": 5", "\"lanes\": 6", 1))
-    monkeypatch.setattr(generalisation, "FAMILY_FILE", bad)
+    bad.write_text(heldout.text().replace("\"lanes\": 5", "\"lanes\": 6", 1))
+    monkeypatch.setattr(heldout, "FAMILY_FILE", bad)
     monkeypatch.setattr(sys, "argv", ["ecodrive run"])
     with pytest.raises(SystemExit) as e:
         main(["--profile", "generalisation", "--logs", str(tmp_path / "logs")])
@@ -144,7 +144,7 @@ def test_a_shipped_policy_drives_a_held_out_variant_with_transfer(tiny):
     assert (sub / "results.parquet").is_file() and json.loads((sub / "manifest.json").read_text())["transfer"] is True
     assert all((root / m).is_file() for m in df.mcap)  # paths relative to the family folder
     man = json.loads((root / "manifest.json").read_text())
-    assert man["profile"] == "generalisation" and man["family"]["version"] == generalisation.VERSION
+    assert man["profile"] == "generalisation" and man["family"]["version"] == heldout.VERSION
     assert man["variants"] == {variant.name: variant.scenario}
     again = run_family(opts, progress=False)  # a rerun reuses every finished episode
     pd.testing.assert_frame_equal(df.drop(columns="sumo_s"), again.drop(columns="sumo_s"))
@@ -173,7 +173,7 @@ def test_the_docs_list_the_family():
     from pathlib import Path
 
     doc = (Path(__file__).resolve().parents[3] / "docs" / "generalisation.md").read_text()
-    assert f"version {generalisation.VERSION}" in doc and str(generalisation.MASTER_SEED) in doc
+    assert f"version {heldout.VERSION}" in doc and str(heldout.MASTER_SEED) in doc
     for v in load():
         spacings = ', '.join(f'{x:g}' for x in v.scenario['spacings'])
         assert f"| {v.name} | {v.scenario['n_intersections']} | {spacings} |" in doc

@@ -4,7 +4,7 @@ At the first step of an episode the agent solves the case's bound with the ``"co
 (least E + phi T through the known fixed-time signals, the ego alone on the corridor) for the
 departure it sees (``info["time"]`` at the reset is the env's ``t_depart``), or reads that very
 plan from the bounds shipped with the fixed cases where they hold its problem
-(``bench.harness.shipped_bounds``: same scenario, DP version and grid, departure). Then it drives open
+(``bench.cases.shipped_bounds``: same scenario, DP version and grid, departure). Then it drives open
 loop in time: at step k it asks for the acceleration that brings its speed to the plan's speed at
 step k + 1, ``a = (v_plan[k+1] - v) / dt``, within [a_min, a_max]. It drives the ``longitudinal``
 action type, so the safety layer clips the request to Krauss' safe speed when traffic or a red
@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.harness import shipped_bounds
-from ecodrive_bench.bench.harness.not_learning import NotLearning
-from ecodrive_bench.bench.harness.planners import ORACLE as NAME
+from ecodrive_bench.bench.cases import shipped_bounds
+from ecodrive_bench.bench.methods.not_learning import NotLearning
+from ecodrive_bench.bench.methods.planners import ORACLE as NAME
 from ecodrive_bench.bench.oracle.dp import Plan, bound
 from ecodrive_bench.envs.config import ScenarioConfig
 

@@ -1,4 +1,4 @@
-"""The bounds shipped with the fixed cases (bench.harness.shipped_bounds): a lookup answers only
+"""The bounds shipped with the fixed cases (bench.cases.shipped_bounds): a lookup answers only
 its own problem, with the DP's values and plan exactly; anything else is solved; drift, edits
 and damage are one line each, exit code 2."""
 from __future__ import annotations
@@ -8,11 +8,12 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from ecodrive_bench.bench.harness import case_files, cases, shipped_bounds
-from ecodrive_bench.bench.harness.bounds import NO_LIMIT, SHIPPED, SOLVED, attach
-from ecodrive_bench.bench.harness.mpc import MPCAgent
-from ecodrive_bench.bench.harness.oracle import OracleAgent
+from ecodrive_bench.bench.cases import case, shipped_bounds
+from ecodrive_bench.bench.cases.bounds import NO_LIMIT, SHIPPED, SOLVED, attach
+from ecodrive_bench.bench.harness import case_files
 from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
+from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 from ecodrive_bench.bench.oracle import dp, mpc
 
 SIGNALS = "coordinated"
@@ -177,7 +178,7 @@ def test_the_shipped_file_covers_every_fixed_case_of_the_current_problem():
     rows = shipped_bounds.read(shipped_bounds.FILE).frame
     for s in ("coordinated", "uncoordinated"):
         mine = rows[rows.signals == s]
-        assert sorted(mine.case) == [c.index for c in cases.load()]
+        assert sorted(mine.case) == [c.index for c in case.load()]
         assert set(mine.scenario_digest) == {shipped_bounds.problem_digest(setting(s, None))}
         assert set(mine.dp_version) == {dp.VERSION} and set(mine.grid) == {shipped_bounds.grid_key()}
         assert (mine.time_limit != NO_LIMIT).all() and mine.energy_bound.notna().all()
@@ -190,7 +191,7 @@ def test_the_shipped_file_covers_every_fixed_case_of_the_current_problem():
 def test_a_damaged_file_is_one_line_and_nothing_is_overwritten(tmp_path, capsys):
     bad = tmp_path / "shipped_bounds.parquet"
     bad.write_bytes(b"PAR1 not a table")
-    before = (bad.read_bytes(), cases.CASES_FILE.read_bytes())
+    before = (bad.read_bytes(), case.CASES_FILE.read_bytes())
     assert case_files.main(["--check", "--bounds"], bounds_file=bad) == 2
     out = capsys.readouterr()
     assert len(out.err.strip().splitlines()) == 1 and "not a readable shipped-bounds table" in out.err
@@ -205,4 +206,4 @@ def test_a_damaged_file_is_one_line_and_nothing_is_overwritten(tmp_path, capsys)
     assert len(err) == 1 and err[0].startswith("note: ") and "every bound is solved" in err[0]
     assert pd.read_parquet(tmp_path / "bounds.parquet").bound_source.tolist() == [SOLVED]
     assert got.energy_bound.isna().all()
-    assert (bad.read_bytes(), cases.CASES_FILE.read_bytes()) == before
+    assert (bad.read_bytes(), case.CASES_FILE.read_bytes()) == before

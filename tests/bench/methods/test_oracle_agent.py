@@ -7,13 +7,13 @@ import pandas as pd
 import pytest
 
 from ecodrive_bench.agents.registry import LEARNING, RULE_BASED, make_agent
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.episode import make_env, run_episode
 from ecodrive_bench.bench.harness.options import parse
-from ecodrive_bench.bench.harness.oracle import OracleAgent
-from ecodrive_bench.bench.harness.policies import load_policy, policy_dir
 from ecodrive_bench.bench.harness.run import run
 from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
+from ecodrive_bench.bench.methods.policies import load_policy, policy_dir
 from ecodrive_bench.bench.oracle.dp import bound
 
 FREE_FLOW = {"arterial_flow": 0.0, "side_flow": 0.0}  # the ego alone on the corridor

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from ecodrive_bench.bench.harness.policies import MODELS, CheckpointError, load_policy, policy_dir
 from ecodrive_bench.bench.io import sha256
+from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, load_policy, policy_dir
 from ecodrive_bench.bench.training.qcheck import main as qcheck_main
 from ecodrive_bench.bench.training.train import main as train_main
 from ecodrive_bench.bench.training.train import train

@@ -1,10 +1,10 @@
 """The training family: corridors to train on (``"train"``) and to select on (``"validation"``).
 
 The protocol of train levels against test levels (Procgen, IntersectionZoo): a policy trained on
-the family is tested on the held-out family (``bench.harness.generalisation``, ``family="test"``)
+the family is tested on the held-out family (``bench.cases.heldout``, ``family="test"``)
 that it never saw, and its checkpoints are chosen on the validation split, never on a test case.
 Both files are drawn on the same axes (junctions, spacing, cycle and green share, offsets, demand,
-lanes: ``bench.harness.generalisation.draw_corridor``), each split stratified over every axis, the
+lanes: ``bench.cases.heldout.draw_corridor``), each split stratified over every axis, the
 training family from its own ``MASTER_SEED``. ``check`` refuses a family that shares a corridor
 with the held-out family or that is the paper's corridor, in either signal setting.
 
@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.args import InputError
-from ecodrive_bench.bench.harness import generalisation
-from ecodrive_bench.bench.harness.cases import INSERT_RANGE, Case, CaseError, check_cases
-from ecodrive_bench.bench.harness.generalisation import CYCLES, FLOW_RANGE, JUNCTIONS, LANES, draw_family
+from ecodrive_bench.bench.cases import heldout
+from ecodrive_bench.bench.cases.case import INSERT_RANGE, Case, CaseError, check_cases
+from ecodrive_bench.bench.cases.heldout import CYCLES, FLOW_RANGE, JUNCTIONS, LANES, draw_family
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, ScenarioConfig, diff
 from ecodrive_bench.envs.family import TRAIN_FILE, Corridor, read
 
@@ -43,8 +43,8 @@ def generate(master_seed: int = MASTER_SEED) -> dict[str, Any]:
     rng = np.random.default_rng(master_seed)
     return {"version": VERSION, "master_seed": master_seed, "axes": {
                 "junctions": list(JUNCTIONS), "lanes": list(LANES), "cycles_s": list(CYCLES),
-                "flow_vph": list(FLOW_RANGE), "spacing_m": list(generalisation.SPACING_RANGE),
-                "green_share": list(generalisation.GREEN_SHARE)},
+                "flow_vph": list(FLOW_RANGE), "spacing_m": list(heldout.SPACING_RANGE),
+                "green_share": list(heldout.GREEN_SHARE)},
             "validation_cases": VALIDATION_CASES, "insert_range_s": list(INSERT_RANGE),
             "splits": {"train": draw_family(rng, N_TRAIN, 0, lambda k: f"t{k + 1:02d}"),
                        "validation": draw_family(rng, N_VALIDATION, VALIDATION_CASES, lambda k: f"v{k + 1:02d}")}}
@@ -58,7 +58,7 @@ def text(data: dict[str, Any] | None = None) -> str:
 def overlaps(data: dict[str, Any]) -> list[str]:
     """The training-family corridors that equal, in effect and in either signal setting, a
     held-out one or the paper's corridor: one line each ([]: disjoint)."""
-    held = [(v["name"], v["scenario"]) for v in generalisation.generate()["variants"]] + [("the paper's corridor", {})]
+    held = [(v["name"], v["scenario"]) for v in heldout.generate()["variants"]] + [("the paper's corridor", {})]
     out = []
     for split, entries in data["splits"].items():
         for c in entries:

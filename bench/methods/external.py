@@ -72,10 +72,10 @@ def agent_folder() -> str | None:
 
 def load_factory(spec: str) -> Callable[..., Any]:
     """The factory named by ``package.module:factory`` (or, for ``sb3:ALGO:PATH``, the one that
-    loads a Stable-Baselines3 model: ``bench.harness.sb3``); the module is imported from
+    loads a Stable-Baselines3 model: ``bench.methods.sb3``); the module is imported from
     ``sys.path``, then from ``agent_folder()``."""
     if spec.startswith("sb3:"):
-        from ecodrive_bench.bench.harness import sb3
+        from ecodrive_bench.bench.methods import sb3
 
         return sb3.factory(spec)
     if not SPEC.match(spec):

@@ -22,9 +22,9 @@ stratification (so each value range is covered, in a seed-given pairing):
 - lanes: ``LANES`` (a shipped 5-lane policy observes fewer as padded, occupied lanes).
 
 The grid, step and perception settings are the paper's, so every shipped policy can observe every
-variant (``bench.harness.policies.transfer_overrides``). The file lives with the env
+variant (``bench.methods.policies.transfer_overrides``). The file lives with the env
 (``envs/families/heldout.json``), whose ``family="test"`` samples its corridors
-(``envs.family``); the training family (``bench.harness.families``) draws from the same axes
+(``envs.family``); the training family (``bench.cases.train_family``) draws from the same axes
 and shares no corridor with it.
 """
 from __future__ import annotations
@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.args import InputError, read_json
-from ecodrive_bench.bench.harness.cases import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
+from ecodrive_bench.bench.cases.case import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, ScenarioConfig
 from ecodrive_bench.envs.family import HELDOUT_FILE
 
@@ -121,7 +121,7 @@ def text(data: dict | None = None) -> str:
 
 def load(path: Path | None = None) -> list[Variant]:
     """The family, verified: a regular JSON file of at most ``MAX_JSON_BYTES``, every variant's
-    cases valid (``bench.harness.cases.check_cases``: the value and its range named), the file the
+    cases valid (``bench.cases.case.check_cases``: the value and its range named), the file the
     generator's output of this ``VERSION`` (a tampered or stale file is a ``FamilyError``) and every
     variant a valid scenario."""
     path = FAMILY_FILE if path is None else path

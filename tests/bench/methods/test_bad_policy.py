@@ -14,9 +14,11 @@ from typing import Any
 import pytest
 import torch
 
-from ecodrive_bench.bench.harness.cases import Case
+from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.executors import Task, task_agent
-from ecodrive_bench.bench.harness.policies import (
+from ecodrive_bench.bench.harness.run_command import main
+from ecodrive_bench.bench.io import sha256
+from ecodrive_bench.bench.methods.policies import (
     CheckpointError,
     check_policy,
     load_policy,
@@ -25,8 +27,6 @@ from ecodrive_bench.bench.harness.policies import (
     policy_spaces,
     read_manifest,
 )
-from ecodrive_bench.bench.harness.run_command import main
-from ecodrive_bench.bench.io import sha256
 from ecodrive_bench.envs.config import ScenarioConfig
 
 METHOD, SIGNALS = "prl", "coordinated"
@@ -125,7 +125,7 @@ def test_a_raw_pickle_policy_is_refused_as_one_line_without_a_warning(tmp_path, 
 
 
 def test_check_policy_accepts_every_shipped_policy():
-    from ecodrive_bench.bench.harness.policies import MODELS
+    from ecodrive_bench.bench.methods.policies import MODELS
 
     folders = sorted(MODELS.glob("*-*/s*"))
     assert folders
@@ -207,7 +207,7 @@ def test_a_loaded_policy_acts_as_trained_with_a_one_batch_replay(method):
 
     from ecodrive_bench.agents.registry import make_agent
     from ecodrive_bench.bench.harness.episode import make_env
-    from ecodrive_bench.bench.harness.policies import load_policy, policy_agent, policy_dir
+    from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_dir
 
     folder = policy_dir(method, "uncoordinated")
     state, manifest = load_policy(folder, method)

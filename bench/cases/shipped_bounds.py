@@ -1,7 +1,7 @@
-"""The DP's answers for the fixed cases, shipped beside them: ``bench/harness/shipped_bounds.parquet``.
+"""The DP's answers for the fixed cases, shipped beside them: ``bench/cases/shipped_bounds.parquet``.
 
-The bounds of ``bench.harness.bounds``, the plans of the ``oracle`` method
-(``bench.harness.oracle``) and the first plans of the ``mpc`` method (``bench.harness.mpc``) are
+The bounds of ``bench.cases.bounds``, the plans of the ``oracle`` method
+(``bench.methods.oracle_agent``) and the first plans of the ``mpc`` method (``bench.methods.mpc_agent``) are
 fixed by the case list (``cases.json``), the scenario and the DP (``bench.oracle.dp``,
 ``bench.oracle.mpc``). They are solved once for every fixed case on the paper's scenario of each
 signal setting and kept here, so a run reads them instead of spending a DP solve (2-8 s) per case
@@ -249,7 +249,7 @@ def check(path: Path = FILE, per_setting: int = CHECK_PER_SETTING, signals: tupl
     """One line per drift ([]: none): a file that cannot be read; a setting whose rows are for
     another problem (scenario, DP version, grid) or that lacks fixed cases; and, on ``sample``'s
     rows of each setting, a stored bound or plan that is not exactly what the DP solves now."""
-    from ecodrive_bench.bench.harness.cases import load
+    from ecodrive_bench.bench.cases.case import load
     from ecodrive_bench.bench.progress import bar
 
     try:

@@ -4,10 +4,10 @@ when named in ``--methods`` (and by default on the generalisation profile).
 - ``oracle``: the cost-optimal plan of the departure, replayed open loop in time;
 - ``mpc``: re-plans on the DP's cost-to-go in closed loop, keeping the gap to the vehicle ahead;
 - ``clairvoyant``: re-plans in closed loop knowing the case's future traffic, and picks its lane:
-  the top of the scale (``bench.harness.clairvoyant``).
+  the top of the scale (``bench.methods.clairvoyant_agent``).
 
-Their names only: the agents (``bench.harness.oracle.OracleAgent``, ``bench.harness.mpc.MPCAgent``,
-``bench.harness.clairvoyant.ClairvoyantAgent``, built from the env's config) import the DP, which
+Their names only: the agents (``bench.methods.oracle_agent.OracleAgent``, ``bench.methods.mpc_agent.MPCAgent``,
+``bench.methods.clairvoyant_agent.ClairvoyantAgent``, built from the env's config) import the DP, which
 the options and a command's ``--help`` need not.
 """
 from __future__ import annotations

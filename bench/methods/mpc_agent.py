@@ -4,7 +4,7 @@ At the first step of an episode it takes the cost-to-go table (``bench.oracle.mp
 corridor's periodic one, solved once per process) and the departure's least-cost plan on the
 fine lattice with Krauss' stop-for-red cap obeyed (the plan SUMO drives step for step when the
 ego is alone); for the fixed cases that plan is read from the shipped bounds
-(``bench.harness.shipped_bounds``, the same plan bit for bit) instead of being solved again. At
+(``bench.cases.shipped_bounds``, the same plan bit for bit) instead of being solved again. At
 every step it reads
 the ego's state (speed from the observation, position from ``info["position"]``) and the vehicle
 ahead from the occupancy grid. It keeps the first plan until the first event that says it no
@@ -43,9 +43,9 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.harness import shipped_bounds
-from ecodrive_bench.bench.harness.not_learning import NotLearning
-from ecodrive_bench.bench.harness.planners import MPC as NAME
+from ecodrive_bench.bench.cases import shipped_bounds
+from ecodrive_bench.bench.methods.not_learning import NotLearning
+from ecodrive_bench.bench.methods.planners import MPC as NAME
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan
 from ecodrive_bench.envs.config import ScenarioConfig
