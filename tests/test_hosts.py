@@ -17,7 +17,7 @@ from ecodrive_bench.bench.cases import shipped_bounds
 ENERGIES = """
 import numpy as np, sys
 from ecodrive_bench.bench.oracle.energy import energy_wh
-from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.cases.setting import setting
 v = np.random.default_rng(3).uniform(0.0, 20.0, 4096)
 sys.stdout.write(energy_wh(v[:-1], v[1:], 1.0, setting("uncoordinated", None).ev).tobytes().hex())
 """

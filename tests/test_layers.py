@@ -9,9 +9,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 # a module may import from its own layer and those below it (lower number)
-LAYER = {"envs": 0, "agents": 0, "bench.paper": 1, "bench.io": 1, "bench.args": 1, "bench.runlock": 1, "bench.hosts": 1, "bench.progress": 1, "bench.logs": 2, "bench.oracle": 2, "bench.harness": 3,
-         "bench.training": 4, "bench.experiments": 5, "bench.regression": 6, "bench.perf": 6, "reports": 7,
-         "bench.cli": 8}
+LAYER = {"envs": 0, "agents": 0, "bench.paper": 1, "bench.io": 1, "bench.args": 1, "bench.runlock": 1, "bench.hosts": 1, "bench.progress": 1, "bench.logs": 2, "bench.oracle": 2,
+         "bench.cases": 3, "bench.methods": 4, "bench.harness": 5, "bench.training": 6, "bench.experiments": 7,
+         "bench.regression": 8, "bench.perf": 8, "reports": 9, "bench.cli": 10}
 
 
 def layer_of(module: str) -> str | None:

@@ -43,7 +43,7 @@ class BoundTask:
 
 def _solve(task: BoundTask) -> tuple[Any, Any, Any, float]:
     """(scenario config, "cost" plan, "energy" plan or None, seconds) of one case."""
-    from ecodrive_bench.bench.harness.scenarios import setting
+    from ecodrive_bench.bench.cases.setting import setting
     from ecodrive_bench.bench.oracle.dp import bound
 
     cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
@@ -78,7 +78,7 @@ def solve_entry(task: BoundTask) -> dict[str, Any]:
 def shipped_row(table: Any, task: BoundTask) -> dict[str, Any] | None:
     """The row ``solve(task)`` would give (its time aside), read from the shipped bounds
     (``bench.cases.shipped_bounds.Table``); None when they do not answer both of its bounds."""
-    from ecodrive_bench.bench.harness.scenarios import setting
+    from ecodrive_bench.bench.cases.setting import setting
 
     cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
     plan = table.plan(cfg, task.depart_time)

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.hosts import ATOL, DP_RTOL, arrays_close, close
 from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
 from ecodrive_bench.bench.oracle import dp, mpc

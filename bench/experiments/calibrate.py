@@ -14,8 +14,9 @@ import numpy as np
 from ecodrive_bench.agents import BaselineAgent
 from ecodrive_bench.bench.args import Parser, int_in
 from ecodrive_bench.bench.cases.case import load
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.harness.scenarios import parse_overrides
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.paper import TABLE4
 
 PAPER_BASELINE = {s: TABLE4[("baseline", s)] for s in ("coordinated", "uncoordinated")}  # [Wh], [s]

@@ -35,8 +35,9 @@ import pandas as pd
 from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.args import Parser, fail, int_in, name
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.scripted import brake, place_ahead, release
 from ecodrive_bench.envs.config import ScenarioConfig
 

@@ -207,7 +207,7 @@ def traffic_events(method: str, seed: int | None, episodes: int, rng_seed: int =
     flag, and (for a learning policy) Q_change - Q_stay over the free, allowed sides."""
     import torch
 
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
     from ecodrive_bench.bench.methods.policies import load_policy, policy_dir
     from ecodrive_bench.envs.env import EGO_ID
 

@@ -90,7 +90,8 @@ def run_job(job: Job, work: Path | None = None) -> dict[str, Any]:
 
     from ecodrive_bench.agents.registry import make_agent
     from ecodrive_bench.bench.cases.case import load
-    from ecodrive_bench.bench.harness.episode import make_env, run_episode
+    from ecodrive_bench.bench.harness.episode import run_episode
+    from ecodrive_bench.bench.methods.env import make_env
     from ecodrive_bench.bench.methods.policies import acting_config, load_policy, policy_dir
     from ecodrive_bench.bench.training.train import train
 

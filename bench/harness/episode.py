@@ -9,13 +9,11 @@ import os
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
-from ecodrive_bench.bench.harness.scenarios import deep_merge
 from ecodrive_bench.bench.harness.steplogs import VerifiedLog
 from ecodrive_bench.bench.logs.mcaplog import meta_json
 from ecodrive_bench.envs.env import EcoDriveEnv
@@ -23,22 +21,6 @@ from ecodrive_bench.envs.scenario import LANE_WIDTH
 from ecodrive_bench.envs.sumo import sumo_version
 
 STOP_SPEED = 0.1  # [m/s] below this the ego counts as stopped
-
-
-def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = None,
-             family: str | None = None) -> EcoDriveEnv:
-    """The raw env for an agent (or a method name), with the agent's scenario overrides; ``family``:
-    a split of the corridor families, one corridor drawn per reset (``envs.family``)."""
-    from ecodrive_bench.agents.registry import ACTION_INTERFACE, ENV_OVERRIDES
-
-    if isinstance(agent, str):
-        interface, overrides = ACTION_INTERFACE[agent], ENV_OVERRIDES.get(agent, {})
-    else:
-        interface, overrides = agent.action_interface, agent.env_overrides
-    cfg = deep_merge(config or {}, overrides)
-    env = gym.make("EcoDrive-v0", signals=signals, action=interface, config=cfg,
-                   **({"family": family} if family is not None else {}))
-    return env.unwrapped  # the harness steps the raw env: no wrappers in the timed loop
 
 
 def run_episode(

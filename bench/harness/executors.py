@@ -26,9 +26,9 @@ from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.errors import install_hint
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 from ecodrive_bench.bench.io import atomic_bytes
+from ecodrive_bench.bench.methods.errors import install_hint
 from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 
 EXECUTORS = ("local", "ray")
@@ -139,7 +139,8 @@ def run_task(task: Task) -> dict[str, Any]:
     """One greedy episode in this worker; envs and policies are loaded once per worker."""
     import torch
 
-    from ecodrive_bench.bench.harness.episode import make_env, run_episode
+    from ecodrive_bench.bench.harness.episode import run_episode
+    from ecodrive_bench.bench.methods.env import make_env
 
     torch.set_num_threads(1)
     scenario = json.loads(task.scenario) if task.scenario else None

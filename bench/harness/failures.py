@@ -27,8 +27,8 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ecodrive_bench.bench.harness.errors import AgentError
 from ecodrive_bench.bench.harness.pool import Failure, PoolBroken, TaskTimeout
+from ecodrive_bench.bench.methods.errors import AgentError
 from ecodrive_bench.bench.methods.policies import CheckpointError
 
 BAD_INPUT, FAILED = 2, 3

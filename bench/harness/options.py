@@ -12,8 +12,8 @@ from ecodrive_bench.bench.args import MAX_NAME, Parser, float_in, int_in, name, 
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.cases.heldout import CASES_PER_VARIANT, FamilyError, Variant
 from ecodrive_bench.bench.harness import scenarios
-from ecodrive_bench.bench.harness.errors import AgentError
 from ecodrive_bench.bench.harness.executors import EPISODE_FIXED_S, EPISODE_STEP_S, add_options, check_options
+from ecodrive_bench.bench.methods.errors import AgentError
 from ecodrive_bench.bench.methods.external import GROUP, registered
 from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 from ecodrive_bench.bench.methods.policies import MODELS

@@ -26,8 +26,9 @@ from ecodrive_bench.agents.registry import METHODS, POLICY_METHODS
 from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.cases.bounds import attach
 from ecodrive_bench.bench.cases.case import Case, load
+from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.harness import failures, scenarios
-from ecodrive_bench.bench.harness.errors import AgentError, UsageError
+from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.executors import Task, episode_limit, run_local, run_ray
 from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
 from ecodrive_bench.bench.harness.pool import PoolBroken
@@ -38,6 +39,7 @@ from ecodrive_bench.bench.harness.steplogs import finished, written_by
 from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, refuse_links, sha256, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import resolve_log
 from ecodrive_bench.bench.methods import external
+from ecodrive_bench.bench.methods.errors import AgentError
 from ecodrive_bench.bench.methods.planners import PLANNERS
 from ecodrive_bench.bench.methods.policies import check_policy, family_dir, policy_dir, shipped_seeds
 from ecodrive_bench.bench.progress import bar as progress_bar
@@ -136,7 +138,7 @@ def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
         except AgentError as e:
             raise UsageError(str(e)) from None
         codes[label] = external.code_sha256(spec, agent)
-    evals = {s: scenarios.setting(s, opts.scenario) for s in opts.signals}
+    evals = {s: setting(s, opts.scenario) for s in opts.signals}
     pdirs = {(m, s, sd): str(policy_dir(m, s, opts.models, sd)) if sd >= 0 else "" for m, s, sd in runs}
     # a policy that may not (or cannot) drive the scenario is refused before anything is written
     where = {r: scenarios.evaluation(r[0], r[1], pdirs[r], opts.scenario, opts.transfer) for r in runs}

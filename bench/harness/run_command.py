@@ -15,8 +15,9 @@ from typing import Any
 
 from ecodrive_bench.bench import runlock
 from ecodrive_bench.bench.args import InputError, fail
-from ecodrive_bench.bench.harness.errors import AgentError, Terminated, UsageError
+from ecodrive_bench.bench.harness.errors import Terminated, UsageError
 from ecodrive_bench.bench.harness.options import parse, parser
+from ecodrive_bench.bench.methods.errors import AgentError
 from ecodrive_bench.bench.methods.policies import CheckpointError
 
 INTERRUPTED, TERMINATED = 130, 143  # 128 + SIGINT, 128 + SIGTERM, as a shell reports them

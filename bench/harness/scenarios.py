@@ -29,15 +29,8 @@ from ecodrive_bench.bench.args import (
     one_line,
     read_json,
 )
+from ecodrive_bench.bench.cases.setting import deep_merge, setting
 from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
-
-
-def deep_merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    """``base`` with ``over`` on top, nested dicts merged key by key."""
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
 
 
 def add_options(ap) -> None:
@@ -50,11 +43,6 @@ def add_options(ap) -> None:
     ap.add_argument("--transfer", action="store_true",
                     help="let a policy drive a scenario other than the one it was trained on (recorded in "
                          "the logs and results)")
-
-
-def setting(signals: str, overrides: dict[str, Any] | None) -> ScenarioConfig:
-    """The scenario of one signal setting under the command's overrides."""
-    return ScenarioConfig.from_dict(deep_merge({"signals": signals}, overrides or {}))
 
 
 def parse_overrides(path: Path | None, items: list[str], signals: list[str], build: bool = True) -> dict[str, Any]:
@@ -115,7 +103,7 @@ def check_buildable(cfg: ScenarioConfig, where: str) -> None:
 
 def check_cached(method: str, signals: str, ev: Evaluation) -> None:
     """Build (or check in the cache, rebuilding a damaged entry) the scenario ``method`` drives
-    in ``signals`` under ``ev``, as its worker will (``bench.harness.episode.make_env``): an entry
+    in ``signals`` under ``ev``, as its worker will (``bench.methods.env.make_env``): an entry
     that cannot be rebuilt is one ``InputError`` line, before any episode."""
     from ecodrive_bench.agents.registry import ENV_OVERRIDES
 

@@ -190,8 +190,8 @@ class ClairvoyantAgent(NotLearning):
 
 def solve(task: tuple[str, Case]) -> dict[str, Any]:
     """One fixed case planned from scratch (in a worker)."""
-    from ecodrive_bench.bench.harness.episode import make_env
-    from ecodrive_bench.bench.harness.scenarios import setting
+    from ecodrive_bench.bench.cases.setting import setting
+    from ecodrive_bench.bench.methods.env import make_env
 
     signals, case = task
     cfg = setting(signals, None)

@@ -33,7 +33,7 @@ from typing import Any
 
 from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.args import MAX_NAME, is_name
-from ecodrive_bench.bench.harness.errors import AgentError
+from ecodrive_bench.bench.methods.errors import AgentError
 
 GROUP = "ecodrive_bench.agents"
 INTERFACES = ("parameterized", "discrete27", "longitudinal")
@@ -112,7 +112,7 @@ def interface_of(factory: Callable[..., Any]) -> str:
 def make(spec: str, signals: str, config: dict[str, Any] | None = None) -> tuple[Any, Agent]:
     """(env, agent) for the user's factory ``spec`` on ``signals``: the env has the factory's
     action type, and the agent's own ``env_overrides`` when it has any."""
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
 
     factory = load_factory(spec)
     probe = make_env(_Interface(interface_of(factory)), signals, config)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.harness.errors import AgentError, install_hint
+from ecodrive_bench.bench.methods.errors import AgentError, install_hint
 from ecodrive_bench.bench.methods.sb3_zip import Saved, ZipError, read
 
 ALGOS = ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")  # Stable-Baselines3's algorithms (not sb3-contrib)

@@ -22,11 +22,12 @@ import numpy as np
 import pandas as pd
 
 from ecodrive_bench.bench.args import Parser, fail
-from ecodrive_bench.bench.harness.errors import AgentError, UsageError
+from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import preflight, run
 from ecodrive_bench.bench.hosts import ENERGY_RTOL
 from ecodrive_bench.bench.io import atomic_csv
+from ecodrive_bench.bench.methods.errors import AgentError
 from ecodrive_bench.bench.methods.policies import CheckpointError
 from ecodrive_bench.bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
 from ecodrive_bench.bench.paper import TABLE4 as PAPER_TABLE4

@@ -15,8 +15,9 @@ import numpy as np
 
 from ecodrive_bench.bench.cases import train_family
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.io import sha256
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.envs.family import OBS_LANES, TRAIN_FILE, Corridor
 
 SUFFIX = "-family"  # a generalist's method name: <method>-family

@@ -77,7 +77,7 @@ def check(method: str, signals: str, cases: int, run: Path | None = None, models
     import torch
 
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
     from ecodrive_bench.bench.training.train import load_agent, read_checkpoint, validation_cases
     from ecodrive_bench.envs.config import ConfigError, backfill
 

@@ -44,10 +44,12 @@ from ecodrive_bench.agents.registry import LEARNING, make_agent
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
 from ecodrive_bench.bench.cases import train_family
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.episode import deep_merge, make_env, run_episode
+from ecodrive_bench.bench.cases.setting import deep_merge
+from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
 from ecodrive_bench.bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
 from ecodrive_bench.bench.logs.mcaplog import write_train_log
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.bench.training import family as generalist

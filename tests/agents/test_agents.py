@@ -11,8 +11,8 @@ import torch
 import ecodrive_bench.envs  # noqa: F401
 from ecodrive_bench.agents.nets import linear_epsilon
 from ecodrive_bench.agents.registry import LEARNING, make_agent
-from ecodrive_bench.bench.harness.episode import make_env
 from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.policies import CheckpointError, load_policy, policy_dir
 from ecodrive_bench.bench.training.train import snapshot, train, validate
 from ecodrive_bench.envs.config import ScenarioConfig

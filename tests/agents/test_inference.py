@@ -207,7 +207,7 @@ def test_shipped_policies_act_as_the_torch_forward_on_real_observations(method, 
     """Seed 0 of each shipped policy drives the first fixed case (uncoordinated) greedily through
     the numpy path; at every step the torch forward picks the same discrete choice and an
     acceleration within ``ACCEL_ATOL``."""
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
     from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_dir, policy_spaces
 
     folder = policy_dir(method, "uncoordinated")

@@ -20,7 +20,7 @@ import pytest
 import torch
 
 from ecodrive_bench.agents.registry import LEARNING, make_agent
-from ecodrive_bench.bench.harness.episode import make_env
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_dir, policy_spaces
 
 OBS_STEP = 60  # [steps] into the case: other vehicles in the grid

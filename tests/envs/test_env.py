@@ -7,7 +7,8 @@ from gymnasium.utils.env_checker import check_env
 
 import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
 from ecodrive_bench.agents import BaselineAgent, GlosaAgent
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.envs.action import dqn_table
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0}

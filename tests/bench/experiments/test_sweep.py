@@ -70,7 +70,7 @@ def test_a_job_that_is_a_shipped_seeds_training_takes_its_policy(tmp_path, monke
     """The reward study's (r, phi = 1) cell by the recipe is how the shipped PRL seeds were trained:
     the job evaluates the shipped policy and keeps its training metrics instead of training again.
     Any other value (here the episode truncation) makes it a job of its own."""
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
     from ecodrive_bench.bench.methods.policies import policy_dir
 
     monkeypatch.setattr(train_module, "RUNS", tmp_path / "runs")

@@ -21,7 +21,8 @@ from ecodrive_bench.bench.cases.case import (
     generate,
     load,
 )
-from ecodrive_bench.bench.harness.scenarios import parse_overrides, setting
+from ecodrive_bench.bench.cases.setting import setting
+from ecodrive_bench.bench.harness.scenarios import parse_overrides
 from ecodrive_bench.envs.config import EVParams, RewardConfig, ScenarioConfig
 
 FUZZ = settings(max_examples=100, deadline=None, derandomize=True,

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from ecodrive_bench.agents import BaselineAgent
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.logs.mcaplog import LogError, is_complete, read_log
+from ecodrive_bench.bench.methods.env import make_env
 
 
 def _rerun_cmd() -> list[str]:
@@ -87,7 +88,7 @@ def test_killed_run_leaves_readable_part(tmp_path, cases):
         import os, signal
         from ecodrive_bench.agents import BaselineAgent
         from ecodrive_bench.bench.cases.case import load
-        from ecodrive_bench.bench.harness.episode import make_env
+        from ecodrive_bench.bench.methods.env import make_env
         from ecodrive_bench.bench.logs import mcaplog
         agent = BaselineAgent(); env = make_env(agent, "uncoordinated")
         n = [0]

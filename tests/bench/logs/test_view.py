@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from ecodrive_bench.agents import BaselineAgent
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
+from ecodrive_bench.bench.methods.env import make_env
 
 ENTITIES = ("/world/ego", "/world/neighbours", "/world/signals", "/world/trail", "/grid", "/series/speed",
             "/series/requested_accel", "/series/applied_accel", "/series/energy_total", "/series/reward_parts/speed",

@@ -8,7 +8,7 @@ import sys
 SCRIPT = """
 import sys
 import numpy as np
-from ecodrive_bench.bench.harness.episode import make_env
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_dir, policy_spaces
 for m in ("prl", "mpdqn", "dqn", "ddpg"):
     folder = policy_dir(m, "uncoordinated")
@@ -39,7 +39,7 @@ def test_an_optimizer_assigned_in_place_of_the_lazy_one_is_the_one_used():
     import torch
 
     from ecodrive_bench.agents.ddpg import DDPGAgent
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
 
     env = make_env("ddpg", "uncoordinated")
     agent = DDPGAgent(env.observation_space, env.action_space)

@@ -206,7 +206,7 @@ def test_a_loaded_policy_acts_as_trained_with_a_one_batch_replay(method):
     import numpy as np
 
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
     from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_dir
 
     folder = policy_dir(method, "uncoordinated")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.episode import make_env
-from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.methods.clairvoyant_agent import ClairvoyantAgent
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.oracle.dp import bound
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0}

@@ -8,10 +8,11 @@ import pytest
 
 from ecodrive_bench.agents.registry import LEARNING, RULE_BASED, make_agent
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import run
 from ecodrive_bench.bench.logs.mcaplog import read_log
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 from ecodrive_bench.bench.methods.policies import load_policy, policy_dir
 from ecodrive_bench.bench.oracle.dp import bound

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.oracle.dp import Corridor, Grid, bound, solve
 from ecodrive_bench.bench.oracle.horizon import LeastCost
 from ecodrive_bench.bench.oracle.kernel import backward_step, backward_step_in, backward_step_numpy, mask_gap
@@ -99,7 +99,7 @@ AVX2 = {"NUMBA_CPU_NAME": "haswell", "NUMBA_CPU_FEATURES": "+avx2,+fma,-avx512f"
 SOLVE_ON_AVX2 = """
 import json, sys
 import numpy as np
-from ecodrive_bench.bench.harness.scenarios import setting
+from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.oracle.dp import bound
 from ecodrive_bench.bench.oracle.kernel import backward_step_in
 plans = {}

@@ -14,7 +14,8 @@ import pandas as pd
 import pytest
 
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
+from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.policies import CheckpointError
 from ecodrive_bench.bench.training import braking
 from ecodrive_bench.bench.training.braking import (

@@ -26,7 +26,8 @@ def test_rollout_earns_the_harness_return_on_a_real_episode():
     import torch
 
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.episode import make_env, run_episode
+    from ecodrive_bench.bench.harness.episode import run_episode
+    from ecodrive_bench.bench.methods.env import make_env
     from ecodrive_bench.bench.methods.policies import load_policy, policy_dir
     from ecodrive_bench.bench.training.qcheck import rollout
     from ecodrive_bench.bench.training.train import validation_cases

@@ -88,7 +88,7 @@ def test_a_checkpoint_error_from_train_has_the_command_prefix(tmp_path, capsys):
 
 def test_a_real_checkpoint_passes_the_structure_check(tmp_path):
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
 
     env = make_env("prl", "coordinated")
     agent = make_agent("prl", env.observation_space, env.action_space, seed=0)
@@ -105,7 +105,7 @@ def _resumable(out, **change):
     """A checkpoint of the identity ``train("prl", "coordinated", 2, 0, out)`` has, with its replay
     buffer; ``change`` replaces entries."""
     from ecodrive_bench.agents.registry import make_agent
-    from ecodrive_bench.bench.harness.episode import make_env
+    from ecodrive_bench.bench.methods.env import make_env
 
     env = make_env("prl", "coordinated")
     agent = make_agent("prl", env.observation_space, env.action_space, seed=0, eps_decay_episodes=2)
