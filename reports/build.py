@@ -46,6 +46,7 @@ from .load import (
     stop_lines,
     unfinished_warnings,
 )
+from .names import seeded
 from .outdir import staged
 
 METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "prl-family", "mpdqn-family", "ddpg", "dqn", "oracle",
@@ -242,7 +243,9 @@ def _trajectory(run_dir: Path, out: Path, sub: pd.DataFrame, compare: str, signa
     it) into ``page``, and its markdown lines; none when neither drive can be drawn."""
     trajs, bands, longest = {}, None, 0
     for method in ("baseline", compare):
-        path = resolve_log(run_dir, sub[(sub.method == method) & (sub.case == case)].mcap.iloc[0])
+        rows = sub[(sub.method == method) & (sub.case == case)].sort_values("train_seed")
+        row = rows.iloc[0]  # a learned method's lowest training seed, named in the legend and caption
+        path = resolve_log(run_dir, row.mcap)
         try:
             steps, warn = load_steps(path)
         except LogError as e:
@@ -251,7 +254,8 @@ def _trajectory(run_dir: Path, out: Path, sub: pd.DataFrame, compare: str, signa
         if warn:  # a partial log is never drawn as a whole drive
             warnings.append(f"{warn} (not drawn)")
             continue
-        trajs[method] = metrics.trajectory(steps)
+        seed = int(row.train_seed) if pd.notna(row.train_seed) else None
+        trajs[seeded(method, seed)] = metrics.trajectory(steps)
         if len(steps) > longest:  # bands over the longer drive
             longest, bands = len(steps), metrics.signal_bands(steps, *stop_lines(steps))
     plan = _bound_plan(run_dir, sub, case, warnings) if trajs else None

@@ -12,6 +12,8 @@ import pandas as pd  # noqa: E402
 
 from ecodrive_bench.bench.io import atomic_file  # noqa: E402
 
+from .names import name  # noqa: E402
+
 LABELS = {"energy": "energy [Wh]", "travel_time": "travel time [s]"}
 
 
@@ -46,7 +48,7 @@ def violins(groups: pd.DataFrame, methods: list[str], signals: str, out: Path) -
     for ax, metric in zip(axes, ("energy", "travel_time")):
         data = [groups[(groups.method == m) & (groups.signals == signals)][metric].to_numpy() for m in methods]
         ax.violinplot(data, showmedians=True)
-        ax.set_xticks(range(1, len(methods) + 1), methods, rotation=30, ha="right")  # 8 names fit a panel
+        ax.set_xticks(range(1, len(methods) + 1), [name(m) for m in methods], rotation=30, ha="right")  # 8 names fit a panel
         ax.set_xlabel("method")
         ax.set_ylabel(LABELS[metric])
         ax.grid(alpha=0.3)
@@ -207,7 +209,7 @@ def headroom(shares: pd.DataFrame, out: Path) -> list[Path]:
                 ax.text(left if v < left else right, yi, f" {v:.0f}% ", va="center",
                         ha="left" if v < left else "right", fontsize=8)
         ax.set_xlim(left, right)
-        ax.set_yticks(y, g.method)
+        ax.set_yticks(y, [name(m) for m in g.method])
         ax.axvline(0, color="k", lw=0.8)
         ax.axvline(100, color="k", lw=0.8, ls="--")
         ax.set_xlabel("share of the baseline0-to-clairvoyant cost gap closed [%]")

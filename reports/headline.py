@@ -23,16 +23,12 @@ from ecodrive_bench.bench.io import atomic_text
 from ecodrive_bench.bench.paper import TABLE4, improvement
 
 from .metrics import headroom
+from .names import label
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
 SETTINGS = (("coordinated", "coord."), ("uncoordinated", "non-coord."))
 ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "prl-family", "mpdqn-family", "ddpg", "dqn", "oracle", "mpc",
          "clairvoyant")
-LABELS = {"baseline": "baseline (SUMO's driver)", "baseline0": "baseline0 (SUMO, sigma 0)", "glosa": "glosa (SUMO device)",
-          "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013", "dqn": "DQN-27", "oracle": "oracle (cost-optimal plan replayed)",
-          "mpc": "mpc (re-plans with the signal plans, closed loop)", "prl-family": "PRL-family (trained on the family)",
-          "mpdqn-family": "MP-DQN-family (trained on the family)",
-          "clairvoyant": "clairvoyant (the signal plans and the future traffic)"}
 
 
 LEARNED = ("prl", "mpdqn", "ddpg", "dqn", "prl-family", "mpdqn-family")
@@ -52,7 +48,7 @@ def phis(results: pd.DataFrame, manifest: dict) -> dict[str, float]:
 
 def headroom_sentence(row: Any) -> str:
     """One headroom row in words: "PRL closes 62% [55, 70] of the gap"."""
-    return f"{LABELS.get(row.method, row.method)} closes {share_text(row)} of the gap"
+    return f"{label(row.method)} closes {share_text(row)} of the gap"
 
 
 def headroom_line(results: pd.DataFrame, manifest: dict) -> str:
@@ -69,7 +65,7 @@ def headroom_line(results: pd.DataFrame, manifest: dict) -> str:
         g = shares[shares.signals == s]
         if len(g):
             b = g.loc[g.share_closed.idxmax()]
-            parts.append(f"{share_text(b)} {short} ({LABELS.get(b.method, b.method)})")
+            parts.append(f"{share_text(b)} {short} ({label(b.method)})")
     return ("Headroom: of the cost gap (E + phi T) between steady driving (baseline0, no information) and the "
             "clairvoyant reference (the signal plans and the future traffic), the best learned method closes "
             + " and ".join(parts) + "; 95% CI over cases and seeds.")
@@ -97,7 +93,7 @@ def table(results: pd.DataFrame) -> str:
             count = str(n[0])
         else:  # "coord. / non-coord.", in the columns' order
             count = " / ".join(map(str, n))
-        cells = [LABELS.get(m, m), count]
+        cells = [label(m), count]
         for s, _ in SETTINGS:
             if (m, s) not in means.index:
                 cells += ["", "", "", ""]

@@ -22,7 +22,6 @@ from .html_parts import (
     duration,
     esc,
     figure,
-    label,
     method_cell,
     missing,
     num,
@@ -34,6 +33,7 @@ from .html_parts import (
 )
 from .html_provenance import provenance_section
 from .html_style import CSS, TEMPLATE
+from .names import label
 
 
 # ---------------------------------------------------------------- sections

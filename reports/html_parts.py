@@ -8,17 +8,12 @@ from pathlib import Path
 
 import pandas as pd
 
+from .names import label
+
 DASH = "\u2013"
 MINUS = "\u2212"
 STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT CHECKED": "absent",
                 "KNOWN FAIL": "known", "OUTSIDE BAND": "known"}
-METHOD_LABELS = {"baseline": "Baseline (SUMO Krauss + LC2013)", "baseline0": "Baseline, driver imperfection off",
-                 "glosa": "GLOSA (SUMO device)", "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013",
-                 "dqn": "DQN", "oracle": "Oracle (cost-optimal plan replayed in traffic)",
-                 "mpc": "MPC (closed-loop re-planning with the signal plans)",
-                 "prl-family": "PRL-family (trained on the corridor family)",
-                 "mpdqn-family": "MP-DQN-family (trained on the corridor family)",
-                 "clairvoyant": "Clairvoyant (the signal plans and the case's future traffic)"}
 METRIC_UNITS = {"energy": ("Energy", "Wh"), "travel_time": ("Travel time", "s")}
 
 
@@ -95,10 +90,6 @@ def ci(lo, hi, digits: int = 2) -> str:
     return DASH if missing(lo) or missing(hi) else f"[{num(lo, digits)}, {num(hi, digits)}]"
 
 
-def label(method: str) -> str:
-    return METHOD_LABELS.get(method, method)
-
-
 def esc(v) -> str:
     return html.escape(str(v), quote=True)
 
@@ -161,7 +152,7 @@ def violin_caption(groups: pd.DataFrame, results: pd.DataFrame, methods: list[st
 
 
 def trajectory_caption(drawn: list[str], signals: str, case: int) -> str:
-    who = esc(" and ".join(label(m) for m in drawn))
+    who = esc(" and ".join(drawn))  # display names, a learned method's with its training seed
     plan = (" The dashed line is the cost-optimal plan, the trajectory of the case's bound (the ego alone on "
             "the corridor; no energy curve)." if BOUND_LABEL in drawn else "")
     return (f"<b>fig:compare, {esc(signals)} signals, test case {case}</b> ({who}). Left: distance travelled [m] against "

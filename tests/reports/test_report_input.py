@@ -87,7 +87,7 @@ def test_readme_headline_is_rewritten_from_the_run(smoke, tmp_path, capsys):
     readme.write_text("# x\n<!-- headline:start -->\ntyped by hand\n<!-- headline:end -->\nrest\n")
     assert main([str(smoke), "--out", str(tmp_path / "rep"), "--readme", str(readme)]) == 0
     text = readme.read_text()
-    assert "typed by hand" not in text and "| baseline (SUMO's driver) |" in text and text.endswith("rest\n")
+    assert "typed by hand" not in text and "| Baseline (SUMO's Krauss driver and LC2013) |" in text and text.endswith("rest\n")
     bare = tmp_path / "BARE.md"
     bare.write_text("no block\n")
     assert main([str(smoke), "--out", str(tmp_path / "rep2"), "--readme", str(bare)]) == 2
