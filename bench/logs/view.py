@@ -3,8 +3,8 @@
     ecodrive view logs/<run>/<signals>/<method>/case-000.mcap [--save out.rrd]
 
 The blueprint puts the drive first: an ego close-up (``/world`` seen from ``/world/ego_frame``, which
-follows the ego) beside the time-distance diagram (``/td``), then the whole corridor with the
-occupancy grid, then the time series. The two drive views, and why the close-up is a moving frame
+follows the ego), the occupancy grid it observes and the time-distance diagram (``/td``), then the
+whole corridor, then the time series. The two drive views, and why the close-up is a moving frame
 rather than an ego-relative copy of the drawing, are in ``bench/logs/drive.py``.
 
 Entities (timeline ``sim_time``, simulation seconds):
@@ -125,9 +125,11 @@ def build_recording(data: LogData, rec) -> tuple[int, str]:
     log_ego_frame(rec, steps)
     closeup, td = views(steps, lane_y, half, x_end, log_time_distance(rec, steps, geo, links, plan))
     blueprint = rrb.Blueprint(rrb.Vertical(
-        rrb.Horizontal(closeup, td, column_shares=[3, 2]),
-        rrb.Horizontal(rrb.Spatial2DView(name="corridor", origin="/world", background=ROAD),
-                       rrb.Spatial2DView(name="occupancy grid", origin="/grid"), column_shares=[5, 1]),
+        # the grid (cells along the road x lanes, ahead at the top) is tall and narrow: it gets the
+        # drive row's height, where a cell is some 15 px at 1600x860, beside the close-up it describes
+        rrb.Horizontal(closeup, rrb.Spatial2DView(name="occupancy grid", origin="/grid"), td,
+                       column_shares=[3, 1, 2]),
+        rrb.Spatial2DView(name="corridor", origin="/world", background=ROAD),
         rrb.Horizontal(
             rrb.TimeSeriesView(name="speed [m/s]", origin="/series", contents=speed_views),
             rrb.TimeSeriesView(name="acceleration [m/s^2]", origin="/series",
