@@ -26,6 +26,7 @@ REPLAN_MEDIAN_MS, REPLAN_P99_MS = 20.0, 100.0  # [ms] one mpc re-plan on one cor
 COLD_SOLVE_LIMIT = 0.1  # a whole case's bound at least 10x faster than the reference solver (numpy, unpruned)
 FLOOR_LIMIT = 1.5  # an update within this factor of its FLOP floor (one thread)
 ACT_LIMIT_S = 0.3e-3  # [s] a greedy batch-1 act (test_greedy_act[...], one thread)
+FAMILY_RESET_LIMIT = 1.2  # [-] a warm family env's reset against a plain env's (test_family_reset, same rounds)
 MAIN_JOB_LIMIT = 1.3  # [-] nox -s benchmark's goal, wall time x workers / SUMO's time; test_episode_over_floor[...]
 # measures one process's logged episodes against it (without the pool's few percent)
 VECTOR_PREFIXES = ("sse", "ssse3", "avx", "fma", "neon", "sve")  # LLVM's names of vector extensions
@@ -115,6 +116,15 @@ def ratios(path: Path) -> dict[str, float]:
             out[f"act_over_env_step_in_episode_{m}"] = e["episode_act_s"] / e["episode_step_s"]
     if "test_env_reset" in med:
         out["reset_ms"] = med["test_env_reset"] * 1e3
+    plan = extra.get("test_clairvoyant_plan", {})
+    if "over_episode" in plan:
+        out["clairvoyant_plan_over_episode"] = plan["over_episode"]
+        out["clairvoyant_plan_s"] = plan["plan_s"]
+    fam = extra.get("test_family_reset", {})
+    if "over_plain" in fam:
+        out["family_reset_over_plain"] = fam["over_plain"]
+        out["family_reset_ms"] = fam["family_reset_s"] * 1e3
+        out["plain_reset_ms"] = fam["plain_reset_s"] * 1e3
     for name, e in extra.items():  # the main job's episodes, method by method, against SUMO's own time
         if name.startswith("test_episode_over_floor[") and "floor_ratio" in e:
             method = name[len("test_episode_over_floor["):-1]
@@ -206,6 +216,15 @@ def main(argv: list[str] | None = None) -> int:
         good = r["reset_ms"] <= 50
         ok &= good
         print(f"{'env.reset':40s} {r['reset_ms']:6.1f} ms (target <= 50 ms) {'ok' if good else 'MISSED'}")
+    if "clairvoyant_plan_over_episode" in r:  # no target: a shipped case costs one episode
+        print(f"{'clairvoyant: planning an unshipped case':40s} {r['clairvoyant_plan_s']:6.2f} s "
+              f"({r['clairvoyant_plan_over_episode']:.1f} baseline episodes of the same case)")
+    if "family_reset_over_plain" in r:
+        good = r["family_reset_over_plain"] <= FAMILY_RESET_LIMIT
+        ok &= good
+        print(f"{'family env reset / plain env reset':40s} {r['family_reset_over_plain']:6.3f}x "
+              f"({r['family_reset_ms']:.0f} ms against {r['plain_reset_ms']:.0f} ms, warm cache; "
+              f"target <= {FAMILY_RESET_LIMIT:g}x) {'ok' if good else 'MISSED'}")
     if "fleet_control_over_sim" in r:
         good = r["fleet_control_over_sim"] <= 3.0
         ok &= good

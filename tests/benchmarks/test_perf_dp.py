@@ -110,3 +110,38 @@ def test_dp_replan(benchmark, driven):
     benchmark.extra_info["replans"] = len(inputs)
     for name, q in QUANTILES.items():
         benchmark.extra_info[f"{name}_s"] = float(np.quantile(times, q))
+
+
+def test_clairvoyant_plan(benchmark, cases):
+    """Planning a case that is not shipped (``ClairvoyantAgent(shipped=None).prepare``: its
+    record-and-drive rounds, each drive re-planning every step on the DP), against a baseline episode
+    of the same case, timed in the same rounds. extra_info["over_episode"]: the median of the
+    rounds' ratios, the plan's cost in episodes (``bench.perf``); a shipped case costs one episode."""
+    from ecodrive_bench.agents import BaselineAgent
+    from ecodrive_bench.bench.harness.episode import run_episode
+    from ecodrive_bench.bench.methods.clairvoyant_agent import ClairvoyantAgent
+    from ecodrive_bench.bench.methods.env import make_env
+
+    case = cases[0]
+    planner = ClairvoyantAgent(make_env("baseline", "uncoordinated").cfg, shipped=None)
+    env = make_env(planner, "uncoordinated")
+    base, base_env = BaselineAgent(), make_env("baseline", "uncoordinated")
+    ratios, plan_s, episode_s = [], [], []
+    try:
+        def run():
+            t = time.perf_counter()
+            planner.prepare(env, case)
+            t_plan = time.perf_counter() - t
+            t = time.perf_counter()
+            run_episode(base_env, base, case, "baseline")
+            t_episode = time.perf_counter() - t
+            ratios.append(t_plan / t_episode)
+            plan_s.append(t_plan)
+            episode_s.append(t_episode)
+
+        benchmark.pedantic(run, rounds=ROUNDS, iterations=1)
+    finally:
+        env.close()
+        base_env.close()
+    benchmark.extra_info.update(over_episode=float(np.median(ratios)), plan_s=float(np.median(plan_s)),
+                                episode_s=float(np.median(episode_s)))

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from ecodrive_bench.agents import BaselineAgent
-from ecodrive_bench.bench.harness.episode import make_env, run_episode
+from ecodrive_bench.bench.harness.episode import run_episode
+from ecodrive_bench.bench.methods.env import make_env
 
 STEPS = 150  # simulated seconds after the ego's insertion
 ROUNDS = 15
@@ -77,6 +78,45 @@ def test_env_step(benchmark, env, cases):
 def test_env_reset(benchmark, env, cases):
     it = iter(range(10**6))
     benchmark.pedantic(lambda: env.reset(options=cases[next(it) % len(cases)].options()), rounds=20, iterations=1)
+
+
+FAMILY_RESETS = 10  # reset(seed=i), i = 0..9, per env and round
+
+
+def test_family_reset(benchmark):
+    """``reset(seed=i)`` of a warm ``family="train"`` env (each reset draws a corridor; its scenario
+    files were built and cached by a first pass over the same seeds) against the same calls of a
+    plain env, alternating within each round. extra_info["over_plain"]: the median of the rounds'
+    ratios, taken in the same rounds (robust to machine noise; ``bench.perf``)."""
+    import gymnasium as gym
+
+    family = gym.make("EcoDrive-v0", signals="uncoordinated", family="train").unwrapped
+    plain = gym.make("EcoDrive-v0", signals="uncoordinated").unwrapped
+    ratios, family_s, plain_s = [], [], []
+    try:
+        for i in range(FAMILY_RESETS):  # warm: every corridor these seeds draw is built once
+            family.reset(seed=i)
+        plain.reset(seed=0)
+
+        def run():
+            t = time.perf_counter()
+            for i in range(FAMILY_RESETS):
+                family.reset(seed=i)
+            t_family = time.perf_counter() - t
+            t = time.perf_counter()
+            for i in range(FAMILY_RESETS):
+                plain.reset(seed=i)
+            t_plain = time.perf_counter() - t
+            ratios.append(t_family / t_plain)
+            family_s.append(t_family / FAMILY_RESETS)
+            plain_s.append(t_plain / FAMILY_RESETS)
+
+        benchmark.pedantic(run, rounds=3, iterations=1)
+    finally:
+        family.close()
+        plain.close()
+    benchmark.extra_info.update(over_plain=float(np.median(ratios)), family_reset_s=float(np.median(family_s)),
+                                plain_reset_s=float(np.median(plain_s)), resets=FAMILY_RESETS)
 
 
 @pytest.fixture(scope="module")
