@@ -229,3 +229,22 @@ def test_episode_floor_lines_give_the_ratio_with_a_free_act(tmp_path, capsys):
     prl = next(line for line in out if line.startswith("prl: logged episode"))
     base = next(line for line in out if line.startswith("baseline: logged episode"))
     assert "MISSED; 1.340x with a free act" in prl and "ok" in base and "free act" not in base
+
+
+def test_family_reset_target_and_the_clairvoyant_plan(tmp_path, capsys):
+    def write(over_plain: float) -> Path:
+        data = {"benchmarks": [
+            _bench("test_family_reset", 1.0, over_plain=over_plain, family_reset_s=0.3, plain_reset_s=0.25, resets=10),
+            _bench("test_clairvoyant_plan", 30.0, over_episode=10.5, plan_s=9.0, episode_s=0.86),
+        ]}
+        path = tmp_path / f"perf-{over_plain}.json"
+        path.write_text(json.dumps(data))
+        return path
+
+    r = ratios(write(1.1))
+    assert r["family_reset_over_plain"] == 1.1 and r["family_reset_ms"] == pytest.approx(300.0)
+    assert r["clairvoyant_plan_over_episode"] == 10.5 and r["clairvoyant_plan_s"] == 9.0
+    assert main([str(write(1.1))]) == 0
+    out = capsys.readouterr().out
+    assert "family env reset / plain env reset" in out and "ok" in out and "10.5 baseline episodes" in out
+    assert main([str(write(1.3))]) == 1 and "MISSED" in capsys.readouterr().out
