@@ -13,8 +13,9 @@ import pandas as pd
 
 from ecodrive_bench.bench.io import atomic_csv
 
-from . import figures, metrics, tables
+from . import figures, metrics, tables, top
 from .edge import edges
+from .headline import LEARNED
 from .load import RunError
 from .names import name
 
@@ -98,6 +99,7 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...],
     phis = {sig: float(manifest.get("scenario", {}).get(sig, {}).get("reward", {}).get("phi", 1.0))
             for sig in set(table.signals)}
     md += specialists_against_generalists(table, in_distribution, phis)
+    md += top_of_scale(table, phis)
     images = []
     methods = [m for m in order if m in set(table.method)]
     for signals in sorted(set(table.signals)):
@@ -186,3 +188,38 @@ def _targets(signals: str, pairs: list[tuple[str, str]], fam: pd.DataFrame, ind:
             out.append(f"- {signals}, paper's corridor: {name(gen)} costs {cg:.1f} against {name(spec)}'s {cs:.1f} "
                        f"({100 * ratio:+.1f}%; within {100 * PAPER_CORRIDOR_SLACK:g}%): {verdict}")
     return out
+
+
+def top_of_scale(family: pd.DataFrame, phis: dict[str, float]) -> list[str]:
+    """Markdown: ``clairvoyant`` against every other method on each held-out corridor and setting
+    (``reports.top``): its cost, the cheapest other method, its smallest margin over the learned and
+    rule-based methods, its smallest case share against a learned method, its travel time against
+    SUMO's driver; [] when the run has no clairvoyant."""
+    if top.TOP not in set(family.method):
+        return []
+    rows, verdicts = [], []
+    for signals in sorted(set(family.signals)):
+        sub = family[family.signals == signals]
+        vs = top.against(sub, phis.get(signals, 1.0), by=("variant",))
+        if vs.empty:
+            continue
+        v = top.verdicts(vs, top.travel_time(sub, by=("variant",)), LEARNED, by=("variant",))
+        verdicts.append(v)
+        for r in v.itertuples(index=False):
+            rows.append({"setting": signals, "variant": r.variant, "clairvoyant": f"{r.top_cost:.1f}",
+                         "cheapest other": f"{name(r.cheapest)} {r.cheapest_cost:.1f}",
+                         f"margin (>= {100 * top.MARGIN:g}%)": f"{100 * r.min_margin:+.1f}%",
+                         f"case share (>= {100 * top.CASE_SHARE:g}%)": f"{100 * r.min_case_share:.0f}%",
+                         "T vs SUMO's driver": f"{100 * r.slower:+.1f}%"})
+    if not rows:
+        return []
+    v = pd.concat(verdicts, ignore_index=True)
+    n = len(v)
+    return ["### The top of the scale on the held-out corridors", "",
+            f"`clairvoyant` against every other method the run holds, per corridor and setting (cost E + phi T; margin "
+            f"= 1 - its cost / the method's, the smallest over the learned and rule-based methods, which it should beat "
+            f"by {100 * top.MARGIN:g}%; case share = the cases on which it costs no more than a learned method's seed "
+            f"mean, the smallest over them). Cheaper by the margin and below oracle and mpc: {int(v.cheaper.sum())} of "
+            f"{n}; case share held: {int(v.cases_held.sum())} of {n}; no slower than SUMO's driver: "
+            f"{int(v.not_slower.sum())} of {n}.", "",
+            tables.frame_markdown(pd.DataFrame(rows).set_index(["setting", "variant"])), ""]
