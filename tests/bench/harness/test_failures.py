@@ -9,68 +9,32 @@ import json
 import os
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from plugin_agent import install, source
 
 from ecodrive_bench.bench.harness.run_command import main
 
-AGENT = textwrap.dedent('''
-    import os, signal
-    from pathlib import Path
-    import numpy as np
-
-    HERE = Path(__file__).parent
-
-    class Cruise:
-        name = "cruise"
-        action_interface = "parameterized"
-        env_overrides = {}
-
-        def __init__(self, mode):
-            self.mode, self.step = mode, 0
-
-        def act(self, obs, info, explore=False):
-            self.step = 0 if info["travel_time"] == 0 else self.step + 1
-            if (HERE / f"{self.mode}.on").exists():
-                if self.mode == "boom" and self.step == 31:
-                    raise ValueError("the agent's bug")
-                if self.mode == "kill" and self.step == 5:
-                    if info["time"] < 225:  # case 002 (inserted at 206.4 s): dies every time
-                        os.kill(os.getpid(), signal.SIGKILL)
-                    try:  # another case: once
-                        os.close(os.open(HERE / "killed-once", os.O_CREAT | os.O_EXCL))
-                        os.kill(os.getpid(), signal.SIGKILL)
-                    except FileExistsError:
-                        pass
-            return 1, np.full(3, 0.5, dtype=np.float32)
-
-        def observe(self, *args):
-            return {}
-
-        def state_dict(self):
-            return {}
-
-        def load_state_dict(self, state):
-            pass
-
-    def boom(observation_space, action_space):
-        return Cruise("boom")
-
-    def kill(observation_space, action_space):
-        return Cruise("kill")
-''')
+AGENT = source('''
+    if (HERE / f"{self.mode}.on").exists():
+        if self.mode == "boom" and self.step == 31:
+            raise ValueError("the agent's bug")
+        if self.mode == "kill" and self.step == 5:
+            if info["time"] < 225:  # case 002 (inserted at 206.4 s): dies every time
+                os.kill(os.getpid(), signal.SIGKILL)
+            try:  # another case: once
+                os.close(os.open(HERE / "killed-once", os.O_CREAT | os.O_EXCL))
+                os.kill(os.getpid(), signal.SIGKILL)
+            except FileExistsError:
+                pass
+''', ['boom', 'kill'])
 
 
 @pytest.fixture
 def agents(tmp_path, monkeypatch):
-    (tmp_path / "failing_agents.py").write_text(AGENT)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setenv("PYTHONPATH", str(tmp_path))  # the pool's workers import it too
-    sys.modules.pop("failing_agents", None)
-    return tmp_path
+    return install(tmp_path, 'failing_agents', AGENT, monkeypatch)
 
 
 def _run(logs: Path, agent: str, workers: str, capsys) -> tuple[int, list[str]]:

@@ -6,70 +6,30 @@ from __future__ import annotations
 
 import json
 import sys
-import textwrap
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from plugin_agent import install, source
 
 from ecodrive_bench.bench.harness.run_command import main
 from ecodrive_bench.bench.harness.steplogs import check, written_by
 from ecodrive_bench.bench.logs.mcaplog import read_log
 
-AGENT = textwrap.dedent('''
-    import os
-    from pathlib import Path
-    import numpy as np
-
-    HERE = Path(__file__).parent
-    VERSION = 1
-
-    class Cruise:
-        name = "cruise"
-        action_interface = "parameterized"
-        env_overrides = {}
-
-        def __init__(self, mode):
-            self.mode, self.step = mode, 0
-
-        def act(self, obs, info, explore=False):
-            self.step = 0 if info["travel_time"] == 0 else self.step + 1
-            if self.mode == "forker" and self.step == 50:
-                os.fork()  # both processes return from act
-            if self.mode == "liar" and self.step == 150:  # overwrite the middle of its own step log
-                part = max((HERE / "logs").rglob("liar/*.mcap.part"), key=lambda p: p.stat().st_mtime_ns)
-                with open(part, "r+b") as f:
-                    f.seek(part.stat().st_size // 2)
-                    f.write(b"\\xff" * 64)
-            return 1, np.full(3, 0.5, dtype=np.float32)
-
-        def observe(self, *args):
-            return {}
-
-        def state_dict(self):
-            return {}
-
-        def load_state_dict(self, state):
-            pass
-
-    def forker(observation_space, action_space):
-        return Cruise("forker")
-
-    def liar(observation_space, action_space):
-        return Cruise("liar")
-
-    def cruise(observation_space, action_space):
-        return Cruise("cruise")
-''')
+AGENT = source('''
+    if self.mode == "forker" and self.step == 50:
+        os.fork()  # both processes return from act
+    if self.mode == "liar" and self.step == 150:  # overwrite the middle of its own step log
+        part = max((HERE / "logs").rglob("liar/*.mcap.part"), key=lambda p: p.stat().st_mtime_ns)
+        with open(part, "r+b") as f:
+            f.seek(part.stat().st_size // 2)
+            f.write(b"\\xff" * 64)
+''', ['forker', 'liar', 'cruise'])
 
 
 @pytest.fixture
 def agents(tmp_path, monkeypatch):
-    (tmp_path / "lying_agents.py").write_text(AGENT)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.chdir(tmp_path)
-    sys.modules.pop("lying_agents", None)
-    return tmp_path
+    return install(tmp_path, 'lying_agents', AGENT, monkeypatch)
 
 
 def _run(folder: Path, capsys, *extra: str) -> tuple[int, list[str], list[str]]:

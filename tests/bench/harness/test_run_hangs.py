@@ -9,64 +9,28 @@ import os
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
 import psutil
 import pytest
+from plugin_agent import install, source
 
 from ecodrive_bench.bench.harness.run_command import main
 
-AGENT = textwrap.dedent('''
-    import os, signal, time
-    from pathlib import Path
-    import numpy as np
-
-    HERE = Path(__file__).parent
-
-    class Cruise:
-        name = "cruise"
-        action_interface = "parameterized"
-        env_overrides = {}
-
-        def __init__(self, mode):
-            self.mode, self.step = mode, 0
-
-        def act(self, obs, info, explore=False):
-            self.step = 0 if info["travel_time"] == 0 else self.step + 1
-            if self.step == 5 and self.mode == "sleepy":
-                time.sleep(3600)
-            if self.step == 5 and self.mode == "stopper" and not (HERE / "stopped").exists():
-                (HERE / "stopped").write_text(str(os.getpid()))
-                os.kill(os.getpid(), signal.SIGSTOP)
-            return 1, np.full(3, 0.5, dtype=np.float32)
-
-        def observe(self, *args):
-            return {}
-
-        def state_dict(self):
-            return {}
-
-        def load_state_dict(self, state):
-            pass
-
-    def sleepy(observation_space, action_space):
-        return Cruise("sleepy")
-
-    def stopper(observation_space, action_space):
-        return Cruise("stopper")
-''')
+AGENT = source('''
+    if self.step == 5 and self.mode == "sleepy":
+        time.sleep(3600)
+    if self.step == 5 and self.mode == "stopper" and not (HERE / "stopped").exists():
+        (HERE / "stopped").write_text(str(os.getpid()))
+        os.kill(os.getpid(), signal.SIGSTOP)
+''', ['sleepy', 'stopper'])
 ROOT = Path(__file__).parents[3]
 
 
 @pytest.fixture
 def agents(tmp_path, monkeypatch):
-    (tmp_path / "hang_agents.py").write_text(AGENT)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.chdir(tmp_path)
-    sys.modules.pop("hang_agents", None)
-    return tmp_path
+    return install(tmp_path, 'hang_agents', AGENT, monkeypatch)
 
 
 def _command(logs: Path, *extra: str) -> list[str]:
