@@ -12,6 +12,8 @@ import textwrap
 import time
 from pathlib import Path
 
+from plugin_agent import install, source
+
 from ecodrive_bench.bench.harness.executors import run_local
 from ecodrive_bench.bench.harness.pool import Failure, TaskExit
 
@@ -70,39 +72,16 @@ def test_a_ctrl_c_to_the_parent_still_stops_the_pool(tmp_path):
     assert len(list(tmp_path.glob("started-*"))) <= 2  # no further task was started
 
 
-AGENT = textwrap.dedent('''
-    import numpy as np
-
-    class Interrupting:
-        name = "interrupting"
-        action_interface = "parameterized"
-        env_overrides = {}
-
-        def act(self, obs, info, explore=False):
-            if info["travel_time"] >= 3:
-                raise KeyboardInterrupt("pressed inside act")
-            return 1, np.full(3, 0.5, dtype=np.float32)
-
-        def observe(self, *args):
-            return {}
-
-        def state_dict(self):
-            return {}
-
-        def load_state_dict(self, state):
-            pass
-
-    def interrupting(observation_space, action_space):
-        return Interrupting()
-''')
+AGENT = source('''
+    if info["travel_time"] >= 3:
+        raise KeyboardInterrupt("pressed inside act")
+''', ["interrupting"])
 
 
 def test_an_agent_that_raises_keyboard_interrupt_is_one_line_per_failed_episode(tmp_path, monkeypatch, capfd):
     from ecodrive_bench.bench.harness.run_command import main
 
-    (tmp_path / "interrupting_agent.py").write_text(AGENT)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setenv("PYTHONPATH", str(tmp_path))  # the pool's workers import it too
+    install(tmp_path, "interrupting_agent", AGENT, monkeypatch)
     rc = main(["--profile", "smoke", "--logs", str(tmp_path / "logs"), "--methods", "baseline", "--signals",
                "uncoordinated", "--agent", "interrupting_agent:interrupting", "--workers", "2"])
     err = capfd.readouterr().err
