@@ -73,8 +73,8 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...],
     md = ["## Generalisation: held-out corridors (zero-shot)", "",
           f"Run `{run_dir.name}`: {table.variant.nunique()} variant(s) of the generalisation family (version "
           f"{fam.get('version', '?')}, master seed {fam.get('master_seed', '?')}, docs/generalisation.md), "
-          f"{len(table)} episodes; every shipped policy drives them with --transfer (trained on the paper's "
-          "corridor only). Change = method mean / baseline mean - 1 on the same variant, setting and cases: "
+          f"{len(table)} episodes; every shipped policy drives them with --transfer (a specialist trained on the "
+          "paper's corridor, a generalist over the training family, whose corridors are not these). Change = method mean / baseline mean - 1 on the same variant, setting and cases: "
           "negative is less energy or a shorter trip than SUMO's driver (the opposite sign of Table 4's Imp.). "
           "Worst = the largest change over the variants."
           + (" In-dist. = the same change on the paper's corridor (the paper run's 100 cases); gap = family "
