@@ -33,6 +33,9 @@ from ecodrive_bench.bench.harness.workers import TaskExit, Worker, _die_with_par
 RETRIES = 2  # a task whose worker died is run at most 1 + RETRIES times
 HOLD_POLL = 0.05  # [s] how often held-back tasks are asked again while a worker waits for them
 SPAWN_DEATHS = 5  # workers that die this many times in a row before taking any task: give up
+SIGNAL_POLL = 0.5  # [s] the longest wait between looks at signals: the kernel may hand a Ctrl-C or
+# SIGTERM to any thread of the process, and Python runs its handler in the main thread only once
+# that thread wakes, so a wait without a limit could hold a Ctrl-C back until a task ends
 START_S = 300.0  # [s] a worker not ready by then (stopped, stuck in its imports) is replaced
 _NOTHING = object()
 
@@ -187,12 +190,12 @@ class _Pool:
         return False
 
     def _timeout(self, held: bool) -> float | None:
-        """[s] until the next time limit (a task's, a worker's start), ``HOLD_POLL`` at most
-        while tasks are held back; None: no limit."""
+        """[s] until the next time limit (a task's, a worker's start), ``HOLD_POLL`` at most while
+        tasks are held back, ``SIGNAL_POLL`` at most otherwise."""
         ends = [w.deadline for w in self.workers if w.tid is not None and w.deadline is not None]
         ends += [w.born + START_S for w in self.workers if not w.ready]
-        out = max(0.0, min(ends) - time.monotonic()) if ends else None
-        return (HOLD_POLL if out is None else min(out, HOLD_POLL)) if held else out
+        out = max(0.0, min(ends) - time.monotonic()) if ends else SIGNAL_POLL
+        return min(out, HOLD_POLL if held else SIGNAL_POLL)
 
     def _reply(self, w: Worker, msg: Any) -> Any:
         """The result in ``msg``, or ``_NOTHING`` (a failure handed on, a ready note, a stray)."""
@@ -272,7 +275,8 @@ class _Pool:
         busy = [w for w in self.workers if w.tid is not None]
         while busy:
             ends = [w.deadline for w in busy if w.deadline is not None]
-            timeout = max(0.0, min(ends) - time.monotonic()) if len(ends) == len(busy) else None
+            timeout = min(max(0.0, min(ends) - time.monotonic()) if len(ends) == len(busy) else SIGNAL_POLL,
+                          SIGNAL_POLL)
             ready = set(wait([w.conn for w in busy] + [w.proc.sentinel for w in busy], timeout=timeout))
             now = time.monotonic()
             for w in list(busy):

@@ -157,6 +157,32 @@ def test_ctrl_c_kills_a_stopped_worker_at_once(tmp_path):
     assert not _workers()
 
 
+def test_a_ctrl_c_that_another_thread_receives_still_stops_the_pool_in_a_second(tmp_path):
+    """The kernel hands a process's SIGINT to any thread that does not block it; Python then runs
+    the handler in the main thread only when that thread wakes. With the main thread blocking
+    SIGINT here, the helper thread receives it: the pool's waits are bounded (``SIGNAL_POLL``), so
+    the KeyboardInterrupt comes within a second, not at the task's 30 s limit."""
+    import threading
+
+    sent = []
+
+    def interrupt() -> None:
+        while not (tmp_path / "hang-a.pid").exists():
+            time.sleep(0.05)
+        sent.append(time.monotonic())
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=interrupt, daemon=True).start()  # started before the block: it can receive SIGINT
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            list(run_pool([(str(tmp_path), "hang-a")], 1, job, limit=lambda t: 30.0))
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+    assert time.monotonic() - sent[0] < 1 + pool.SIGNAL_POLL
+    assert _gone(_pid(tmp_path, "hang-a")) and not _workers()
+
+
 def test_closing_the_pool_kills_a_stopped_worker_at_once(tmp_path):
     """The caller stops reading (an exception of its own, Ctrl-C in its loop): closing the pool
     kills every worker within seconds, a stopped one too."""
