@@ -1,12 +1,20 @@
 from __future__ import annotations
 
 import os
+import signal
 import tempfile
 from pathlib import Path
 
 import pytest
 
 import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
+
+# The suite tests Ctrl-C handling. A pytest started with SIGINT ignored (under nohup, or as a
+# background job of a non-interactive shell) gets Python's handler back, so the pool tests can
+# interrupt it, and its subprocesses start with SIGINT's default action (a caught signal is reset
+# at exec; an ignored one would stay ignored).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # keep Rerun's config/data out of the user's home during tests
 _XDG = Path(tempfile.mkdtemp(prefix="ecodrive-xdg-"))
