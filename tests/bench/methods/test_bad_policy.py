@@ -130,7 +130,7 @@ def test_check_policy_accepts_every_shipped_policy():
     folders = sorted(MODELS.glob("*-*/s*"))
     assert folders
     for folder in folders:
-        check_policy(folder, folder.parent.name.split("-")[0])
+        check_policy(folder, folder.parent.name.rsplit("-", 1)[0])  # <method>-<signals>: prl-family-coordinated
 
 
 def test_the_worker_refuses_a_wrong_structure_as_a_checkpoint_error(tmp_path):

@@ -51,7 +51,7 @@ def test_the_shipped_policies_load_as_data():
     folders = sorted(MODELS.glob("*-*/s*"))
     assert len(folders) >= 8
     for folder in folders:
-        method = folder.parent.name.split("-")[0]
+        method = folder.parent.name.rsplit("-", 1)[0]  # <method>-<signals>: prl-family-coordinated
         state, _ = load_policy(folder, method)
         assert state
 
