@@ -118,7 +118,8 @@ def records(path: Path, f: IO[bytes], expand: bool = True, budget: Budget | None
     chunk's records in its place (``expand``) or the chunk itself, never decompressed (not
     ``expand``; ``chunk_records`` with the same ``budget`` expands one). The data section's CRC is
     checked at its end. Raises ``LogError`` past a limit, mcap's errors (``McapError``,
-    ``ValueError``, ``struct.error``) where the file is corrupt or ends early."""
+    ``ValueError``, ``struct.error``) where the file is corrupt, ends early or goes on past its
+    closing magic."""
     size = os.fstat(f.fileno()).st_size - f.tell()
     budget = budget or Budget(path)
     stream = ReadDataStream(io.BufferedReader(_Clamped(f, size)), calculate_crc=True)
@@ -152,6 +153,8 @@ def records(path: Path, f: IO[bytes], expand: bool = True, budget: Budget | None
             yield rec
         if isinstance(rec, Footer):
             read_magic(stream)
+            if stream.count != size:  # the writer ends a file with its closing magic
+                raise McapError(f"{size - stream.count} bytes after the closing magic")
             return
 
 

@@ -170,3 +170,17 @@ def test_a_plan_record_without_a_trajectory_is_drawn_without_one(craft, tmp_path
     path = craft.write_log(tmp_path / "case-000.mcap", plan_json=json.dumps({"rounds": [{"round": 0, "cost": 1.0}]}))
     assert read_log(path).plan == {"rounds": [{"round": 0, "cost": 1.0}]}
     assert view.main([str(path), "--save", str(tmp_path / "out.rrd")]) == 0, capsys.readouterr().err
+
+
+def test_bytes_after_the_closing_magic_make_a_log_unreadable(craft, tmp_path):
+    """The writer ends a file with its closing magic: a log that goes on is damaged, for the
+    reader and for the harness's check before reusing a finished log."""
+    from ecodrive_bench.bench.harness.steplogs import check
+
+    path = craft.write_log(tmp_path / "case-000.mcap")
+    assert read_log(path).complete
+    path.write_bytes(path.read_bytes() + b"\0")
+    with pytest.raises(Exception, match="1 bytes after the closing magic"):
+        with open(path, "rb") as f:
+            list(bounded.records(path, f))
+    assert "unreadable" in check(path)
