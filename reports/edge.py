@@ -21,8 +21,9 @@ METRICS = ("cost", "energy")
 
 def _scores(method: pd.DataFrame, reference: pd.DataFrame, metric: str, groups: list[str]) -> np.ndarray | None:
     """[seeds, cases of every group] matrix whose mean is the mean over ``groups`` of each group's
-    edge: column (g, c) holds (r_gc - m_sgc) / (R_g n_g G), scaled by the number of columns. None
-    where a seed misses a case that the reference ran or no case is shared."""
+    edge: column (g, c) holds (r_gc - m_sgc) / (R_g n_g G), scaled by the number of columns. A group
+    where a seed misses a case that the reference ran, or that shares no case, is left out; None
+    where no group is left."""
     cols, seeds = [], sorted(set(method.train_seed))
     parts = list(method.groupby(groups)) if groups else [((), method)]
     refs = dict(list(reference.groupby(groups))) if groups else {(): reference}
@@ -71,13 +72,9 @@ def edges(results: pd.DataFrame, phi: float, methods: tuple[str, ...] | None = N
                 lo, hi = stratified_seed_bootstrap(scores)
                 row.update({metric: float(scores.mean()), f"{metric}_ci_low": lo, f"{metric}_ci_high": hi})
                 if groups:
-                    per = []
-                    for key, g in m.groupby(groups):
-                        key = key if isinstance(key, tuple) else (key,)
-                        r = ref[np.logical_and.reduce([ref[c] == v for c, v in zip(groups, key)])]
-                        one = _scores(g, r, metric, []) if not r.empty else None
-                        if one is not None:
-                            per.append(float(one.mean()))
-                    row[f"{metric}_worst"] = min(per) if per else np.nan
+                    refs = dict(list(ref.groupby(groups)))
+                    per = [one.mean() for key, g in m.groupby(groups) if key in refs
+                           for one in [_scores(g, refs[key], metric, [])] if one is not None]
+                    row[f"{metric}_worst"] = float(min(per)) if per else np.nan
             rows.append(row)
     return pd.DataFrame(rows)

@@ -13,7 +13,7 @@ import pandas as pd
 
 from ecodrive_bench.bench.io import atomic_csv
 
-from . import figures, metrics, tables, top
+from . import figures, headline, metrics, tables, top
 from .edge import edges
 from .headline import LEARNED
 from .load import RunError
@@ -96,8 +96,7 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...],
     per["energy_change"], per["time_change"] = per.energy_change.map(_percent), per.time_change.map(_percent)
     md += ["Per variant (energy [Wh], travel time [s], changes [%]):", "",
            tables.frame_markdown(per.set_index(["signals", "variant", "method"]), digits=1)]
-    phis = {sig: float(manifest.get("scenario", {}).get(sig, {}).get("reward", {}).get("phi", 1.0))
-            for sig in set(table.signals)}
+    phis = headline.phis(table, manifest)
     md += specialists_against_generalists(table, in_distribution, phis)
     md += top_of_scale(table, phis)
     images = []

@@ -275,8 +275,8 @@ class _Pool:
         busy = [w for w in self.workers if w.tid is not None]
         while busy:
             ends = [w.deadline for w in busy if w.deadline is not None]
-            timeout = min(max(0.0, min(ends) - time.monotonic()) if len(ends) == len(busy) else SIGNAL_POLL,
-                          SIGNAL_POLL)
+            timeout = (min(max(0.0, min(ends) - time.monotonic()), SIGNAL_POLL) if len(ends) == len(busy)
+                       else SIGNAL_POLL)
             ready = set(wait([w.conn for w in busy] + [w.proc.sentinel for w in busy], timeout=timeout))
             now = time.monotonic()
             for w in list(busy):
