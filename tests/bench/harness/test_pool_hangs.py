@@ -146,6 +146,8 @@ def test_ctrl_c_kills_a_stopped_worker_at_once(tmp_path):
 
     def interrupt() -> None:
         stopped.append(_stopped(tmp_path, "stop-a"))
+        while not (tmp_path / "hang-b.pid").exists():  # both workers are in their task
+            time.sleep(0.05)
         sent.append(time.monotonic())
         os.kill(os.getpid(), signal.SIGINT)
 
