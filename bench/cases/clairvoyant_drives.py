@@ -33,7 +33,7 @@ from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
 
 FILE = Path(__file__).with_name("clairvoyant_drives.parquet")
-VERSION = 1  # [-] of the planner's drives: bump with any change that moves one
+VERSION = 2  # [-] of the planner's drives: bump with any change that moves one
 META_KEY = b"ecodrive_clairvoyant_drives"
 MAX_BYTES = 16 << 20  # [bytes] a larger file is refused before it is read
 REBUILD = "ecodrive cases --write --clairvoyant"

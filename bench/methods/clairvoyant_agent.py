@@ -15,9 +15,11 @@ behind at SUMO's minGap plus Krauss' safe distance (``gap_caps``). Every ``LANE_
 plans the same way in the lanes beside its own, and changes to one whose plan costs
 ``LANE_GAIN`` less. Because the ego's own presence changes the traffic a little (a vehicle that
 changes lanes in front of it, one that it holds up), ``prepare`` records again from its own drive
-and drives once more, up to ``ROUNDS`` drives; the episode replays the round whose drive cost least
-(E + phi T): its actions, one by one, which drive that very episode again, since a case is
-deterministic.
+and drives once more, up to ``ROUNDS`` drives. Each drive is a real closed-loop drive of the case
+through the safety layer; the episode replays the one that cost least (E + phi T), the first
+drive's included (its traffic held at its speed sometimes leads to a cheaper green than the
+recorded future's closer gaps): its actions, one by one, which drive that very episode again,
+since a case is deterministic.
 
 For the fixed cases the chosen drives are shipped (``bench.cases.clairvoyant_drives``): ``prepare``
 reads the case's actions instead of planning, where they answer its problem.
@@ -49,7 +51,7 @@ from ecodrive_bench.envs.config import ScenarioConfig
 LOOKAHEAD = 40  # [steps] of known traffic in each re-plan
 LANE_EVERY = 5  # [steps] between looks at the lanes beside the ego's
 LANE_GAIN = 1.0  # [Wh] a lane beside is taken when its plan costs this much less
-ROUNDS = 3  # [-] record-and-drive rounds per case; the cheapest drive is the method's
+ROUNDS = 3  # [-] drives per case (the first without a recording); the cheapest is the method's
 TOL_V = 0.05  # [m/s] speed drift that leaves the first plan for re-plans (as mpc)
 TOL_X = 0.6  # [m] position drift that does the same (beyond about a row of the global lattice)
 
@@ -93,7 +95,7 @@ class ClairvoyantAgent(NotLearning):
             used = self.tracks
             rec, cost = self._drive(env, case)
             self.rounds.append({"round": r, "cost": round(cost, 4), "recorded": used is not None})
-            if used is not None and (best is None or cost < best[0]):
+            if best is None or cost < best[0]:
                 best = (cost, self.taken)
             self.tracks = Tracks.of(rec)
         assert best is not None
