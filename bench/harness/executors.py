@@ -29,7 +29,7 @@ from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 from ecodrive_bench.bench.io import atomic_bytes
 from ecodrive_bench.bench.methods.errors import install_hint
-from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
+from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS, identity
 
 EXECUTORS = ("local", "ray")
 # an episode's default wall-clock limit on the local pool (``episode_limit``): a fixed allowance for
@@ -158,7 +158,7 @@ def run_task(task: Task) -> dict[str, Any]:
 
         planner = {ORACLE: OracleAgent, MPC: MPCAgent, CLAIRVOYANT: ClairvoyantAgent}[task.method]
         _ENVS[env_key] = env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
-        _AGENTS[key] = (planner(env.cfg), "")
+        _AGENTS[key] = (planner(env.cfg), identity(task.method))
     if env_key not in _ENVS:
         _ENVS[env_key] = make_env(task.method, task.signals, scenario)
     env = _ENVS[env_key]

@@ -40,7 +40,7 @@ from ecodrive_bench.bench.io import Unwritable, atomic_json, atomic_parquet, ref
 from ecodrive_bench.bench.logs.mcaplog import resolve_log
 from ecodrive_bench.bench.methods import external
 from ecodrive_bench.bench.methods.errors import AgentError
-from ecodrive_bench.bench.methods.planners import PLANNERS
+from ecodrive_bench.bench.methods.planners import PLANNERS, identity
 from ecodrive_bench.bench.methods.policies import check_policy, family_dir, policy_dir, shipped_seeds
 from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.envs.config import ScenarioConfig
@@ -188,7 +188,7 @@ def plan(opts: RunOptions, pre: Preflight) -> Plan:
         for method, seed in [(m, sd) for m, s, sd in pre.runs if s == signals]:
             pdir, ev = pre.pdirs[(method, signals, seed)], pre.where[(method, signals, seed)]
             sha = (sha256(Path(pdir) / "policy.pt") if pdir
-                   else pre.codes.get(method) or opts.agent_sha256.get(method, ""))
+                   else pre.codes.get(method) or opts.agent_sha256.get(method, "") or identity(method))
             if sha:
                 todo.shas[policy_key(method, signals, seed)] = sha
             folder = opts.run_dir / signals / method / (f"s{seed}" if seed >= 0 else "")

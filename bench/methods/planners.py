@@ -16,3 +16,17 @@ ORACLE = "oracle"
 MPC = "mpc"
 CLAIRVOYANT = "clairvoyant"
 PLANNERS = (ORACLE, MPC, CLAIRVOYANT)
+
+
+def identity(method: str) -> str:
+    """What a planner's step logs record as their ``agent_sha256``, so that a run reuses a log only
+    if the same planner wrote it: for ``clairvoyant``, the sha256 of its drives' ``VERSION``
+    (``bench.cases.clairvoyant_drives``: bumped with any change that moves a drive); "" for
+    every other method, whose logs record no identity."""
+    if method != CLAIRVOYANT:
+        return ""
+    import hashlib
+
+    from ecodrive_bench.bench.cases.clairvoyant_drives import VERSION
+
+    return hashlib.sha256(f"clairvoyant drives version {VERSION}".encode()).hexdigest()

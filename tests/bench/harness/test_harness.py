@@ -223,3 +223,21 @@ def test_the_logged_raw_action_is_every_number_of_the_action_as_a_float(action):
     want = [float(v) for part in parts for v in np.ravel(part)]
     got = _flatten(action)
     assert got == want and all(type(v) is float for v in got)
+
+
+def test_a_clairvoyant_log_of_other_drives_runs_again(tmp_path, monkeypatch):
+    """A clairvoyant step log records its drives' version (``planners.identity``): once the drives
+    change (another ``VERSION``), a rerun plans the case again instead of reusing the log."""
+    from ecodrive_bench.bench.cases.case import load as load_cases
+    from ecodrive_bench.bench.harness import run as run_module
+    from ecodrive_bench.bench.methods import planners
+
+    opts = dataclasses.replace(parse(["--profile", "smoke", "--logs", str(tmp_path), "--workers", "1", "--methods",
+                                      "clairvoyant", "--signals", "coordinated"]), cases=load_cases()[:1])
+    assert len(run(opts, progress=False)) == 1
+    todo = run_module.plan(opts, run_module.preflight(opts))
+    assert len(todo.reused) == 1 and not todo.tasks
+    assert todo.shas["clairvoyant-coordinated"] == planners.identity("clairvoyant") != ""
+    monkeypatch.setattr(run_module, "identity", lambda m: "0" * 64)  # drives of another version
+    todo = run_module.plan(opts, run_module.preflight(opts))
+    assert not todo.reused and len(todo.tasks) == 1
