@@ -42,6 +42,7 @@ def test_a_chosen_drive_repeats_step_for_step_with_its_traffic():
     _, agent, [(a, cost_a), (b, cost_b)] = _chosen_drives(None, 2)
     assert cost_a == cost_b and cost_a == pytest.approx(agent.rounds[-1]["chosen_cost"], abs=1e-4)  # rounded there
     assert agent.rounds[-1]["chosen_cost"] == min(r["cost"] for r in agent.rounds[:-1])  # the cheapest, the first included
+    assert [r.get("steady", False) for r in agent.rounds[:-1]] == [False] * (len(agent.rounds) - 2) + [True]
     assert a.t0 == b.t0 and np.array_equal(a.ego_x, b.ego_x) and len(a.traffic) == len(b.traffic)
     for (ids_a, rows_a), (ids_b, rows_b) in zip(a.traffic, b.traffic):
         assert ids_a == ids_b and np.array_equal(rows_a, rows_b)
