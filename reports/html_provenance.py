@@ -84,8 +84,8 @@ def provenance_section(page: Page) -> str:
         cells = "".join(f"<tr><th scope='row'>{esc(k)}</th><td><code class='sha'>{esc(v)}</code></td></tr>"
                         for k, v in shas.items())
         out.append("<table class='kv'><caption>Policies evaluated: sha256 of each <code>policy.pt</code> "
-                   "(<code>models/&lt;method&gt;-&lt;signals&gt;/s&lt;seed&gt;/</code>), of a plug-in agent's code, or of "
-                   "<code>clairvoyant</code>'s drives version.</caption><tbody>"
+                   "(<code>models/&lt;method&gt;-&lt;signals&gt;/s&lt;seed&gt;/</code>), of a plug-in agent's code, or of a planner's "
+                   "versions.</caption><tbody>"
                    f"{cells}</tbody></table></div>")
     else:
         out.append("<p>No learned policy in this run (rule-based methods only): no checkpoint hashes.</p></div>")

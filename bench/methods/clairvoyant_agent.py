@@ -92,31 +92,36 @@ class ClairvoyantAgent(NotLearning):
             if self.actions is not None:
                 self.rounds = [{"shipped": str(self.shipped.name)}]
                 return
-        best: tuple[float, list[tuple[int, float]]] | None = None
-        for r in range(ROUNDS + 1):  # the planned drives, then the steady one
-            used, self.steady = self.tracks, r == ROUNDS
-            rec, cost = self._drive(env, case)
-            self.rounds.append({"round": r, "cost": round(cost, 4), "recorded": used is not None,
-                                **({"steady": True} if self.steady else {})})
-            if best is None or cost < best[0]:
-                best = (cost, self.taken)
-            self.tracks = Tracks.of(rec) if r + 1 < ROUNDS else None
-        self.steady = False
-        assert best is not None
-        self.actions, self.tracks = best[1], None
+        tried = []  # (cost, actions) of each drive
+        for r in range(ROUNDS):  # the planned drives, each but the first on the previous one's recording
+            rec, cost = self._drive(env, case, record=r + 1 < ROUNDS)
+            self.rounds.append({"round": r, "cost": round(cost, 4), "recorded": self.tracks is not None})
+            tried.append((cost, self.taken))
+            self.tracks = Tracks.of(rec) if rec is not None else None
+        self.steady = True
+        try:
+            _, cost = self._drive(env, case, record=False)
+        finally:
+            self.steady = False
+        self.rounds.append({"round": ROUNDS, "cost": round(cost, 4), "recorded": False, "steady": True})
+        tried.append((cost, self.taken))
+        best = min(tried, key=lambda d: d[0])  # the first of equal costs
+        self.actions = best[1]
         self.rounds.append({"chosen_cost": round(best[0], 4), "wall_s": round(time.perf_counter() - started, 3)})
 
-    def _drive(self, env: Any, case: Case) -> tuple[Recording, float]:
+    def _drive(self, env: Any, case: Case, record: bool = True) -> tuple[Recording | None, float]:
+        """One drive of ``case``: its recording (None without ``record``: no drive follows it) and its cost."""
         obs, info = env.reset(seed=case.sumo_seed, options=case.options())
-        xs, traffic = [info["position"]], [env.traffic()]
+        xs, traffic = [info["position"]], [env.traffic()] if record else []
         while True:
             obs, _, terminated, truncated, info = env.step(self.act(obs, info))
             xs.append(info["position"])
-            traffic.append(env.traffic())
+            if record:
+                traffic.append(env.traffic())
             if terminated or truncated:
                 break
-        cost = info["energy"] + env.cfg.reward.phi * info["travel_time"]
-        return Recording(env.t_depart, np.array(xs), tuple(traffic)), float(cost)
+        cost = float(info["energy"] + env.cfg.reward.phi * info["travel_time"])
+        return (Recording(env.t_depart, np.array(xs), tuple(traffic)) if record else None), cost
 
     # ------------------------------------------------------------------ acting
     def _plan(self, k: int, x: float, v: float, lane: int, ids: tuple[str, ...], rows: np.ndarray):

@@ -20,13 +20,18 @@ PLANNERS = (ORACLE, MPC, CLAIRVOYANT)
 
 def identity(method: str) -> str:
     """What a planner's step logs record as their ``agent_sha256``, so that a run reuses a log only
-    if the same planner wrote it: for ``clairvoyant``, the sha256 of its drives' ``VERSION``
-    (``bench.cases.clairvoyant_drives``: bumped with any change that moves a drive); "" for
-    every other method, whose logs record no identity."""
-    if method != CLAIRVOYANT:
+    if the same planner wrote it: the sha256 of the versions its episodes follow (the DP's plans,
+    ``bench.oracle.dp.VERSION``; ``mpc``'s first plans and re-plans, ``bench.oracle.mpc.VERSION``;
+    ``clairvoyant``'s drives, ``bench.cases.clairvoyant_drives.VERSION``; each bumped with any
+    change that moves one); "" for a method that is not a planner."""
+    if method not in PLANNERS:
         return ""
     import hashlib
 
-    from ecodrive_bench.bench.cases.clairvoyant_drives import VERSION
+    from ecodrive_bench.bench.cases.clairvoyant_drives import VERSION as DRIVES
+    from ecodrive_bench.bench.oracle.dp import VERSION as DP
+    from ecodrive_bench.bench.oracle.mpc import VERSION as REPLANS
 
-    return hashlib.sha256(f"clairvoyant drives version {VERSION}".encode()).hexdigest()
+    versions = {ORACLE: f"dp {DP}", MPC: f"dp {DP} mpc {REPLANS}",
+                CLAIRVOYANT: f"dp {DP} mpc {REPLANS} drives {DRIVES}"}[method]
+    return hashlib.sha256(f"{method} {versions}".encode()).hexdigest()

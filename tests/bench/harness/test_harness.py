@@ -238,6 +238,7 @@ def test_a_clairvoyant_log_of_other_drives_runs_again(tmp_path, monkeypatch):
     todo = run_module.plan(opts, run_module.preflight(opts))
     assert len(todo.reused) == 1 and not todo.tasks
     assert todo.shas["clairvoyant-coordinated"] == planners.identity("clairvoyant") != ""
+    assert len({planners.identity(p) for p in planners.PLANNERS} - {""}) == len(planners.PLANNERS)  # one each
     monkeypatch.setattr(run_module, "identity", lambda m: "0" * 64)  # drives of another version
     todo = run_module.plan(opts, run_module.preflight(opts))
     assert not todo.reused and len(todo.tasks) == 1
