@@ -1,6 +1,6 @@
 """The clairvoyant drives of the fixed cases, shipped beside them: ``bench/cases/clairvoyant_drives.parquet``.
 
-Planning a case costs ``clairvoyant`` ``ROUNDS`` planned drives of it and a steady one (4-16 s on one
+Planning a case costs ``clairvoyant`` ``ROUNDS`` planned drives of it and 21 cruises (10-25 s on one
 core), against a fraction of a second for every other method's episode. The drive it chooses is
 fixed by the case, the scenario and the planner, so it is solved once per fixed case of each signal
 setting and shipped as its actions (lane decision and acceleration per step): a run reads them and
@@ -33,7 +33,7 @@ from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
 
 FILE = Path(__file__).with_name("clairvoyant_drives.parquet")
-VERSION = 3  # [-] of the planner's drives: bump with any change that moves one
+VERSION = 4  # [-] of the planner's drives: bump with any change that moves one
 META_KEY = b"ecodrive_clairvoyant_drives"
 MAX_BYTES = 16 << 20  # [bytes] a larger file is refused before it is read
 REBUILD = "ecodrive cases --write --clairvoyant"

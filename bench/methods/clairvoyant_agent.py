@@ -15,10 +15,12 @@ behind at SUMO's minGap plus Krauss' safe distance (``gap_caps``). Every ``LANE_
 plans the same way in the lanes beside its own, and changes to one whose plan costs
 ``LANE_GAIN`` less. Because the ego's own presence changes the traffic a little (a vehicle that
 changes lanes in front of it, one that it holds up), ``prepare`` records again from its own drive
-and drives once more, up to ``ROUNDS`` drives. Last it drives the case steadily: in its lane at
-full throttle, the safety layer's Krauss clip following the traffic (what steady driving would
-cost, which the planner's departure plan, the free-flow optimum, sometimes loses by a cycle when
-a queue stands in its way). Each drive is a real closed-loop drive of the case through the safety
+and drives once more, up to ``ROUNDS`` drives. Last it cruises the case, once per target speed of
+``CRUISE_SPEEDS`` and acceleration cap of ``CRUISE_ACCELS``: in its lane, up to that speed at
+most at that acceleration, the safety layer's Krauss clip following the traffic (steady driving
+at full throttle is one of them). The planner's departure plan, the free-flow optimum, sometimes
+loses a cycle where a queue stands in its way, and a cruise at the right speed catches the greens
+that the queue leaves. Each drive is a real closed-loop drive of the case through the safety
 layer; the episode replays the one that cost least (E + phi T): its actions, one by one, which
 drive that very episode again, since a case is deterministic.
 
@@ -52,7 +54,9 @@ from ecodrive_bench.envs.config import ScenarioConfig
 LOOKAHEAD = 40  # [steps] of known traffic in each re-plan
 LANE_EVERY = 5  # [steps] between looks at the lanes beside the ego's
 LANE_GAIN = 1.0  # [Wh] a lane beside is taken when its plan costs this much less
-ROUNDS = 3  # [-] planned drives per case (the first without a recording), before the steady one
+ROUNDS = 3  # [-] planned drives per case (the first without a recording), before the cruises
+CRUISE_SPEEDS = (1.0, 0.95, 0.9, 0.85, 0.8, 0.75, 0.7)  # [-] target speeds of the cruise drives, shares of the limit
+CRUISE_ACCELS = (None, 1.5, 0.75)  # [m/s^2] their acceleration caps (None: a_max, full throttle)
 TOL_V = 0.05  # [m/s] speed drift that leaves the first plan for re-plans (as mpc)
 TOL_X = 0.6  # [m] position drift that does the same (beyond about a row of the global lattice)
 
@@ -79,7 +83,7 @@ class ClairvoyantAgent(NotLearning):
         self.taken: list[tuple[int, float]] = []  # the drive's actions so far: (k index, acceleration)
         self.actions: list[tuple[int, float]] | None = None  # the chosen drive's, which the episode repeats
         self.step = 0  # actions taken in this episode
-        self.steady = False  # the steady drive: stay in lane at full throttle, the safety layer following
+        self.cruise: tuple[float, float] | None = None  # a cruise drive's (target speed [m/s], acceleration cap [m/s^2])
 
     # ------------------------------------------------------------------ planning
     def prepare(self, env: Any, case: Case) -> None:
@@ -98,13 +102,16 @@ class ClairvoyantAgent(NotLearning):
             self.rounds.append({"round": r, "cost": round(cost, 4), "recorded": self.tracks is not None})
             tried.append((cost, self.taken))
             self.tracks = Tracks.of(rec) if rec is not None else None
-        self.steady = True
-        try:
-            _, cost = self._drive(env, case, record=False)
-        finally:
-            self.steady = False
-        self.rounds.append({"round": ROUNDS, "cost": round(cost, 4), "recorded": False, "steady": True})
-        tried.append((cost, self.taken))
+        for share in CRUISE_SPEEDS:
+            for cap in CRUISE_ACCELS:
+                self.cruise = (share * self.cfg.speed_limit, self.cfg.a_max if cap is None else min(cap, self.cfg.a_max))
+                try:
+                    _, cost = self._drive(env, case, record=False)
+                finally:
+                    self.cruise = None
+                self.rounds.append({"round": len(self.rounds), "cost": round(cost, 4), "recorded": False,
+                                    "cruise": [share, cap if cap is not None else "a_max"]})
+                tried.append((cost, self.taken))
         best = min(tried, key=lambda d: d[0])  # the first of equal costs
         self.actions = best[1]
         self.rounds.append({"chosen_cost": round(best[0], 4), "wall_s": round(time.perf_counter() - started, 3)})
@@ -137,10 +144,17 @@ class ClairvoyantAgent(NotLearning):
             lateral, accel = self.actions[min(self.step, len(self.actions) - 1)]
             self.step += 1
             return lateral, np.full(3, accel, dtype=np.float32)
-        out = ((1, np.full(3, self.cfg.a_max, dtype=np.float32)) if self.steady
-               else self._closed_loop(obs, info))
+        out = self._cruise(obs) if self.cruise is not None else self._closed_loop(obs, info)
         self.taken.append((int(out[0]), float(out[1][0])))
         return out
+
+    def _cruise(self, obs: dict[str, np.ndarray]) -> tuple[int, np.ndarray]:
+        """A cruise drive's action: stay in lane, towards the target speed at most at the cap."""
+        assert self.cruise is not None
+        target, cap = self.cruise
+        v = float(obs["logic"][self.cfg.observed_lanes + 1])
+        accel = min(max((target - v) / self.cfg.step_length, self.cfg.a_min), cap)
+        return 1, np.full(3, accel, dtype=np.float32)
 
     def _follows(self, k: int, x: float, v: float, lane: int, ids: tuple[str, ...], rows: np.ndarray) -> bool:
         """Whether the first plan still holds: the ego on it, and no vehicle ahead in its way over

@@ -7,7 +7,7 @@ import pytest
 
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.cases.setting import setting
-from ecodrive_bench.bench.methods.clairvoyant_agent import ClairvoyantAgent
+from ecodrive_bench.bench.methods.clairvoyant_agent import CRUISE_ACCELS, CRUISE_SPEEDS, ROUNDS, ClairvoyantAgent
 from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.oracle.dp import bound
 
@@ -42,7 +42,9 @@ def test_a_chosen_drive_repeats_step_for_step_with_its_traffic():
     _, agent, [(a, cost_a), (b, cost_b)] = _chosen_drives(None, 2)
     assert cost_a == cost_b and cost_a == pytest.approx(agent.rounds[-1]["chosen_cost"], abs=1e-4)  # rounded there
     assert agent.rounds[-1]["chosen_cost"] == min(r["cost"] for r in agent.rounds[:-1])  # the cheapest, the first included
-    assert [r.get("steady", False) for r in agent.rounds[:-1]] == [False] * (len(agent.rounds) - 2) + [True]
+    cruises = [(share, cap if cap is not None else "a_max") for share in CRUISE_SPEEDS for cap in CRUISE_ACCELS]
+    assert [tuple(r["cruise"]) for r in agent.rounds[:-1] if "cruise" in r] == cruises  # after the planned drives
+    assert ["cruise" in r for r in agent.rounds[:-1]] == [False] * ROUNDS + [True] * len(cruises)
     assert a.t0 == b.t0 and np.array_equal(a.ego_x, b.ego_x) and len(a.traffic) == len(b.traffic)
     for (ids_a, rows_a), (ids_b, rows_b) in zip(a.traffic, b.traffic):
         assert ids_a == ids_b and np.array_equal(rows_a, rows_b)
