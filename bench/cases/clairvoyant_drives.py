@@ -1,7 +1,7 @@
 """The clairvoyant drives of the fixed cases, shipped beside them: ``bench/cases/clairvoyant_drives.parquet``.
 
-Planning a case costs ``clairvoyant`` ``ROUNDS`` planned drives of it and 21 cruises (10-25 s on one
-core), against a fraction of a second for every other method's episode. The drive it chooses is
+Planning a case costs ``clairvoyant`` ``ROUNDS`` planned drives of it and a cruise per speed and
+acceleration cap (a median of 11 s on a loaded core, docs/clairvoyant.md), against a fraction of a second for every other method's episode. The drive it chooses is
 fixed by the case, the scenario and the planner, so it is solved once per fixed case of each signal
 setting and shipped as its actions (lane decision and acceleration per step): a run reads them and
 drives the episode with them, the same episode step for step, at the cost of any episode.

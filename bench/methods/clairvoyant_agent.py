@@ -152,9 +152,14 @@ class ClairvoyantAgent(NotLearning):
         """A cruise drive's action: stay in lane, towards the target speed at most at the cap."""
         assert self.cruise is not None
         target, cap = self.cruise
-        v = float(obs["logic"][self.cfg.observed_lanes + 1])
-        accel = min(max((target - v) / self.cfg.step_length, self.cfg.a_min), cap)
-        return 1, np.full(3, accel, dtype=np.float32)
+        return 1, self._towards(target, float(obs["logic"][self.cfg.observed_lanes + 1]), cap)
+
+    def _towards(self, target: float, v: float, cap: float | None = None) -> np.ndarray:
+        """The acceleration [m/s^2] that brings speed ``v`` to ``target`` in a step, within
+        [a_min, ``cap``] (default a_max), as the action's three copies."""
+        cfg = self.cfg
+        accel = min(max((target - v) / cfg.step_length, cfg.a_min), cfg.a_max if cap is None else cap)
+        return np.full(3, accel, dtype=np.float32)
 
     def _follows(self, k: int, x: float, v: float, lane: int, ids: tuple[str, ...], rows: np.ndarray) -> bool:
         """Whether the first plan still holds: the ego on it, and no vehicle ahead in its way over
@@ -184,8 +189,7 @@ class ClairvoyantAgent(NotLearning):
         ids, rows = self.env.traffic()
         if self.first is not None and self.want is None and self._follows(k, x, v, lane, ids, rows):
             if k % LANE_EVERY != 0:  # on the first plan, between looks at the lanes beside
-                accel = min(max((float(self.first.v[k + 1]) - v) / dt, cfg.a_min), cfg.a_max)
-                return 1, np.full(3, accel, dtype=np.float32)
+                return 1, self._towards(float(self.first.v[k + 1]), v)
         else:
             self.first = None  # from here on every step re-plans on the global lattice
         here = self._plan(k, x, v, lane, ids, rows)
@@ -205,8 +209,7 @@ class ClairvoyantAgent(NotLearning):
             target = float(self.first.v[k + 1])
         else:
             target = float(here.v[1]) if here is not None and len(here.v) > 1 else cfg.speed_limit
-        accel = min(max((target - v) / dt, cfg.a_min), cfg.a_max)
-        return k_index, np.full(3, accel, dtype=np.float32)
+        return k_index, self._towards(target, v)
 
     @property
     def plan_trace(self) -> dict[str, Any] | None:
