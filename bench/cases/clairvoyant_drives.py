@@ -1,21 +1,27 @@
-"""The clairvoyant drives of the fixed cases, shipped beside them: ``bench/cases/clairvoyant_drives.parquet``.
+"""The clairvoyant drives of the fixed cases and the held-out corridors' cases, shipped beside them:
+``bench/cases/clairvoyant_drives.parquet``.
 
-Planning a case costs ``clairvoyant`` ``ROUNDS`` planned drives of it and a cruise per speed and
-acceleration cap (a median of 11 s on a loaded core, docs/clairvoyant.md), against a fraction of a second for every other method's episode. The drive it chooses is
-fixed by the case, the scenario and the planner, so it is solved once per fixed case of each signal
-setting and shipped as its actions (lane decision and acceleration per step): a run reads them and
-drives the episode with them, the same episode step for step, at the cost of any episode.
+Planning a case costs ``clairvoyant`` a drive of SUMO's driver, ``ROUNDS`` planned drives and a
+cruise per speed and acceleration cap (a median of 11 s on a loaded core, docs/clairvoyant.md),
+against a fraction of a second for every other method's episode. Its choice among them couples
+the cases of a set (a corridor and signal setting: ``case_sets``): the set's price of time
+(``bench.oracle.time_price``) makes its mean travel time no more than SUMO's driver's. So every
+case of every set is planned once and shipped as the chosen drive's actions (lane decision and
+acceleration per step), with the set's price: a run reads them and drives the episode with them,
+the same episode step for step, at the cost of any episode.
 
 A row answers a case only if its key is the case's: ``scenario_digest``
 (``bench.cases.shipped_bounds.problem_digest``: the scenario and the built corridor), the
-planner's ``VERSION``, and the case's SUMO seed and insertion time. Anything else (another corridor,
-the generalisation profile) is planned in the run. The table's content digest is checked on
-reading; an edited or damaged file is one line on stderr and every case is planned.
+planner's ``VERSION``, and the case's SUMO seed and insertion time. Anything else (another corridor
+or case) is planned in the run, on its own, at a price of 0: the cheapest drive. The table's
+content digest is checked on reading; an edited or damaged file is one line on stderr and every
+case is planned.
 
-    ecodrive cases --write --clairvoyant [--workers N]   # every fixed case of both settings
+    ecodrive cases --write --clairvoyant [--workers N]   # every set; a set already current is kept
     ecodrive cases --check                               # re-plans CHECK_PER_SETTING cases per setting
 
-(``bench.methods.clairvoyant_agent.write`` and ``check``). The check compares the lane decisions exactly and the accelerations and the cost within the
+(``bench.harness.case_files.write_clairvoyant``, ``bench.methods.clairvoyant_agent.check``). The
+check compares the lane decisions exactly and the accelerations and the cost within the
 cross-host tolerances (``bench.hosts``).
 """
 from __future__ import annotations
@@ -33,14 +39,15 @@ from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
 
 FILE = Path(__file__).with_name("clairvoyant_drives.parquet")
-VERSION = 4  # [-] of the planner's drives: bump with any change that moves one
+VERSION = 5  # [-] of the planner's drives and their choice: bump with any change that moves one
 META_KEY = b"ecodrive_clairvoyant_drives"
 MAX_BYTES = 16 << 20  # [bytes] a larger file is refused before it is read
 REBUILD = "ecodrive cases --write --clairvoyant"
 CHECK_PER_SETTING = 1  # [cases] re-planned per setting by `ecodrive cases --check`
 ACCEL_RTOL = 1e-6  # [-] float32 accelerations computed from SUMO's speeds and the DP's lattice
-COLUMNS = ("signals", "case", "sumo_seed", "insert_time", "scenario_digest", "version", "cost", "rounds",
-           "lateral", "accel")
+COLUMNS = ("corridor", "signals", "case", "sumo_seed", "insert_time", "scenario_digest", "version", "cost",
+           "travel_time", "sumo_driver_time", "time_price", "rounds", "lateral", "accel")
+PAPER = "paper"  # the corridor name of the fixed cases' sets
 
 
 class DrivesError(ValueError):
@@ -57,7 +64,7 @@ def save(frame: pd.DataFrame, path: Path = FILE) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    frame = frame[list(COLUMNS)].sort_values(["signals", "case"], ignore_index=True)
+    frame = frame[list(COLUMNS)].sort_values(["corridor", "signals", "case"], ignore_index=True)
     meta = {"version": VERSION, "sha256": content_sha256(frame), "rows": len(frame)}
     tab = pa.Table.from_pandas(frame, preserve_index=False).replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
     with atomic_file(path) as f:
@@ -95,12 +102,23 @@ def lookup(cfg: Any, case: Case, path: Path = FILE) -> list[tuple[int, float]] |
     return None if hit is None else [(int(a), float(b)) for a, b in zip(*hit)]
 
 
-def entry(signals: str, case: Case, cfg: Any, agent: Any) -> dict[str, Any]:
-    """A row from a prepared ``ClairvoyantAgent`` (its chosen drive)."""
-    from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
+def case_sets() -> list[tuple[str, str, dict[str, Any] | None, tuple[Case, ...]]]:
+    """Every shipped set: (corridor, signals, scenario overrides or None, cases), the fixed cases'
+    per setting, then each held-out variant's per setting (``bench.cases.heldout``)."""
+    from ecodrive_bench.bench.cases import case, heldout
+    from ecodrive_bench.envs.config import SIGNALS
 
-    chosen = agent.rounds[-1]
-    return {"signals": signals, "case": case.index, "sumo_seed": case.sumo_seed, "insert_time": float(case.insert_time),
-            "scenario_digest": problem_digest(cfg), "version": VERSION, "cost": float(chosen["chosen_cost"]),
-            "rounds": len(agent.rounds) - 1, "lateral": [int(a) for a, _ in agent.actions],
-            "accel": [float(b) for _, b in agent.actions]}
+    fixed = tuple(case.load())
+    sets = [(PAPER, s, None, fixed) for s in SIGNALS]
+    return sets + [(v.name, s, v.scenario, v.cases) for v in heldout.load() for s in SIGNALS]
+
+
+def entry(planned: dict[str, Any], price: float, chosen: int) -> dict[str, Any]:
+    """A row: drive ``chosen`` of a planned case (``bench.methods.clairvoyant_agent.solve``) at its set's ``price``."""
+    c: Case = planned["case"]
+    lateral, accel = zip(*planned["actions"][chosen]) if planned["actions"][chosen] else ((), ())
+    return {"corridor": planned["corridor"], "signals": planned["signals"], "case": c.index, "sumo_seed": c.sumo_seed,
+            "insert_time": float(c.insert_time), "scenario_digest": planned["digest"], "version": VERSION,
+            "cost": float(planned["costs"][chosen]), "travel_time": float(planned["times"][chosen]),
+            "sumo_driver_time": float(planned["limit"]), "time_price": float(price), "rounds": len(planned["costs"]),
+            "lateral": [int(a) for a in lateral], "accel": [float(b) for b in accel]}

@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
                        help="write or check a corridor family instead: train (the training and validation splits, "
                             "envs/families/train.json, bench.cases.train_family) or test (the held-out family)")
     which.add_argument("--clairvoyant", action="store_true",
-                       help="write or check the clairvoyant drives of the fixed cases only "
+                       help="write or check the clairvoyant drives of the fixed and held-out cases only "
                             "(bench/cases/clairvoyant_drives.parquet, bench.methods.clairvoyant_agent)")
     which.add_argument("--bounds", action="store_true",
                        help="write or check the shipped bounds only (bench/cases/shipped_bounds.parquet, "
@@ -91,19 +91,43 @@ def clairvoyant(prog: str, write: bool, workers: int) -> int:
 
 
 def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[str]:
-    """Plan every fixed case of both settings and ship the chosen drives (about 10 s a case)."""
+    """Plan every case of every set (``bench.cases.clairvoyant_drives.case_sets``, about 10 s a
+    case) and ship the chosen drives; a set whose rows are current (this ``VERSION``, scenario and
+    cases) is kept as it is. The file is saved as each set completes, so a stopped write keeps them."""
     import pandas as pd
 
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
+    from ecodrive_bench.bench.cases.setting import setting
+    from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
     from ecodrive_bench.bench.harness.executors import run_local
-    from ecodrive_bench.bench.methods.clairvoyant_agent import solve
+    from ecodrive_bench.bench.methods.clairvoyant_agent import choose_set, solve
     from ecodrive_bench.bench.progress import bar
-    from ecodrive_bench.envs.config import SIGNALS
 
-    tasks = [(s, c) for s in SIGNALS for c in case.load()]
-    rows = list(bar(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
-                    enabled=progress))
-    drives.save(pd.DataFrame(rows), path)
+    try:
+        frame = drives.read(path) if path.exists() else None
+    except drives.DrivesError:
+        frame = None  # damaged or of another layout: every set is planned
+    kept, todo = [], {}
+    for corridor, s, scenario, cases in drives.case_sets():
+        have = None if frame is None else frame[(frame.corridor == corridor) & (frame.signals == s)]
+        want = {(c.sumo_seed, float(c.insert_time)) for c in cases}
+        if have is not None and len(have) == len(cases) and set(have.version) == {drives.VERSION} \
+                and set(have.scenario_digest) == {problem_digest(setting(s, scenario))} \
+                and {(int(r.sumo_seed), float(r.insert_time)) for r in have.itertuples()} == want:
+            kept.append(have)
+        else:
+            todo[(corridor, s)] = [(corridor, s, scenario, c) for c in cases]
+    tasks = [t for ts in todo.values() for t in ts]
+    done: dict[tuple[str, str], list[dict]] = {key: [] for key in todo}
+    for planned in bar(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
+                       enabled=progress):
+        key = (planned["corridor"], planned["signals"])
+        done[key].append(planned)
+        if len(done[key]) == len(todo[key]):  # the set is complete: its price, its rows, saved
+            kept.append(pd.DataFrame(choose_set(sorted(done[key], key=lambda p: p["case"].index))))
+            drives.save(pd.concat(kept, ignore_index=True), path)
+    if not todo and frame is not None:
+        print(f"{path.name}: every set is current; nothing to plan")
     return []
 
 

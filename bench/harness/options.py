@@ -103,7 +103,7 @@ def parser() -> Parser:
                     help=f"among {', '.join([*METHODS, *PLANNERS, *users])} (default: every method with a shipped "
                          f"policy; {ORACLE} (the cost-optimal plan replayed, a DP solve per case), {MPC} (re-plans "
                          f"on the DP in closed loop, a few s per case), {CLAIRVOYANT} (knows the case's future traffic; "
-                         "its drives of the fixed cases are shipped, other cases some 5-30 s each) and installed "
+                         "its drives of the fixed and held-out cases are shipped, other cases some 5-30 s each) and installed "
                          f"agents of the entry-point group {GROUP} run when named)")
     ap.add_argument("--planners", action="store_true",
                     help=f"also run the planners, {ORACLE}, {MPC} and {CLAIRVOYANT}, besides the methods (the default ones or "

@@ -21,11 +21,18 @@ most at that acceleration, the safety layer's Krauss clip following the traffic 
 at full throttle is one of them). The planner's departure plan, the free-flow optimum, sometimes
 loses a cycle where a queue stands in its way, and a cruise at the right speed catches the greens
 that the queue leaves. Each drive is a real closed-loop drive of the case through the safety
-layer; the episode replays the one that cost least (E + phi T): its actions, one by one, which
-drive that very episode again, since a case is deterministic.
+layer, and before them ``prepare`` lets SUMO's driver (the ``baseline`` method) drive the case on an
+env of its own, for its travel time.
 
-For the fixed cases the chosen drives are shipped (``bench.cases.clairvoyant_drives``): ``prepare``
-reads the case's actions instead of planning, where they answer its problem.
+The episode replays the chosen drive: its actions, one by one, which drive that very episode
+again, since a case is deterministic. Which drive is chosen couples the cases of a set (a corridor
+and signal setting): the reference is the least mean cost E + phi T whose mean travel time is no
+more than SUMO's driver's, and a set's price of time lambda (``bench.oracle.time_price``) makes
+each case take the drive of least E + (phi + lambda) T; lambda is 0 where the cheapest drives
+already meet SUMO's driver's mean time. The fixed cases' and the held-out corridors' sets are
+planned whole and their chosen drives shipped (``bench.cases.clairvoyant_drives``, ``solve`` and
+``choose_set``): ``prepare`` reads the case's actions instead of planning, where they answer its
+problem. A case planned on its own, with no set, takes its cheapest drive (lambda 0).
 
 It drives the ``parameterized`` action: the lane decision (the LC2013 mask may refuse it) and the
 acceleration that brings its speed to the plan's next one, through the same safety layer as
@@ -39,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from ecodrive_bench.agents.baseline import BaselineAgent
 from ecodrive_bench.bench.cases import clairvoyant_drives as drives
 from ecodrive_bench.bench.cases import shipped_bounds
 from ecodrive_bench.bench.cases.case import Case
@@ -49,8 +57,10 @@ from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
 from ecodrive_bench.bench.oracle.dp import Corridor
 from ecodrive_bench.bench.oracle.mpc import HEADWAY, MIN_GAP
+from ecodrive_bench.bench.oracle.time_price import pick, time_price
 from ecodrive_bench.envs.config import ScenarioConfig
 
+BASELINE = BaselineAgent.name  # SUMO's driver, whose travel time on the case bounds the drive's
 LOOKAHEAD = 40  # [steps] of known traffic in each re-plan
 LANE_EVERY = 5  # [steps] between looks at the lanes beside the ego's
 LANE_GAIN = 1.0  # [Wh] a lane beside is taken when its plan costs this much less
@@ -87,7 +97,7 @@ class ClairvoyantAgent(NotLearning):
 
     # ------------------------------------------------------------------ planning
     def prepare(self, env: Any, case: Case) -> None:
-        """Record ``case`` and pick the drive the episode repeats (module docstring)."""
+        """Pick the drive the episode repeats: the shipped one, else the cheapest of ``plan``'s."""
         started = time.perf_counter()
         self.env, self.lane_y = env, env.files.lane_y
         self.tracks, self.rounds, self.actions = None, [], None
@@ -96,28 +106,38 @@ class ClairvoyantAgent(NotLearning):
             if self.actions is not None:
                 self.rounds = [{"shipped": str(self.shipped.name)}]
                 return
-        tried = []  # (cost, actions) of each drive
+        tried = self.plan(env, case)
+        best = tried[pick(np.array([d[0] for d in tried]), np.array([d[1] for d in tried]), 0.0)]
+        self.actions = best[2]
+        self.rounds.append({"chosen_cost": round(best[0], 4), "chosen_time": best[1], "time_price": 0.0,
+                            "wall_s": round(time.perf_counter() - started, 3)})
+
+    def plan(self, env: Any, case: Case) -> list[tuple[float, float, list[tuple[int, float]]]]:
+        """Every drive of ``case`` (module docstring): (cost, travel time [s], actions) each, in the
+        order driven; ``rounds`` gets SUMO's driver's time and each drive's cost and time."""
+        self.env, self.lane_y = env, env.files.lane_y
+        self.tracks, self.rounds, self.actions = None, [{"sumo_driver_time": sumo_driver_time(env, case)}], None
+        tried = []
         for r in range(ROUNDS):  # the planned drives, each but the first on the previous one's recording
-            rec, cost = self._drive(env, case, record=r + 1 < ROUNDS)
-            self.rounds.append({"round": r, "cost": round(cost, 4), "recorded": self.tracks is not None})
-            tried.append((cost, self.taken))
+            rec, cost, took = self._drive(env, case, record=r + 1 < ROUNDS)
+            self.rounds.append({"round": r, "cost": round(cost, 4), "time": took, "recorded": self.tracks is not None})
+            tried.append((cost, took, self.taken))
             self.tracks = Tracks.of(rec) if rec is not None else None
         for share in CRUISE_SPEEDS:
             for cap in CRUISE_ACCELS:
                 self.cruise = (share * self.cfg.speed_limit, self.cfg.a_max if cap is None else min(cap, self.cfg.a_max))
                 try:
-                    _, cost = self._drive(env, case, record=False)
+                    _, cost, took = self._drive(env, case, record=False)
                 finally:
                     self.cruise = None
-                self.rounds.append({"round": len(self.rounds), "cost": round(cost, 4), "recorded": False,
-                                    "cruise": [share, cap if cap is not None else "a_max"]})
-                tried.append((cost, self.taken))
-        best = min(tried, key=lambda d: d[0])  # the first of equal costs
-        self.actions = best[1]
-        self.rounds.append({"chosen_cost": round(best[0], 4), "wall_s": round(time.perf_counter() - started, 3)})
+                self.rounds.append({"round": len(self.rounds) - 1, "cost": round(cost, 4), "time": took,
+                                    "recorded": False, "cruise": [share, cap if cap is not None else "a_max"]})
+                tried.append((cost, took, self.taken))
+        return tried
 
-    def _drive(self, env: Any, case: Case, record: bool = True) -> tuple[Recording | None, float]:
-        """One drive of ``case``: its recording (None without ``record``: no drive follows it) and its cost."""
+    def _drive(self, env: Any, case: Case, record: bool = True) -> tuple[Recording | None, float, float]:
+        """One drive of ``case``: its recording (None without ``record``: no drive follows it), its
+        cost (E + phi T) and its travel time [s]."""
         obs, info = env.reset(seed=case.sumo_seed, options=case.options())
         xs, traffic = [info["position"]], [env.traffic()] if record else []
         while True:
@@ -128,7 +148,7 @@ class ClairvoyantAgent(NotLearning):
             if terminated or truncated:
                 break
         cost = float(info["energy"] + env.cfg.reward.phi * info["travel_time"])
-        return (Recording(env.t_depart, np.array(xs), tuple(traffic)) if record else None), cost
+        return (Recording(env.t_depart, np.array(xs), tuple(traffic)) if record else None), cost, float(info["travel_time"])
 
     # ------------------------------------------------------------------ acting
     def _plan(self, k: int, x: float, v: float, lane: int, ids: tuple[str, ...], rows: np.ndarray):
@@ -217,42 +237,75 @@ class ClairvoyantAgent(NotLearning):
         return {"rounds": self.rounds} if self.rounds else None
 
 
-def solve(task: tuple[str, Case]) -> dict[str, Any]:
-    """One fixed case planned from scratch (in a worker)."""
+def sumo_driver_time(env: Any, case: Case) -> float:
+    """SUMO's driver's travel time [s] on ``case`` on ``env``'s corridor: the ``baseline`` method's
+    episode of it (the same case and scenario give the same episode), on an env of its own."""
+    from ecodrive_bench.bench.methods.env import make_env
+
+    other = make_env(BASELINE, env.cfg.signals, env.cfg.to_dict())
+    try:
+        _, info = other.reset(seed=case.sumo_seed, options=case.options())
+        while True:
+            _, _, terminated, truncated, info = other.step(0)
+            if terminated or truncated:
+                return float(info["travel_time"])
+    finally:
+        other.close()
+
+
+def solve(task: tuple[str, str, dict[str, Any] | None, Case]) -> dict[str, Any]:
+    """Every drive of one case of a set (corridor, signals, scenario overrides, case), planned from
+    scratch in a worker: their costs, times and actions, and SUMO's driver's time (``limit``)."""
     from ecodrive_bench.bench.cases.setting import setting
     from ecodrive_bench.bench.methods.env import make_env
 
-    signals, case = task
-    cfg = setting(signals, None)
+    corridor, signals, scenario, case = task
+    cfg = setting(signals, scenario)
     agent = ClairvoyantAgent(cfg, shipped=None)
-    env = make_env(agent, signals, None)
+    env = make_env(agent, signals, scenario)
     try:
-        agent.prepare(env, case)
+        tried = agent.plan(env, case)
     finally:
         env.close()
-    return drives.entry(signals, case, cfg, agent)
+    return {"corridor": corridor, "signals": signals, "case": case, "digest": shipped_bounds.problem_digest(cfg),
+            "limit": agent.rounds[0]["sumo_driver_time"], "costs": np.array([d[0] for d in tried]),
+            "times": np.array([d[1] for d in tried]), "actions": [d[2] for d in tried]}
+
+
+def choose_set(planned: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The shipped rows of one case set's planned cases (``solve``): the set's price of time, at
+    which its mean travel time is at most SUMO's driver's (``bench.oracle.time_price``), and each
+    case's drive at that price."""
+    costs, times = [p["costs"] for p in planned], [p["times"] for p in planned]
+    price = time_price(costs, times, float(np.mean([p["limit"] for p in planned])))
+    return [drives.entry(p, price, pick(c, t, price)) for p, c, t in zip(planned, costs, times)]
 
 
 def check(path: Path = drives.FILE, per_setting: int = drives.CHECK_PER_SETTING) -> list[str]:
-    """One line per drift ([]: none) on a sample of the shipped cases, planned again."""
-    from ecodrive_bench.bench.cases.case import load
-
+    """One line per drift ([]: none) on a sample of the shipped cases (``per_setting`` of each
+    signal setting, over all sets), planned again and chosen at their set's stored price."""
     try:
         frame = drives.read(path)
     except drives.DrivesError as e:
         return [str(e)]
-    cases = {c.index: c for c in load()}
+    sets = {(corridor, s): (scenario, {c.index: c for c in cases}) for corridor, s, scenario, cases in drives.case_sets()}
     lines = []
     for s in sorted(set(frame.signals)):
-        rows = frame[frame.signals == s].sort_values("case")
-        pick = np.random.default_rng(20261127).choice(len(rows), size=min(per_setting, len(rows)), replace=False)
-        for r in rows.iloc[np.sort(pick)].itertuples(index=False):
-            got = solve((s, cases[int(r.case)]))
-            at = f"{path}: {s} case {int(r.case)}"
-            if list(got["lateral"]) != [int(a) for a in r.lateral]:
+        rows = frame[frame.signals == s].sort_values(["corridor", "case"])
+        sample = np.random.default_rng(20261127).choice(len(rows), size=min(per_setting, len(rows)), replace=False)
+        for r in rows.iloc[np.sort(sample)].itertuples(index=False):
+            at = f"{path}: {r.corridor} {s} case {int(r.case)}"
+            if (r.corridor, s) not in sets:
+                lines.append(f"{at}: no such case set (corridor {r.corridor!r}); rebuild: {drives.REBUILD}")
+                continue
+            scenario, cases = sets[(r.corridor, s)]
+            got = solve((r.corridor, s, scenario, cases[int(r.case)]))
+            k = pick(got["costs"], got["times"], float(r.time_price))
+            lateral, accel = [a for a, _ in got["actions"][k]], [b for _, b in got["actions"][k]]
+            if lateral != [int(a) for a in r.lateral]:
                 lines.append(f"{at}: the lane decisions differ from a new plan's; rebuild: {drives.REBUILD}")
-            elif not np.allclose(got["accel"], list(r.accel), rtol=drives.ACCEL_RTOL, atol=1e-9):
+            elif not np.allclose(accel, list(r.accel), rtol=drives.ACCEL_RTOL, atol=1e-9):
                 lines.append(f"{at}: the accelerations differ beyond a relative {drives.ACCEL_RTOL:g}; rebuild: {drives.REBUILD}")
-            elif not close(got["cost"], float(r.cost), ENERGY_RTOL):
-                lines.append(f"{at}: cost {float(r.cost)!r} stored, {got['cost']!r} planned; rebuild: {drives.REBUILD}")
+            elif not close(float(got["costs"][k]), float(r.cost), ENERGY_RTOL):
+                lines.append(f"{at}: cost {float(r.cost)!r} stored, {float(got['costs'][k])!r} planned; rebuild: {drives.REBUILD}")
     return lines

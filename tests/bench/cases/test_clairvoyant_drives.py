@@ -1,12 +1,13 @@
-"""The clairvoyant drives shipped with the fixed cases: the file is checked on reading, covers every
-fixed case of both settings, and on the CI cases it is the top of the scale against the own
+"""The clairvoyant drives shipped with the fixed and held-out cases: the file is checked on reading,
+covers every case of every set, each set is no slower than SUMO's driver on average at the least
+price of time that makes it so, and on the CI cases it is the top of the scale against the own
 reference's learned and rule-based methods (``bench/regression/reference/ci.csv``)."""
 from __future__ import annotations
 
 import pandas as pd
 import pytest
 
-from ecodrive_bench.bench.cases import case, clairvoyant_drives
+from ecodrive_bench.bench.cases import case, clairvoyant_drives, heldout
 from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.regression.check import CI_CASES, REFERENCE
 
@@ -17,11 +18,13 @@ MARGIN = 0.05  # [-] the issue's target: at least 5% below every method's mean c
 CASE_SHARE = 0.9  # [-] ... and no more expensive than each learned method's seed mean on 90% of the cases
 
 
-def test_the_file_covers_every_fixed_case_and_answers_its_lookups():
+def test_the_file_covers_every_case_of_every_set_and_answers_its_lookups():
     frame = clairvoyant_drives.read()
     fixed = {c.index for c in case.load()}
     for s in ("coordinated", "uncoordinated"):
-        assert set(frame[frame.signals == s].case) == fixed
+        assert set(frame[(frame.corridor == clairvoyant_drives.PAPER) & (frame.signals == s)].case) == fixed
+        for v in heldout.load():
+            assert set(frame[(frame.corridor == v.name) & (frame.signals == s)].case) == {c.index for c in v.cases}
     first = case.load()[0]
     actions = clairvoyant_drives.lookup(setting("uncoordinated", None), first)
     assert actions and all(k in (0, 1, 2) for k, _ in actions)
@@ -32,12 +35,21 @@ def test_the_file_covers_every_fixed_case_and_answers_its_lookups():
 def test_on_the_ci_cases_no_method_comes_close(signals):
     ref = pd.read_csv(REFERENCE)
     ref = ref[(ref.signals == signals) & (ref.case < CI_CASES)].assign(cost=lambda d: d.energy + d.travel_time)
-    cv = clairvoyant_drives.read().query("signals == @signals and case < @CI_CASES").set_index("case").cost
+    frame = clairvoyant_drives.read()
+    frame = frame[(frame.corridor == clairvoyant_drives.PAPER) & (frame.signals == signals) & (frame.case < CI_CASES)]
+    cv = frame.set_index("case").cost
     for method in LEARNED + RULE_BASED:
         per_case = ref[ref.method == method].groupby("case").cost.mean()
         assert cv.mean() <= (1 - MARGIN) * per_case.mean(), method
         if method in LEARNED:
             assert (cv <= per_case.reindex(cv.index)).mean() >= CASE_SHARE, method
+
+
+def test_every_set_is_no_slower_than_sumos_driver_at_its_price():
+    frame = clairvoyant_drives.read()
+    for (corridor, signals), rows in frame.groupby(["corridor", "signals"]):
+        assert rows.travel_time.mean() <= rows.sumo_driver_time.mean() + 1e-6, (corridor, signals)
+        assert rows.time_price.nunique() == 1 and rows.time_price.iloc[0] >= 0.0  # one price per set
 
 
 def test_an_edited_file_is_one_line_and_every_case_is_planned(tmp_path, capsys):

@@ -5,9 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ecodrive_bench.agents.baseline import BaselineAgent
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.cases.setting import setting
-from ecodrive_bench.bench.methods.clairvoyant_agent import CRUISE_ACCELS, CRUISE_SPEEDS, ROUNDS, ClairvoyantAgent
+from ecodrive_bench.bench.harness.episode import run_episode
+from ecodrive_bench.bench.methods.clairvoyant_agent import (
+    CRUISE_ACCELS,
+    CRUISE_SPEEDS,
+    ROUNDS,
+    ClairvoyantAgent,
+    sumo_driver_time,
+)
 from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.oracle.dp import bound
 
@@ -30,7 +38,7 @@ def _chosen_drives(overrides: dict | None, n: int):
 
 @pytest.mark.slow
 def test_on_an_empty_corridor_it_drives_the_krauss_capped_plan():
-    cfg, _, [(rec, cost)] = _chosen_drives(EMPTY, 1)
+    cfg, _, [(rec, cost, _)] = _chosen_drives(EMPTY, 1)
     free = bound(cfg, rec.t0, "cost", krauss=True)  # the refined bound with Krauss' cap
     assert len(rec.ego_x) == len(free.x) and np.max(np.abs(rec.ego_x - free.x)) < 1e-3  # step for step (float32 requests)
     assert cost == pytest.approx(free.cost, rel=1e-6)  # SUMO's energy against the DP's model of it
@@ -39,15 +47,30 @@ def test_on_an_empty_corridor_it_drives_the_krauss_capped_plan():
 
 @pytest.mark.slow
 def test_a_chosen_drive_repeats_step_for_step_with_its_traffic():
-    _, agent, [(a, cost_a), (b, cost_b)] = _chosen_drives(None, 2)
-    assert cost_a == cost_b and cost_a == pytest.approx(agent.rounds[-1]["chosen_cost"], abs=1e-4)  # rounded there
-    assert agent.rounds[-1]["chosen_cost"] == min(r["cost"] for r in agent.rounds[:-1])  # the cheapest, the first included
+    _, agent, [(a, cost_a, took_a), (b, cost_b, took_b)] = _chosen_drives(None, 2)
+    drives, chosen = agent.rounds[1:-1], agent.rounds[-1]
+    assert cost_a == cost_b and cost_a == pytest.approx(chosen["chosen_cost"], abs=1e-4)  # rounded there
+    assert took_a == took_b == chosen["chosen_time"]
+    assert chosen["chosen_cost"] == min(r["cost"] for r in drives)  # on its own (price 0): the cheapest
     cruises = [(share, cap if cap is not None else "a_max") for share in CRUISE_SPEEDS for cap in CRUISE_ACCELS]
-    assert [tuple(r["cruise"]) for r in agent.rounds[:-1] if "cruise" in r] == cruises  # after the planned drives
-    assert ["cruise" in r for r in agent.rounds[:-1]] == [False] * ROUNDS + [True] * len(cruises)
+    assert [tuple(r["cruise"]) for r in drives if "cruise" in r] == cruises  # after the planned drives
+    assert ["cruise" in r for r in drives] == [False] * ROUNDS + [True] * len(cruises)
     assert a.t0 == b.t0 and np.array_equal(a.ego_x, b.ego_x) and len(a.traffic) == len(b.traffic)
     for (ids_a, rows_a), (ids_b, rows_b) in zip(a.traffic, b.traffic):
         assert ids_a == ids_b and np.array_equal(rows_a, rows_b)
+
+
+@pytest.mark.slow
+def test_sumo_drivers_time_is_the_baseline_methods_episode():
+    agent = ClairvoyantAgent(setting("uncoordinated", None), shipped=None)
+    mine = make_env(agent, "uncoordinated")
+    base = make_env(BaselineAgent.name, "uncoordinated")
+    try:
+        row = run_episode(base, BaselineAgent(), CASE, BaselineAgent.name)  # as the harness runs it
+        assert sumo_driver_time(mine, CASE) == row["travel_time"]
+    finally:
+        base.close()
+        mine.close()
 
 
 def test_an_episode_needs_its_case_prepared():
