@@ -81,25 +81,38 @@ def read(path: Path = FILE) -> pd.DataFrame:
     return frame
 
 
-_TABLES: dict[Path, dict[tuple, tuple[list[int], list[float]]] | None] = {}
+_TABLES: dict[Path, dict[tuple, tuple[list[int], list[float], dict[str, Any]]] | None] = {}
+SHOWN = ("corridor", "cost", "travel_time", "sumo_driver_time", "time_price")  # what a step log's plan shows of a row
 
 
-def lookup(cfg: Any, case: Case, path: Path = FILE) -> list[tuple[int, float]] | None:
-    """The shipped actions of ``case`` on ``cfg``'s problem; None: not shipped (plan it)."""
+def _row(cfg: Any, case: Case, path: Path) -> tuple[list[int], list[float], dict[str, Any]] | None:
     from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
 
     if path not in _TABLES:
         try:
             f = read(path)
             _TABLES[path] = {(r.scenario_digest, int(r.version), int(r.sumo_seed), float(r.insert_time)):
-                             (list(r.lateral), list(r.accel)) for r in f.itertuples(index=False)}
+                             (list(r.lateral), list(r.accel), {k: getattr(r, k) for k in SHOWN})
+                             for r in f.itertuples(index=False)}
         except DrivesError as e:
             if path.exists():
                 print(f"note: {e}; every clairvoyant case is planned", file=sys.stderr)
             _TABLES[path] = None
     table = _TABLES[path]
-    hit = None if table is None else table.get((problem_digest(cfg), VERSION, case.sumo_seed, float(case.insert_time)))
-    return None if hit is None else [(int(a), float(b)) for a, b in zip(*hit)]
+    return None if table is None else table.get((problem_digest(cfg), VERSION, case.sumo_seed, float(case.insert_time)))
+
+
+def lookup(cfg: Any, case: Case, path: Path = FILE) -> list[tuple[int, float]] | None:
+    """The shipped actions of ``case`` on ``cfg``'s problem; None: not shipped (plan it)."""
+    hit = _row(cfg, case, path)
+    return None if hit is None else [(int(a), float(b)) for a, b in zip(hit[0], hit[1])]
+
+
+def about(cfg: Any, case: Case, path: Path = FILE) -> dict[str, Any]:
+    """What the shipped row of ``case`` says of its drive (``SHOWN``: its set, cost, time, SUMO's
+    driver's time and the set's price of time); {} if not shipped."""
+    hit = _row(cfg, case, path)
+    return {} if hit is None else {k: (v.item() if hasattr(v, "item") else v) for k, v in hit[2].items()}
 
 
 def case_sets() -> list[tuple[str, str, dict[str, Any] | None, tuple[Case, ...]]]:

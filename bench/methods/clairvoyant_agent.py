@@ -104,7 +104,7 @@ class ClairvoyantAgent(NotLearning):
         if self.shipped is not None:
             self.actions = drives.lookup(env.cfg, case, self.shipped)
             if self.actions is not None:
-                self.rounds = [{"shipped": str(self.shipped.name)}]
+                self.rounds = [{"shipped": str(self.shipped.name), **drives.about(env.cfg, case, self.shipped)}]
                 return
         tried = self.plan(env, case)
         best = tried[pick(np.array([d[0] for d in tried]), np.array([d[1] for d in tried]), 0.0)]

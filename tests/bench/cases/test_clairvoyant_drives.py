@@ -29,6 +29,10 @@ def test_the_file_covers_every_case_of_every_set_and_answers_its_lookups():
     actions = clairvoyant_drives.lookup(setting("uncoordinated", None), first)
     assert actions and all(k in (0, 1, 2) for k, _ in actions)
     assert clairvoyant_drives.lookup(setting("uncoordinated", {"spacing": 500.0}), first) is None  # another problem
+    about = clairvoyant_drives.about(setting("uncoordinated", None), first)
+    row = frame[(frame.corridor == clairvoyant_drives.PAPER) & (frame.signals == "uncoordinated") & (frame.case == first.index)]
+    assert about["corridor"] == "paper" and about["time_price"] == row.time_price.item() and about["cost"] == row.cost.item()
+    assert clairvoyant_drives.about(setting("uncoordinated", {"spacing": 500.0}), first) == {}
 
 
 @pytest.mark.parametrize("signals", ["coordinated", "uncoordinated"])
