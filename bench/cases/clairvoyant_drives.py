@@ -18,11 +18,11 @@ content digest is checked on reading; an edited or damaged file is one line on s
 case is planned.
 
     ecodrive cases --write --clairvoyant [--workers N]   # every set; a set already current is kept
-    ecodrive cases --check                               # re-plans CHECK_PER_SETTING cases per setting
+    ecodrive cases --check                               # re-plans a sample (clairvoyant_agent.sample)
 
 (``bench.harness.case_files.write_clairvoyant``, ``bench.methods.clairvoyant_agent.check``). The
-check compares the lane decisions exactly and the accelerations and the cost within the
-cross-host tolerances (``bench.hosts``).
+check compares SUMO's driver's time, the lane decisions and the travel time exactly and the
+accelerations and the cost within the cross-host tolerances (``bench.hosts``).
 """
 from __future__ import annotations
 
@@ -43,7 +43,8 @@ VERSION = 5  # [-] of the planner's drives and their choice: bump with any chang
 META_KEY = b"ecodrive_clairvoyant_drives"
 MAX_BYTES = 16 << 20  # [bytes] a larger file is refused before it is read
 REBUILD = "ecodrive cases --write --clairvoyant"
-CHECK_PER_SETTING = 1  # [cases] re-planned per setting by `ecodrive cases --check`
+CHECK_PER_SETTING = 1  # [cases] re-planned per setting by `ecodrive cases --check` (plus one of a priced set)
+CHECK_SEED = 20261127  # [-] of its draw
 ACCEL_RTOL = 1e-6  # [-] float32 accelerations computed from SUMO's speeds and the DP's lattice
 COLUMNS = ("corridor", "signals", "case", "sumo_seed", "insert_time", "scenario_digest", "version", "cost",
            "travel_time", "sumo_driver_time", "time_price", "rounds", "lateral", "accel")

@@ -23,6 +23,7 @@ import os
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 from ecodrive_bench.bench.args import InputError, Parser, fail, int_in
 from ecodrive_bench.bench.cases import case, heldout, train_family
@@ -84,50 +85,70 @@ def clairvoyant(prog: str, write: bool, workers: int) -> int:
     lines = write_clairvoyant(path, workers) if write else clairvoyant_agent.check(path)
     for line in lines:
         fail(prog, line)
-    if not lines:
-        print(f"wrote {path}" if write else f"{path.name} matches the planner on the sample "
-              f"({drives.CHECK_PER_SETTING} case per setting)")
+    if not lines and not write:
+        print(f"{path.name} matches the planner on the sample ({drives.CHECK_PER_SETTING} case per setting, "
+              "and one of a set with a price of time)")
     return 2 if lines else 0
+
+
+def current_sets(frame: Any, sets: list[tuple[str, str, dict[str, Any] | None, tuple]]) -> tuple[list[Any], dict]:
+    """Of the shipped ``frame`` (None: none), the rows of each set of ``sets``
+    (``clairvoyant_drives.case_sets``) that are current (this ``VERSION``, the scenario's digest,
+    exactly its cases), and the solve tasks of every other set, by (corridor, signals)."""
+    from ecodrive_bench.bench.cases import clairvoyant_drives as drives
+    from ecodrive_bench.bench.cases.setting import setting
+    from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
+
+    kept, todo = [], {}
+    for corridor, s, scenario, cases in sets:
+        have = None if frame is None else frame[(frame.corridor == corridor) & (frame.signals == s)]
+        want = {(c.index, c.sumo_seed, float(c.insert_time)) for c in cases}
+        if have is not None and len(have) == len(cases) and set(have.version) == {drives.VERSION} \
+                and set(have.scenario_digest) == {problem_digest(setting(s, scenario))} \
+                and {(int(r.case), int(r.sumo_seed), float(r.insert_time)) for r in have.itertuples()} == want:
+            kept.append(have)
+        else:
+            todo[(corridor, s)] = [(corridor, s, scenario, c) for c in cases]
+    return kept, todo
 
 
 def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[str]:
     """Plan every case of every set (``bench.cases.clairvoyant_drives.case_sets``, about 10 s a
     case) and ship the chosen drives; a set whose rows are current (this ``VERSION``, scenario and
-    cases) is kept as it is. The file is saved as each set completes, so a stopped write keeps them."""
+    cases) is kept as it is, and rows of sets that ``case_sets`` no longer holds are dropped. The
+    file is saved as each set completes, so a stopped write keeps them. A set whose fastest drives
+    are still slower than SUMO's driver on average is shipped with them, and named on stderr."""
     import pandas as pd
 
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
-    from ecodrive_bench.bench.cases.setting import setting
-    from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
     from ecodrive_bench.bench.harness.executors import run_local
     from ecodrive_bench.bench.methods.clairvoyant_agent import choose_set, solve
+    from ecodrive_bench.bench.oracle.time_price import TIME_TOL
     from ecodrive_bench.bench.progress import bar
 
     try:
         frame = drives.read(path) if path.exists() else None
     except drives.DrivesError:
         frame = None  # damaged or of another layout: every set is planned
-    kept, todo = [], {}
-    for corridor, s, scenario, cases in drives.case_sets():
-        have = None if frame is None else frame[(frame.corridor == corridor) & (frame.signals == s)]
-        want = {(c.sumo_seed, float(c.insert_time)) for c in cases}
-        if have is not None and len(have) == len(cases) and set(have.version) == {drives.VERSION} \
-                and set(have.scenario_digest) == {problem_digest(setting(s, scenario))} \
-                and {(int(r.sumo_seed), float(r.insert_time)) for r in have.itertuples()} == want:
-            kept.append(have)
-        else:
-            todo[(corridor, s)] = [(corridor, s, scenario, c) for c in cases]
+    kept, todo = current_sets(frame, drives.case_sets())
     tasks = [t for ts in todo.values() for t in ts]
     done: dict[tuple[str, str], list[dict]] = {key: [] for key in todo}
     for planned in bar(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
-                       enabled=progress):
+                       enabled=progress and bool(tasks)):
         key = (planned["corridor"], planned["signals"])
         done[key].append(planned)
         if len(done[key]) == len(todo[key]):  # the set is complete: its price, its rows, saved
-            kept.append(pd.DataFrame(choose_set(sorted(done[key], key=lambda p: p["case"].index))))
+            rows = pd.DataFrame(choose_set(sorted(done[key], key=lambda p: p["case"].index)))
+            if rows.travel_time.mean() > rows.sumo_driver_time.mean() + TIME_TOL:
+                print(f"note: {key[0]} {key[1]}: even its fastest drives are slower than SUMO's driver on average "
+                      f"({rows.travel_time.mean():.1f} s against {rows.sumo_driver_time.mean():.1f} s); shipped "
+                      "with them", file=sys.stderr)
+            kept.append(rows)
             drives.save(pd.concat(kept, ignore_index=True), path)
-    if not todo and frame is not None:
-        print(f"{path.name}: every set is current; nothing to plan")
+    stale = frame is not None and sum(map(len, kept)) != len(frame) and not todo
+    if stale:  # nothing to plan, but rows of sets no longer in case_sets
+        drives.save(pd.concat(kept, ignore_index=True), path)
+    print(f"wrote {path}" if todo or stale else f"{path.name}: every set is current; nothing to plan")
     return []
 
 

@@ -10,11 +10,12 @@ solves it: at a price of time lambda [Wh/s], each case takes the drive that mini
 
 and the set's price is the least lambda >= 0 at which the chosen drives' mean time meets the
 limit. Where the cheapest drives already meet it, lambda is 0 and the choice is the cost-minimal
-one. A drive's mean time never rises with lambda (each case's argmin moves to faster drives only),
-so the least price is found by bisection over the breakpoints, the lambdas at which a faster,
-costlier drive overtakes a slower, cheaper one in some case. The price returned lies mid-way into
-its interval of constant choice, so that a cost that differs in its last digits between hosts
-(``bench.hosts``) does not move a choice.
+one. The chosen drives' mean time never rises with lambda (each case's argmin moves to faster
+drives only), so the least price is found by bisection over the breakpoints, the lambdas at which
+a faster, costlier drive overtakes a slower, cheaper one in some case. Breakpoints within a
+relative ``CUT_RTOL`` of each other are one, and the price returned lies mid-way into its
+interval of constant choice (twice the last breakpoint past it), so that a cost that differs in
+its last digits between hosts (``bench.hosts``) does not move a choice.
 
 Relaxation leaves a duality gap: a set may hold a cheaper choice that meets the limit that no
 single price picks. The reference accepts it for a choice that reads per case (``pick``) once the
@@ -29,6 +30,7 @@ from collections.abc import Sequence
 import numpy as np
 
 TIME_TOL = 1e-6  # [s] travel times are whole steps; this absorbs their float sums
+CUT_RTOL = 1e-9  # [-] breakpoints closer than this, relatively, are one (a tie that hosts may order either way)
 
 
 def pick(costs: np.ndarray, times: np.ndarray, price: float) -> int:
@@ -44,14 +46,25 @@ def mean_time(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], price: f
 
 def breakpoints(costs: Sequence[np.ndarray], times: Sequence[np.ndarray]) -> np.ndarray:
     """[Wh/s] The positive prices at which, in some case, a faster and costlier drive ties a
-    slower and cheaper one: the only prices where a choice can change; sorted, unique."""
+    slower and cheaper one: the only prices where a choice can change; sorted, and of those within a
+    relative ``CUT_RTOL`` of the one before, only the first."""
     cuts = []
     for c, t in zip(costs, times):
         c, t = np.asarray(c, dtype=float), np.asarray(t, dtype=float)
         dc, dt = c[:, None] - c[None, :], t[None, :] - t[:, None]  # [j, k]: j costlier by dc, faster by dt
         ok = (dc > 0) & (dt > 0)
         cuts.append(dc[ok] / dt[ok])
-    return np.unique(np.concatenate(cuts)) if cuts else np.zeros(0)
+    cuts = np.unique(np.concatenate(cuts)) if cuts else np.zeros(0)
+    if len(cuts) < 2:
+        return cuts
+    keep = np.ones(len(cuts), dtype=bool)
+    last = cuts[0]
+    for i in range(1, len(cuts)):
+        if cuts[i] - last <= CUT_RTOL * last:
+            keep[i] = False
+        else:
+            last = cuts[i]
+    return cuts[keep]
 
 
 def time_price(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], limit: float) -> float:

@@ -64,3 +64,37 @@ def test_an_edited_file_is_one_line_and_every_case_is_planned(tmp_path, capsys):
     assert clairvoyant_drives.lookup(setting("uncoordinated", None), case.load()[0], bad) is None
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "every clairvoyant case is planned" in err[0]
+
+
+def test_a_write_keeps_exactly_the_current_sets():
+    from ecodrive_bench.bench.harness.case_files import current_sets
+
+    frame, sets = clairvoyant_drives.read(), clairvoyant_drives.case_sets()
+    kept, todo = current_sets(frame, sets)
+    assert not todo and sum(map(len, kept)) == len(frame)  # the shipped file is current
+    g = (frame.corridor != clairvoyant_drives.PAPER) & (frame.signals == "coordinated")
+    first = frame[g].corridor.iloc[0]
+    one = (frame.corridor == first) & (frame.signals == "coordinated")
+    moved = frame.copy()
+    moved.loc[moved[one].index[0], "case"] = 99  # a row of another case index
+    older = frame.copy()
+    older.loc[older[one].index, "version"] = clairvoyant_drives.VERSION - 1
+    for edited in (frame.drop(index=frame[one].index[0]), moved, older):
+        kept, todo = current_sets(edited, sets)
+        assert list(todo) == [(first, "coordinated")] and len(todo[(first, "coordinated")]) == one.sum()
+        assert sum(map(len, kept)) == len(frame) - one.sum()
+    kept, todo = current_sets(None, sets)
+    assert not kept and len(todo) == len(sets)
+
+
+def test_the_check_samples_a_priced_set_in_each_setting():
+    from ecodrive_bench.bench.methods.clairvoyant_agent import sample
+
+    frame = clairvoyant_drives.read()
+    drawn = sample(frame)
+    for s in ("coordinated", "uncoordinated"):
+        rows = [r for t, r in drawn if t == s]
+        assert len(rows) in (clairvoyant_drives.CHECK_PER_SETTING, clairvoyant_drives.CHECK_PER_SETTING + 1)
+        if (frame[frame.signals == s].time_price > 0).any():
+            assert any(r.time_price > 0 for r in rows), s
+    assert [(t, r.corridor, r.case) for t, r in sample(frame)] == [(t, r.corridor, r.case) for t, r in drawn]  # seeded

@@ -78,3 +78,43 @@ def test_an_episode_needs_its_case_prepared():
     obs = {"logic": np.zeros(9, dtype=np.float32), "grid": np.ones((60, 5), dtype=np.float32)}
     with pytest.raises(RuntimeError, match="prepare"):
         agent.act(obs, {"travel_time": 0.0, "time": 250.0, "position": 5.1, "action_mask": np.ones(3, int)})
+
+
+def test_a_set_is_chosen_at_its_price():
+    from ecodrive_bench.bench.methods.clairvoyant_agent import choose_set
+    from ecodrive_bench.bench.oracle.time_price import mean_time, time_price
+
+    rng = np.random.default_rng(5)
+    planned = []
+    for i in range(8):
+        times = np.round(rng.uniform(150.0, 250.0, 5))
+        planned.append({"corridor": "c", "signals": "uncoordinated", "case": Case(index=i, sumo_seed=i, insert_time=0.0, group=0),
+                        "digest": "d", "limit": 190.0, "costs": 300.0 - 0.8 * times + rng.normal(0.0, 15.0, 5),
+                        "times": times, "actions": [[(1, float(k))] for k in range(5)]})
+    rows = choose_set(planned)
+    costs, times = [p["costs"] for p in planned], [p["times"] for p in planned]
+    price = time_price(costs, times, 190.0)
+    assert price > 0.0 and {r["time_price"] for r in rows} == {price}  # this set needs a price
+    assert np.mean([r["travel_time"] for r in rows]) == mean_time(costs, times, price) <= 190.0
+    for p, r in zip(planned, rows):
+        k = int(r["accel"][0])  # the drive's index, as its one action's acceleration
+        assert (r["cost"], r["travel_time"]) == (p["costs"][k], p["times"][k])
+
+
+@pytest.mark.slow
+def test_the_check_replans_at_the_stored_price_and_finds_a_drift(tmp_path):
+    from ecodrive_bench.bench.cases import clairvoyant_drives as drives
+    from ecodrive_bench.bench.methods.clairvoyant_agent import check, sample
+
+    if not drives.FILE.is_file():
+        pytest.skip("no shipped clairvoyant drives")
+    frame = drives.read()
+    drawn = sample(frame, 0)  # one row of a priced set per setting
+    assert [s for s, _ in drawn] == ["coordinated", "uncoordinated"] and all(r.time_price > 0 for _, r in drawn)
+    r = drawn[1][1]
+    edited = frame.copy()
+    at = edited.index[(edited.corridor == r.corridor) & (edited.signals == "uncoordinated") & (edited.case == r.case)]
+    edited.loc[at, "sumo_driver_time"] += 1.0
+    drives.save(edited, tmp_path / "drives.parquet")
+    lines = check(tmp_path / "drives.parquet", 0)
+    assert len(lines) == 1 and f"{r.corridor} uncoordinated case {int(r.case)}: SUMO's driver's time" in lines[0]

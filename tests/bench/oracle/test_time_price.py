@@ -33,9 +33,31 @@ def test_the_price_is_the_least_that_meets_the_limit(seed):
     assert price > 0.0 and mean_time(costs, times, price) <= limit
     cuts = breakpoints(costs, times)
     assert not np.any(np.isclose(cuts, price, rtol=1e-9))  # inside an interval, not on a tie
-    start = cuts[cuts < price].max()  # its interval's: every price below misses the limit
-    grid = np.linspace(0.0, start, 4001)[:-1]
-    assert all(mean_time(costs, times, float(p)) > limit for p in grid)
+    below = cuts[cuts < price]  # every interval below the price's: each misses the limit
+    mids = np.concatenate([[below[0] / 2.0], (below[:-1] + below[1:]) / 2.0])
+    assert len(mids) == len(below) and all(mean_time(costs, times, float(p)) > limit for p in mids)
+
+
+def test_a_limit_met_exactly_is_met():
+    costs, times = _set(3)
+    at = [mean_time(costs, times, float(p)) for p in breakpoints(costs, times) * 1.000001]
+    limit = sorted(set(at))[len(set(at)) // 2]  # the mean time of some price's choice, exactly
+    price = time_price(costs, times, limit)
+    assert mean_time(costs, times, price) <= limit
+
+
+def test_no_breakpoint_no_price():
+    costs, times = [np.array([5.0, 7.0]), np.array([3.0])], [np.array([100.0, 110.0]), np.array([90.0])]  # cheaper is faster
+    assert len(breakpoints(costs, times)) == 0
+    assert time_price(costs, times, 10.0) == 0.0  # no price makes a choice faster
+
+
+def test_breakpoints_a_last_digit_apart_are_one():
+    tie = 0.3  # [Wh/s] two cases whose faster drive overtakes at the same price, computed two ways
+    costs = [np.array([10.0, 10.0 + 0.1 + 0.2]), np.array([20.0, 20.0 + 0.3])]
+    times = [np.array([101.0, 100.0]), np.array([51.0, 50.0])]
+    cuts = breakpoints(costs, times)
+    assert len(cuts) == 1 and cuts[0] == pytest.approx(tie)
 
 
 def test_mean_time_never_rises_with_the_price():
@@ -49,5 +71,6 @@ def test_zero_where_the_cheapest_meet_it_and_the_fastest_where_nothing_does():
     assert time_price(costs, times, mean_time(costs, times, 0.0)) == 0.0
     price = time_price(costs, times, 0.0)  # no choice is this fast
     assert all(t[pick(c, t, price)] == t.min() for c, t in zip(costs, times))
+    assert mean_time(costs, times, price) > 0.0  # and the limit is left unmet: its caller says so
     with pytest.raises(ValueError, match="at least one case"):
         time_price([], [], 100.0)
