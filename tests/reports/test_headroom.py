@@ -40,7 +40,7 @@ def test_the_readme_line_names_the_best_learned_method():
     rows = _rows("baseline0", -1, [100.0, 110.0]) + _rows("clairvoyant", -1, [60.0, 70.0])
     rows += _rows("prl", 0, [78.0, 88.0]) + _rows("prl", 1, [82.0, 92.0]) + _rows("dqn", 0, [95.0, 105.0])
     line = headroom_line(pd.DataFrame(rows), {})
-    assert "closes 50% [" in line and "coord. (PRL)" in line and "DQN" not in line
+    assert "closes 50% [" in line and "coordinated (PRL)" in line and "DQN" not in line
     assert headroom_line(pd.DataFrame(_rows("prl", 0, [80.0])), {}) == ""
 
 
