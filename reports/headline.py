@@ -23,7 +23,7 @@ from ecodrive_bench.bench.io import atomic_text
 from ecodrive_bench.bench.paper import TABLE4, improvement
 
 from .metrics import headroom
-from .names import WHAT, label, name
+from .names import label
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
 SETTINGS = (("coordinated", "coord."), ("uncoordinated", "non-coord."))
@@ -65,8 +65,7 @@ def headroom_line(results: pd.DataFrame, manifest: dict) -> str:
         g = shares[shares.signals == s]
         if len(g):
             b = g.loc[g.share_closed.idxmax()]
-            what = WHAT.get(b.method)
-            parts.append(f"{share_text(b)} {s} ({name(b.method)}{', ' + what if what else ''})")
+            parts.append(f"{share_text(b)} {s} ({label(b.method, inside=True)})")
     return ("Headroom: of the cost gap (E + phi T) between steady driving (baseline0, no information) and the "
             "clairvoyant reference (the signal plans and the future traffic), the best learned method closes "
             + " and ".join(parts) + "; 95% CI over cases and seeds.")

@@ -28,10 +28,11 @@ def name(method: str) -> str:
     return NAME.get(method, method)
 
 
-def label(method: str) -> str:
-    """The display name with what the method is, where a reader needs it: ``MPC (re-plans ...)``."""
+def label(method: str, inside: bool = False) -> str:
+    """The display name with what the method is, where a reader needs it: ``MPC (re-plans ...)``;
+    ``inside`` parentheses already: ``MPC, re-plans ...``."""
     what = WHAT.get(method)
-    return f"{name(method)} ({what})" if what else name(method)
+    return name(method) if not what else f"{name(method)}, {what}" if inside else f"{name(method)} ({what})"
 
 
 def seeded(method: str, seed: int | None) -> str:

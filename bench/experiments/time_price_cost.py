@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.bench.oracle.time_price import breakpoints, mean_time, pick, time_price
+from ecodrive_bench.bench.oracle.time_price import breakpoints, choices, time_price
 
 
 def summary(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], limits: Sequence[float]) -> dict[str, float]:
@@ -26,16 +26,17 @@ def summary(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], limits: Se
     (module docstring); ``cut_distance`` is NaN where the price is 0."""
     limit = float(np.mean(limits))
     price = time_price(costs, times, limit)
+    cheapest, chosen = choices(costs, times, 0.0), choices(costs, times, price)
+    fastest = [int(np.argmin(t)) for t in times]
 
-    def cost_at(p: float) -> float:
-        return float(np.mean([c[pick(c, t, p)] for c, t in zip(costs, times)]))
+    def means(picked: list[int]) -> tuple[float, float]:
+        return (float(np.mean([c[k] for c, k in zip(costs, picked)])),
+                float(np.mean([t[k] for t, k in zip(times, picked)])))
 
     cuts = breakpoints(costs, times)
-    return {"limit": limit, "price": price, "cost_0": cost_at(0.0), "time_0": mean_time(costs, times, 0.0),
-            "cost": cost_at(price), "time": mean_time(costs, times, price),
-            "cost_fastest": float(np.mean([c[int(np.argmin(t))] for c, t in zip(costs, times)])),
-            "time_fastest": float(np.mean([t.min() for t in times])),
-            "moved": int(sum(pick(c, t, price) != pick(c, t, 0.0) for c, t in zip(costs, times))),
+    (cost_0, time_0), (cost, time), (cost_f, time_f) = means(cheapest), means(chosen), means(fastest)
+    return {"limit": limit, "price": price, "cost_0": cost_0, "time_0": time_0, "cost": cost, "time": time,
+            "cost_fastest": cost_f, "time_fastest": time_f, "moved": sum(a != b for a, b in zip(chosen, cheapest)),
             "cut_distance": float(np.min(np.abs(cuts - price)) / price) if price > 0 and len(cuts) else float("nan")}
 
 

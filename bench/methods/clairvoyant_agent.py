@@ -57,7 +57,7 @@ from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
 from ecodrive_bench.bench.oracle.dp import Corridor
 from ecodrive_bench.bench.oracle.mpc import HEADWAY, MIN_GAP
-from ecodrive_bench.bench.oracle.time_price import pick, time_price
+from ecodrive_bench.bench.oracle.time_price import choices, pick, time_price
 from ecodrive_bench.envs.config import ScenarioConfig
 
 BASELINE = BaselineAgent.name  # SUMO's driver, whose travel time on the case bounds the drive's
@@ -278,7 +278,7 @@ def choose_set(planned: list[dict[str, Any]]) -> list[dict[str, Any]]:
     case's drive at that price."""
     costs, times = [p["costs"] for p in planned], [p["times"] for p in planned]
     price = time_price(costs, times, float(np.mean([p["limit"] for p in planned])))
-    return [drives.entry(p, price, pick(c, t, price)) for p, c, t in zip(planned, costs, times)]
+    return [drives.entry(p, price, k) for p, k in zip(planned, choices(costs, times, price))]
 
 
 def sample(frame, per_setting: int = drives.CHECK_PER_SETTING) -> list[tuple[str, Any]]:

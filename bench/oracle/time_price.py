@@ -39,9 +39,14 @@ def pick(costs: np.ndarray, times: np.ndarray, price: float) -> int:
     return int(np.lexsort((np.arange(len(value)), np.asarray(times, dtype=float), value))[0])
 
 
+def choices(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], price: float) -> list[int]:
+    """The drive that ``pick`` chooses at ``price`` in each case."""
+    return [pick(c, t, price) for c, t in zip(costs, times)]
+
+
 def mean_time(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], price: float) -> float:
-    """[s] The mean travel time of the drives that ``pick`` chooses at ``price``, one per case."""
-    return float(np.mean([t[pick(c, t, price)] for c, t in zip(costs, times)]))
+    """[s] The mean travel time of the drives chosen at ``price`` (``choices``), one per case."""
+    return float(np.mean([t[k] for t, k in zip(times, choices(costs, times, price))]))
 
 
 def breakpoints(costs: Sequence[np.ndarray], times: Sequence[np.ndarray]) -> np.ndarray:
@@ -55,16 +60,7 @@ def breakpoints(costs: Sequence[np.ndarray], times: Sequence[np.ndarray]) -> np.
         ok = (dc > 0) & (dt > 0)
         cuts.append(dc[ok] / dt[ok])
     cuts = np.unique(np.concatenate(cuts)) if cuts else np.zeros(0)
-    if len(cuts) < 2:
-        return cuts
-    keep = np.ones(len(cuts), dtype=bool)
-    last = cuts[0]
-    for i in range(1, len(cuts)):
-        if cuts[i] - last <= CUT_RTOL * last:
-            keep[i] = False
-        else:
-            last = cuts[i]
-    return cuts[keep]
+    return cuts[np.concatenate([[True], np.diff(cuts) > CUT_RTOL * cuts[:-1]])] if len(cuts) else cuts
 
 
 def time_price(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], limit: float) -> float:

@@ -71,6 +71,5 @@ def test_zero_where_the_cheapest_meet_it_and_the_fastest_where_nothing_does():
     assert time_price(costs, times, mean_time(costs, times, 0.0)) == 0.0
     price = time_price(costs, times, 0.0)  # no choice is this fast
     assert all(t[pick(c, t, price)] == t.min() for c, t in zip(costs, times))
-    assert mean_time(costs, times, price) > 0.0  # and the limit is left unmet: its caller says so
     with pytest.raises(ValueError, match="at least one case"):
         time_price([], [], 100.0)
