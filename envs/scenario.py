@@ -5,9 +5,11 @@ config and is deterministic. Nothing here starts a simulation.
 
 A cache entry records the sha256 of each file it built in its ``done`` marker, and every use
 checks them (``damage``; a few small files, well under a millisecond). An entry whose file is
-missing, truncated or changed, or whose marker records no hashes (an entry built before they were
-recorded), is built again and its files replaced one by one, the marker last; nothing else in the
-folder is touched. A damaged entry is one note line on stderr; one of an earlier version is
+missing, truncated or changed, whose marker is missing or unreadable (read only as a regular file
+of at most ``MARKER_CAP`` bytes, never through a link), or whose marker records no hashes (an entry
+built before they were recorded), is built again and its files replaced one by one, the marker last; nothing else in the
+folder is touched. Two processes may mend one entry at once: each
+builds beside it and moves byte-identical files over it. A damaged entry is one note line on stderr; one of an earlier version is
 brought up to date silently. An entry that cannot be rebuilt is a ``ScenarioBuildError`` naming
 the file, the folder and why.
 """
@@ -19,6 +21,7 @@ import math
 import os
 import re
 import shutil
+import stat
 import subprocess
 import sys
 import tempfile
@@ -41,6 +44,7 @@ NOT_BUILT = ("reward", "max_episode_time", "glosa", "obs_lanes")  # config field
 BUILT = ("corridor.nod.xml", "corridor.edg.xml", "corridor.net.xml", "signals.add.xml", "corridor.rou.xml",
          "geometry.json", "config.json")
 DONE = "done"
+MARKER_CAP = 64 * 1024  # [bytes] the largest done marker read (a real one is under 1 KiB)
 UNRECORDED = f"its {DONE} marker records no sha256 of the files"  # built before they were recorded (or damaged)
 
 
@@ -97,18 +101,21 @@ def build(cfg: ScenarioConfig) -> ScenarioFiles:
     key_fields["_sumo"] = _sumo_version()
     digest = hashlib.sha256(json.dumps(key_fields, sort_keys=True).encode()).hexdigest()[:16]
     folder = cache_root() / digest
-    if not (folder / DONE).exists():
+    if folder.is_symlink():
+        raise ScenarioBuildError(f"scenario cache {folder} is a link; the cache follows none: remove it, then run again")
+    if not folder.exists():
         folder.parent.mkdir(parents=True, exist_ok=True)
         tmp = _build_into(cfg, key_fields, digest, folder.parent)
         try:
             try:
                 os.rename(tmp, folder)
-            except OSError:  # another process finished the same build first
-                if not (folder / DONE).exists():
-                    raise
+            except OSError:  # another process made the folder first: checked (and mended) below
+                pass
+            else:
+                return _files(cfg, folder)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-    elif why := damage(folder):
+    if why := damage(folder):
         _rebuild(cfg, key_fields, digest, folder, why)
     return _files(cfg, folder)
 
@@ -134,14 +141,42 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def read_marker(path: Path) -> dict | None:
+    """The ``done`` marker's record (``{}`` when it is not a JSON object: an older entry's marker),
+    or None where it is missing, not a regular file (a link, a FIFO, a device) or over
+    ``MARKER_CAP`` bytes. Opened without following a
+    link and without blocking, so a FIFO or ``/dev/zero`` in its place is never waited on or read."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > MARKER_CAP:
+            return None
+        data = os.read(fd, MARKER_CAP + 1)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    try:
+        record = json.loads(data)
+    except ValueError:
+        return {}
+    return record if isinstance(record, dict) else {}
+
+
 def damage(folder: Path) -> str:
     """"" when the cache entry ``folder`` holds every file its ``done`` marker records, each with
     its recorded sha256; else which file is damaged and how, in a few words."""
-    try:
-        record = json.loads((folder / DONE).read_text())
-        hashes = record["sha256"]
-        assert isinstance(hashes, dict) and set(BUILT) <= set(hashes)
-    except (OSError, ValueError, KeyError, TypeError, AssertionError):
+    marker = folder / DONE
+    if not marker.exists() and not marker.is_symlink():
+        return f"its {DONE} marker is missing"
+    record = read_marker(marker)
+    if record is None:
+        return f"its {DONE} marker is not a regular file of at most {MARKER_CAP} bytes"
+    hashes = record.get("sha256")
+    if not isinstance(hashes, dict) or not set(BUILT) <= set(hashes):
         return UNRECORDED
     for name in BUILT:
         path = folder / name

@@ -4,11 +4,14 @@ the folder kept; one that cannot be rebuilt is one line naming the file and the 
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
+import threading
 
 import pytest
 
 from ecodrive_bench.envs.config import ScenarioConfig
-from ecodrive_bench.envs.scenario import ScenarioBuildError, build
+from ecodrive_bench.envs.scenario import MARKER_CAP, ScenarioBuildError, build, damage
 
 BUILT = ("corridor.nod.xml", "corridor.edg.xml", "corridor.net.xml", "signals.add.xml", "corridor.rou.xml",
          "geometry.json", "config.json")  # what a cache entry holds besides its marker
@@ -75,3 +78,75 @@ def test_an_entry_that_cannot_be_rebuilt_is_one_line_naming_the_file_and_folder(
     assert "\n" not in msg and str(folder) in msg and "corridor.net.xml is not a file" in msg
     assert "remove that folder" in msg
     assert (folder / "corridor.net.xml" / "keep").read_text() == "x"  # never deleted
+
+
+def _no_marker(p):
+    p.unlink()
+
+
+def _fifo_marker(p):
+    p.unlink()
+    os.mkfifo(p)
+
+
+def _zero_marker(p):
+    p.unlink()
+    p.symlink_to("/dev/zero")
+
+
+def _huge_marker(p):
+    p.write_bytes(b" " * (2 * MARKER_CAP) + p.read_bytes())
+
+
+MARKERS = {"missing": _no_marker, "a FIFO": _fifo_marker, "a link to /dev/zero": _zero_marker,
+           "over the cap": _huge_marker}
+
+
+@pytest.mark.parametrize("spoil", list(MARKERS))
+def test_an_entry_whose_marker_is_missing_or_not_a_small_file_is_built_again(entry, spoil, capsys):
+    """A missing marker, or one that is a FIFO, a link to /dev/zero or too large, is never waited
+    on or read whole: the entry is rebuilt, the user's other files kept."""
+    cfg, folder, original = entry
+    (folder / "notes.txt").write_text("the user's own file")
+    MARKERS[spoil](folder / "done")
+    done = threading.Event()
+    out: list = []
+    t = threading.Thread(target=lambda: (out.append(build(cfg)), done.set()), daemon=True)
+    t.start()
+    assert done.wait(60), "build waited on the marker"
+    assert out[0].stop_lines
+    assert {n: (folder / n).read_bytes() for n in BUILT} == original
+    marker = folder / "done"
+    assert marker.is_file() and not marker.is_symlink()
+    assert set(json.loads(marker.read_text())["sha256"]) == set(BUILT)
+    assert (folder / "notes.txt").read_text() == "the user's own file"
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "done marker" in err[0] and "built again" in err[0]
+    assert sorted(p.name for p in folder.parent.iterdir()) == [folder.name]
+
+
+def _build_in_child(cache: str, q) -> None:
+    os.environ["ECODRIVE_CACHE"] = cache
+    try:
+        files = build(ScenarioConfig(signals="coordinated"))
+        q.put(("ok", str(files.folder)))
+    except BaseException as e:  # noqa: BLE001  (reported to the parent)
+        q.put(("error", repr(e)))
+
+
+def test_two_processes_mend_one_entry_at_once(entry):
+    """Both processes find the marker missing and rebuild; both succeed, and the entry is whole."""
+    cfg, folder, original = entry
+    (folder / "done").unlink()
+    ctx = multiprocessing.get_context("spawn")
+    q = ctx.Queue()
+    procs = [ctx.Process(target=_build_in_child, args=(str(folder.parent), q)) for _ in range(2)]
+    for p in procs:
+        p.start()
+    results = [q.get(timeout=120) for _ in procs]
+    for p in procs:
+        p.join(timeout=60)
+    assert results == [("ok", str(folder))] * 2
+    assert {n: (folder / n).read_bytes() for n in BUILT} == original
+    assert damage(folder) == ""
+    assert sorted(p.name for p in folder.parent.iterdir()) == [folder.name]
