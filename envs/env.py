@@ -9,9 +9,10 @@ import numpy as np
 
 from . import rewards
 from .action import make_action
-from .config import ScenarioConfig
+from .config import ConfigError, ScenarioConfig
 from .family import corridors
-from .observation import GridLogicObservation
+from .network import NetworkSpec, as_spec, build_network
+from .observation import GridLogicObservation, RouteGridLogicObservation
 from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
 from .scenario import build
 from .sumo import SumoSession
@@ -42,6 +43,12 @@ class EcoDriveEnv(gym.Env):
       with the corridor's overrides on top of the config and ``obs_lanes`` = 5, so the spaces are
       the same on every corridor; ``info["corridor"]`` names it. Scenario files are built once
       per corridor (the cache of ``envs.scenario``).
+    - ``network``: a corridor on any SUMO network (``envs.network``): a ``NetworkSpec``, a dict of
+      its fields (``net``, ``demand``, ``route``, ``insert``), or the name of a real corridor
+      (``envs.network.REAL``, read from the installed ``sumo-rl`` package). The ego drives the
+      route among the network's own traffic and signal programs; the observation and action
+      spaces are the same, taken in the ego's route frame; the episode ends when the ego reaches
+      the route's last edge; insertion times are drawn from the spec's window.
 
     ## Example
     >>> import gymnasium as gym, numpy as np
@@ -117,9 +124,13 @@ class EcoDriveEnv(gym.Env):
         render_mode: str | None = None,
         rerun_target: str = "spawn",
         family: str | None = None,
+        network: NetworkSpec | dict | str | None = None,
         **overrides: Any,
     ) -> None:
         check_mode(render_mode)
+        if network is not None and family is not None:
+            raise ConfigError("network= and family= are not accepted together; accepted: one corridor source")
+        self.network = None if network is None else as_spec(network)
         if isinstance(config, ScenarioConfig):
             base = config.to_dict()
         else:
@@ -157,9 +168,9 @@ class EcoDriveEnv(gym.Env):
     def _use(self, cfg: ScenarioConfig) -> None:
         """Drive the corridor of ``cfg``: its files (built once, cached), session and types."""
         self.cfg = cfg
-        self.files = build(cfg)
+        self.files = build(cfg) if self.network is None else build_network(self.network, cfg)
         self.session = SumoSession(cfg, self.files)
-        self.obs_type = GridLogicObservation(cfg, self.files)
+        self.obs_type = (RouteGridLogicObservation if self.files.route_frame else GridLogicObservation)(cfg, self.files)
         self.action_type = make_action(self._action, cfg)
         self._closeup = CloseUp(self.files.lane_y, self.files.stop_lines, cfg.vehicle_length)
 
@@ -196,11 +207,15 @@ class EcoDriveEnv(gym.Env):
                 or not 0 <= sumo_seed < SEED_BOUND:
             raise ValueError(f"sumo_seed={sumo_seed!r} is not accepted; accepted: an integer in [0, {SEED_BOUND})")
         sumo_seed = int(sumo_seed)
-        t_ins = options.get("insert_time", float(self.np_random.uniform(cfg.insert_min, cfg.insert_max)))
+        lo, hi = self.files.insert_window or (cfg.insert_min, cfg.insert_max)
+        t_ins = options.get("insert_time", float(self.np_random.uniform(lo, hi)))
         if isinstance(t_ins, (bool, np.bool_)) or not isinstance(t_ins, (int, float, np.integer, np.floating)) \
                 or not 0 <= t_ins <= INSERT_MAX:
             raise ValueError(f"insert_time={t_ins!r} is not accepted; accepted: a number in [0, {INSERT_MAX:g}] s")
         t_ins = float(t_ins)
+        if self.files.span is not None and not self.files.span[0] <= t_ins <= self.files.span[1]:
+            raise ValueError(f"insert_time={t_ins!r} is not accepted; accepted: a number in the demand's span "
+                             f"[{self.files.span[0]:g}, {self.files.span[1]:g}] s")
         self.case = {"sumo_seed": sumo_seed, "insert_time": t_ins}
         s = self.session
         dt = cfg.step_length
@@ -334,7 +349,7 @@ class EcoDriveEnv(gym.Env):
         info = {
             "action_mask": ego.mask.copy(),
             "time": self.session.time(),
-            "position": float(ego.kin.x),
+            "position": float(ego.along),
             "travel_time": travel_time,
             "energy": ego.energy,
             "energy_step": 0.0 if m is None else m.energy,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
+from . import safety
 from .config import ScenarioConfig
 from .jit import compiled
 from .scenario import LANE_WIDTH, ScenarioFiles
@@ -176,5 +177,110 @@ class GridLogicObservation:
             logic = logic_vector(lane, self.cfg.observed_lanes, 0.0, speed, NO_V2I, NO_V2I)
         else:
             logic = logic_vector(lane, self.cfg.observed_lanes, min(sig.distance, self._high[-4]), speed, sig.red,
+                                 min(sig.time_to_green, self._high[-1]))
+        return {"grid": grid, "logic": logic}, sig, others
+
+    def along(self, session: SumoSession, vid: str, kin: Kinematics) -> float:
+        """The vehicle's position along its corridor [m]: x, on the generated arterial."""
+        return kin.x
+
+    @staticmethod
+    def same_road(edge0: str, edge1: str) -> bool:
+        """Whether a lane index read on ``edge0`` and one on ``edge1`` number the same lanes: always on
+        the generated arterial, whose edges all have its lanes."""
+        return True
+
+    def mask(self, session: SumoSession, vid: str, lane: int) -> np.ndarray:
+        """The lateral mask over k: the road's lanes and LC2013's verdict (``safety.lane_mask``)."""
+        return safety.lane_mask(lane, self.cfg.lanes, session.could_change(vid, 1), session.could_change(vid, -1))
+
+
+def lane_frame(shape: Sequence[tuple[float, float]], pos: float) -> tuple[float, float, float, float]:
+    """(x, y) of the point ``pos`` [m] along the polyline ``shape``, and the unit direction (dx, dy)
+    of its segment there (the first segment extended before the start, the last past the end)."""
+    segs = [(x0, y0, x1, y1, d) for (x0, y0), (x1, y1) in zip(shape, shape[1:]) if (d := math.hypot(x1 - x0, y1 - y0)) > 0]
+    if not segs:
+        return float(shape[0][0]), float(shape[0][1]), 1.0, 0.0
+    for i, (x0, y0, x1, y1, d) in enumerate(segs):
+        if pos <= d or i == len(segs) - 1:
+            break
+        pos -= d
+    dx, dy = (x1 - x0) / d, (y1 - y0) / d
+    return x0 + dx * pos, y0 + dy * pos, dx, dy
+
+
+def to_route_frame(others: np.ndarray, cx: float, cy: float, dx: float, dy: float) -> np.ndarray:
+    """Rows [x, y, angle, length] moved into the frame whose origin is (cx, cy) and whose x axis
+    runs along (dx, dy), y to its left: [along, left, angle relative to the axis + 90, length], so
+    a vehicle heading along the route reads as heading east, as on the generated arterial."""
+    if not len(others):
+        return _NONE
+    rx, ry = others[:, 0] - cx, others[:, 1] - cy
+    axis = math.degrees(math.atan2(dx, dy))  # SUMO angle (clockwise from north) of the axis
+    out = np.empty_like(others)
+    out[:, 0] = rx * dx + ry * dy
+    out[:, 1] = ry * dx - rx * dy
+    out[:, 2] = (others[:, 2] - axis + HEADING_EAST) % 360.0
+    out[:, 3] = others[:, 3]
+    return out
+
+
+class RouteGridLogicObservation(GridLogicObservation):
+    """The same observation on a corridor of any network (``envs.network``), taken in the ego's
+    route frame: its x axis along the ego's lane where the ego is, its origin on that lane's centre
+    line; the grid's lanes are those of the edge the ego is on (on a junction's internal lane, the
+    edge it came from), lane 0 rightmost. A lane change is allowed only towards a lane that
+    continues the route (SUMO's best lanes), and LC2013's verdict applies as on the arterial.
+    Positions (``along``) are the distance driven along the route."""
+
+    def __init__(self, cfg: ScenarioConfig, files: ScenarioFiles) -> None:
+        super().__init__(cfg, files)
+        self._edge: tuple[tuple[float, ...], int] = ((LANE_WIDTH,) * len(files.lane_y), 0)  # set at the first observe
+        self._internal = False  # the ego is on a junction's internal lane
+
+    def _lanes_here(self, session: SumoSession, kin: Kinematics) -> tuple[tuple[float, ...], int]:
+        """(lane widths of the ego's edge, the ego's lane index there), kept over internal lanes."""
+        if kin.edge and not kin.edge.startswith(":"):
+            n = session.edge_lanes(kin.edge)
+            self._edge = (tuple(session.lane_geometry(f"{kin.edge}_{i}")[1] for i in range(n)), kin.lane)
+        return self._edge
+
+    def along(self, session: SumoSession, vid: str, kin: Kinematics) -> float:
+        return session.odometer(vid)
+
+    @staticmethod
+    def same_road(edge0: str, edge1: str) -> bool:
+        return edge0 == edge1  # a real network's edges differ in their lanes
+
+    def mask(self, session: SumoSession, vid: str, lane: int) -> np.ndarray:
+        widths, _ = self._edge
+        if self._internal:
+            return safety.lane_mask(lane, 1, False, False)  # no change inside a junction
+        cont = session.route_lanes(vid)
+        left = cont.get(lane + 1, False) and session.could_change(vid, 1)
+        right = cont.get(lane - 1, False) and session.could_change(vid, -1)
+        return safety.lane_mask(lane, len(widths), left, right)
+
+    def observe(
+        self, session: SumoSession, vid: str, kin: Kinematics, neighbours: dict
+    ) -> tuple[dict[str, np.ndarray], SignalView | None, list[tuple[float, float, float, float]]]:
+        x, y, _, speed, _, _, edge = kin
+        self._internal = edge.startswith(":")
+        widths, lane = self._lanes_here(session, kin)
+        lane_id, pos = session.lane_place(vid)
+        shape, _ = session.lane_geometry(lane_id)
+        cx, cy, dx, dy = lane_frame(shape, pos)
+        others = [(*v[VAR_POSITION], v[VAR_ANGLE], v[VAR_LENGTH]) for k, v in neighbours.items() if k != vid]
+        rows = to_route_frame(np.array(others, dtype=np.float64).reshape(-1, 4), cx, cy, dx, dy)
+        centres = np.cumsum((np.asarray(widths) + np.concatenate(([0.0], widths[:-1]))) / 2)
+        lane_y = (centres - centres[min(lane, len(centres) - 1)])[: self._lanes]
+        ego_along = (x - cx) * dx + (y - cy) * dy
+        grid = _grid(rows, lane_y, self._rows, self._lanes, ego_along - self.cfg.grid_behind, 1.0 / self.cfg.cell_length)
+        sig = self.signal(session, vid)
+        n_obs = self.cfg.observed_lanes
+        if sig is None:
+            logic = logic_vector(lane, n_obs, 0.0, speed, NO_V2I, NO_V2I)
+        else:
+            logic = logic_vector(lane, n_obs, min(sig.distance, self._high[-4]), speed, sig.red,
                                  min(sig.time_to_green, self._high[-1]))
         return {"grid": grid, "logic": logic}, sig, others

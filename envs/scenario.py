@@ -26,6 +26,7 @@ import subprocess
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,6 +63,13 @@ class ScenarioFiles:
     junction_x: tuple[float, ...]  # [m] x of each junction centre
     tls_ids: tuple[str, ...]
     lane_y: tuple[float, ...]  # [m] y of each W->E lane centre, index 0 = rightmost
+    # a corridor on any network (envs.network): the observation is taken in the ego's route frame
+    route_frame: bool = False
+    demand: tuple[Path, ...] = ()  # route files loaded beside ``routes`` (the network's own traffic)
+    begin: float = 0.0  # [s] simulation start (a demand's first second)
+    insert_window: tuple[float, float] | None = None  # [s] the ego's insertion times drawn from, if not the config's
+    span: tuple[float, float] | None = None  # [s] the demand's time span: an insertion time must lie in it
+    actuated: tuple[str, ...] = ()  # signals on the route whose plan is not fixed (no planner can know their future)
 
 
 class ScenarioBuildError(RuntimeError):
@@ -99,37 +107,48 @@ def build(cfg: ScenarioConfig) -> ScenarioFiles:
                   if k not in NOT_BUILT and not (k in OPTIONAL_FIELDS and v is None)}
     key_fields["_build"] = BUILD_VERSION
     key_fields["_sumo"] = _sumo_version()
+    folder = cached(key_fields, lambda out: _write_all(cfg, out), BUILT, _shape(cfg))
+    return _files(cfg, folder)
+
+
+def cached(key_fields: dict, write: Callable[[Path], None], built: tuple[str, ...], shape: str) -> Path:
+    """The cache entry of ``key_fields`` (a folder named by their digest), made by ``write(folder)``
+    when it is missing and mended when it is damaged (``damage``): the one cache of built files.
+    ``built``: the files ``write`` makes besides ``config.json`` (the key), each hashed into the
+    ``done`` marker; ``shape``: a few words naming what is built, for a ``ScenarioBuildError``."""
+    built = (*built, "config.json") if "config.json" not in built else built
     digest = hashlib.sha256(json.dumps(key_fields, sort_keys=True).encode()).hexdigest()[:16]
     folder = cache_root() / digest
     if folder.is_symlink():
         raise ScenarioBuildError(f"scenario cache {folder} is a link; the cache follows none: remove it, then run again")
     if not folder.exists():
         folder.parent.mkdir(parents=True, exist_ok=True)
-        tmp = _build_into(cfg, key_fields, digest, folder.parent)
+        tmp = _build_into(write, key_fields, digest, folder.parent, built, shape)
         try:
             try:
                 os.rename(tmp, folder)
             except OSError:  # another process made the folder first: checked (and mended) below
                 pass
             else:
-                return _files(cfg, folder)
+                return folder
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-    if why := damage(folder):
-        _rebuild(cfg, key_fields, digest, folder, why)
-    return _files(cfg, folder)
+    if why := damage(folder, built):
+        _rebuild(write, key_fields, digest, folder, why, built, shape)
+    return folder
 
 
-def _build_into(cfg: ScenarioConfig, key_fields: dict, digest: str, parent: Path) -> Path:
-    """A new folder in ``parent`` holding the built scenario and its ``done`` marker."""
+def _build_into(write: Callable[[Path], None], key_fields: dict, digest: str, parent: Path,
+                built: tuple[str, ...], shape: str) -> Path:
+    """A new folder in ``parent`` holding the built files and their ``done`` marker."""
     tmp = Path(tempfile.mkdtemp(prefix=f".{digest}-", dir=parent))
     try:
         try:
-            _write_all(cfg, tmp)
+            write(tmp)
         except _Failed as e:
-            raise ScenarioBuildError(f"scenario {digest} ({_shape(cfg)}) cannot be built: {e}") from None
+            raise ScenarioBuildError(f"scenario {digest} ({shape}) cannot be built: {e}") from None
         (tmp / "config.json").write_text(json.dumps(key_fields, indent=1, sort_keys=True))
-        hashes = {name: _sha256(tmp / name) for name in BUILT}
+        hashes = {name: _sha256(tmp / name) for name in built}
         (tmp / DONE).write_text(json.dumps({"build": BUILD_VERSION, "sha256": hashes}, indent=1) + "\n")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -166,7 +185,7 @@ def read_marker(path: Path) -> dict | None:
     return record if isinstance(record, dict) else {}
 
 
-def damage(folder: Path) -> str:
+def damage(folder: Path, built: tuple[str, ...] = BUILT) -> str:
     """"" when the cache entry ``folder`` holds every file its ``done`` marker records, each with
     its recorded sha256; else which file is damaged and how, in a few words."""
     marker = folder / DONE
@@ -176,9 +195,9 @@ def damage(folder: Path) -> str:
     if record is None:
         return f"its {DONE} marker is not a regular file of at most {MARKER_CAP} bytes"
     hashes = record.get("sha256")
-    if not isinstance(hashes, dict) or not set(BUILT) <= set(hashes):
+    if not isinstance(hashes, dict) or not set(built) <= set(hashes):
         return UNRECORDED
-    for name in BUILT:
+    for name in built:
         path = folder / name
         try:
             if path.is_symlink() or not path.is_file():
@@ -192,16 +211,17 @@ def damage(folder: Path) -> str:
     return ""
 
 
-def _rebuild(cfg: ScenarioConfig, key_fields: dict, digest: str, folder: Path, why: str) -> None:
+def _rebuild(write: Callable[[Path], None], key_fields: dict, digest: str, folder: Path, why: str,
+             built: tuple[str, ...], shape: str) -> None:
     """Build the damaged entry ``folder`` again beside it and move each built file over its own,
     the ``done`` marker last; nothing else in the folder is touched. One line on stderr."""
     try:
-        tmp = _build_into(cfg, key_fields, digest, folder.parent)
+        tmp = _build_into(write, key_fields, digest, folder.parent, built, shape)
     except OSError as e:
         raise ScenarioBuildError(f"scenario cache {folder}: {why}; it cannot be rebuilt ({e.strerror or e}): "
                                  f"remove that folder, then run again") from None
     try:
-        for name in (*BUILT, DONE):
+        for name in (*built, DONE):
             os.replace(tmp / name, folder / name)
     except OSError as e:
         raise ScenarioBuildError(f"scenario cache {folder}: {why}; it cannot be rebuilt ({e.strerror or e}): "
@@ -267,8 +287,8 @@ def _write_all(cfg: ScenarioConfig, out: Path) -> None:
         for side in ("N", "S"):
             ET.SubElement(edges, "edge", id=f"{side}{k}in", attrib={"from": f"{side}{k}", "to": f"J{k}"}, numLanes="1", speed=v)
             ET.SubElement(edges, "edge", id=f"{side}{k}out", attrib={"from": f"J{k}", "to": f"{side}{k}"}, numLanes="1", speed=v)
-    _write_xml(nodes, out / "corridor.nod.xml")
-    _write_xml(edges, out / "corridor.edg.xml")
+    write_xml(nodes, out / "corridor.nod.xml")
+    write_xml(edges, out / "corridor.edg.xml")
     cmd = [  # relative paths and a stripped date line keep the output byte-identical across builds
         _netconvert(), "-n", "corridor.nod.xml", "-e", "corridor.edg.xml",
         "-o", "corridor.net.xml", "--tls.cycle.time", f"{cfg.cycle:g}",
@@ -325,7 +345,7 @@ def _write_signals(cfg: ScenarioConfig, net: ET.Element, path: Path) -> None:
         side_green = cycle - green - 2 * cfg.yellow
         for state, dur in zip(states, (green, cfg.yellow, side_green, cfg.yellow)):
             ET.SubElement(logic, "phase", duration=f"{dur:g}", state=state)
-    _write_xml(add, path)
+    write_xml(add, path)
 
 
 def _ev_params(cfg: ScenarioConfig) -> dict[str, str]:
@@ -339,9 +359,8 @@ def _ev_params(cfg: ScenarioConfig) -> dict[str, str]:
     }
 
 
-def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
-    n = cfg.n_intersections
-    root = ET.Element("routes")
+def write_vtypes(root: ET.Element, cfg: ScenarioConfig) -> None:
+    """The vehicle types of ``cfg`` (the background HDV, the ego EV and its GLOSA twin) into ``root``."""
     ego_attrs = {"length": f"{cfg.vehicle_length:g}", "accel": f"{cfg.a_max:g}", "decel": f"{-cfg.a_min:g}",
                  "maxSpeed": f"{cfg.speed_limit:.4f}", "speedFactor": "1", "speedDev": "0", "sigma": f"{cfg.ego_sigma:g}"}
     for vid, attrs in ((HDV_TYPE, {"length": f"{cfg.vehicle_length:g}"}), (EGO_TYPE, ego_attrs),
@@ -357,6 +376,12 @@ def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
                              ("device.battery.capacity", f"{cfg.ev.battery_capacity:g}"),
                              ("device.battery.chargeLevel", f"{0.8 * cfg.ev.battery_capacity:g}")):
                 ET.SubElement(vt, "param", key=key, value=val)
+
+
+def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
+    n = cfg.n_intersections
+    root = ET.Element("routes")
+    write_vtypes(root, cfg)
     ET.SubElement(root, "route", id=EGO_ROUTE, edges=" ".join(f"A{k}" for k in range(n + 1)))
     flows = []
     if cfg.arterial_flow * (1 - cfg.mpr) > 0:
@@ -373,9 +398,9 @@ def _write_routes(cfg: ScenarioConfig, path: Path) -> None:
         ET.SubElement(root, "flow", id=fid, type=vtype, begin="0", end="86400",
                       period=f"exp({vph / 3600.0:.6f})", departLane="random", departSpeed="max",
                       attrib={"from": src, "to": dst})
-    _write_xml(root, path)
+    write_xml(root, path)
 
 
-def _write_xml(root: ET.Element, path: Path) -> None:
+def write_xml(root: ET.Element, path: Path) -> None:
     ET.indent(root)
     path.write_bytes(ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n")

@@ -91,6 +91,9 @@ _GREEN = frozenset("gG")
 SPEED_MODE_SAFE = 27
 # lane-change mode 512: no autonomous changes; TraCI requests respect the others' gaps
 LC_MODE_EXTERNAL = 512
+# on a route through a network (envs.network): 512 plus SUMO's strategic changes where no TraCI
+# request conflicts, so the ego takes the lanes its route needs (a turn) while the agent decides the rest
+LC_MODE_ROUTE = 513
 LC_MODE_DEFAULT = 1621  # SUMO's default (LC2013 decides)
 
 
@@ -131,14 +134,18 @@ class SumoSession:
         self.busy = False  # in the middle of an episode: its libsumo is not handed to another session
         self.sumo_seconds = 0.0  # [s] wall time inside SUMO since start(): loading and stepping (the floor)
         self._plans: dict[str, TlsPlan] = {}
+        self._lanes: dict[str, tuple[tuple[tuple[float, float], ...], float]] = {}  # lane id -> (shape, width)
+        self._edge_lanes: dict[str, int] = {}
+        self._lc_external = LC_MODE_ROUTE if files.route_frame else LC_MODE_EXTERNAL
         self._finalizer: weakref.finalize | None = None  # gives libsumo up if this is dropped holding it
         self._context_range = max(cfg.grid_ahead, cfg.grid_behind) + 2 * cfg.vehicle_length
 
     # ------------------------------------------------------------------ lifecycle
     def command(self, seed: int) -> list[str]:
         f = self.files
+        begin = ["--begin", f"{f.begin:g}"] if f.begin else []
         return [
-            "sumo", "-n", str(f.net), "-r", str(f.routes), "-a", str(f.additional),
+            "sumo", "-n", str(f.net), "-r", ",".join(map(str, (f.routes, *f.demand))), "-a", str(f.additional), *begin,
             "--step-length", f"{self.cfg.step_length:g}", "--seed", str(int(seed)),
             "--lanechange.duration", f"{self.cfg.lane_change_duration:g}",
             "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true",
@@ -270,10 +277,10 @@ class SumoSession:
 
     def take_control(self, vid: str) -> None:
         self._api.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
-        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_EXTERNAL)
+        self._api.vehicle.setLaneChangeMode(vid, self._lc_external)
 
     def lateral_to_sumo(self, vid: str, lc2013: bool) -> None:
-        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_DEFAULT if lc2013 else LC_MODE_EXTERNAL)
+        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_DEFAULT if lc2013 else self._lc_external)
 
     def kinematics(self, vid: str) -> Kinematics:
         v = self._api.vehicle
@@ -289,6 +296,29 @@ class SumoSession:
         """(x, y) [m] of the vehicle's front bumper."""
         x, y = self._api.vehicle.getPosition(vid)
         return x, y
+
+    def lane_place(self, vid: str) -> tuple[str, float]:
+        """(lane id, position along it [m]) of the vehicle's front bumper."""
+        v = self._api.vehicle
+        return v.getLaneID(vid), v.getLanePosition(vid)
+
+    def lane_geometry(self, lane: str) -> tuple[tuple[tuple[float, float], ...], float]:
+        """(shape, width [m]) of ``lane``: static, so read once per lane and kept."""
+        geo = self._lanes.get(lane)
+        if geo is None:
+            geo = self._lanes[lane] = (tuple(self._api.lane.getShape(lane)), self._api.lane.getWidth(lane))
+        return geo
+
+    def edge_lanes(self, edge: str) -> int:
+        """Number of lanes of ``edge`` (static, kept)."""
+        n = self._edge_lanes.get(edge)
+        if n is None:
+            n = self._edge_lanes[edge] = self._api.edge.getLaneNumber(edge)
+        return n
+
+    def route_lanes(self, vid: str) -> dict[int, bool]:
+        """Lane index -> whether that lane of the vehicle's edge continues its route (SUMO's best lanes)."""
+        return {int(lane.rsplit("_", 1)[1]): bool(cont) for lane, _, _, _, cont, _ in self._api.vehicle.getBestLanes(vid)}
 
     def odometer(self, vid: str) -> float:
         """Distance [m] driven since insertion."""

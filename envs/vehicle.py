@@ -46,6 +46,7 @@ class ControlledVehicle:
     kin: tuple = ()
     signal: SignalView | None = None
     others: list = field(default_factory=list)  # [(x, y, angle, length)] of the neighbours
+    along: float = 0.0  # [m] position along the corridor (``obs_type.along``)
     energy: float = 0.0  # [Wh] cumulative
     lane_changes: int = 0
     clips: int = 0
@@ -59,10 +60,10 @@ class ControlledVehicle:
         s = self.session
         if not measured:
             self.kin = s.kinematics(self.vid)
+            self.along = self.obs_type.along(s, self.vid, self.kin)
         obs, self.signal, self.others = self.obs_type.observe(s, self.vid, self.kin, s.neighbours(self.vid))
-        lane = self.kin.lane
         # the road's lanes, not the observation's: a change into a padded lane is masked
-        self.mask = safety.lane_mask(lane, self.cfg.lanes, s.could_change(self.vid, 1), s.could_change(self.vid, -1))
+        self.mask = self.obs_type.mask(s, self.vid, self.kin.lane)
         return obs
 
     def apply(self, cmd: Command) -> None:
@@ -76,17 +77,20 @@ class ControlledVehicle:
                 s.change_lane(self.vid, safety.paper_to_sumo(lateral))
         if cmd.accel is not None:
             s.set_speed(self.vid, safety.target_speed(speed, cmd.accel, cfg.step_length, cfg.speed_limit))
-        self._pending = (cmd, lateral, speed, self.kin.lane, self.kin.x, self.kin.y)
+        self._pending = (cmd, lateral, speed, self.kin.lane, self.kin.x, self.kin.y, self.kin.edge)
 
     def measure(self) -> StepMeasure:
         """Read back the step just simulated (call after ``session.step``)."""
         s, cfg = self.session, self.cfg
-        cmd, sent, v0, lane0, x0, y0 = self._pending
+        cmd, sent, v0, lane0, x0, y0, edge0 = self._pending
         kin = s.kinematics(self.vid)
+        along = self.obs_type.along(s, self.vid, kin)
+        distance, self.along = max(0.0, along - self.along), along
         dt = cfg.step_length
         applied = safety.applied_acceleration(v0, kin.speed, dt)
         clipped = cmd.accel is not None and safety.was_clipped(cmd.accel, applied, v0, dt, cfg.speed_limit)
-        lane_changed = kin.lane != lane0 and kin.edge[:1] != ":" and kin.edge != ""
+        lane_changed = (kin.lane != lane0 and kin.edge[:1] != ":" and kin.edge != ""
+                        and self.obs_type.same_road(edge0, kin.edge))
         # what happened, not what was asked: SUMO re-checks safety when it executes a change
         lateral = (kin.lane < lane0) - (kin.lane > lane0) if lane_changed else 0  # SUMO index grows to the left
         if cfg.reward.lane_change_charge == "request":
@@ -104,7 +108,7 @@ class ControlledVehicle:
             requested_accel=float("nan") if cmd.accel is None else cmd.accel,
             requested_lateral=0 if cmd.lateral is None else cmd.lateral,
             applied_accel=applied, applied_lateral=lateral, clipped=bool(clipped),
-            lane_changed=lane_changed, distance=max(0.0, kin.x - x0),
+            lane_changed=lane_changed, distance=distance,
             energy=energy, jerk=jerk, speed=kin.speed, lane_change_charged=charged,
         )
 

@@ -42,9 +42,11 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
     which.add_argument("--generalisation", action="store_true",
                        help="write or check the held-out family instead (envs/families/heldout.json, "
                             "bench.cases.heldout); the same as --family test")
-    which.add_argument("--family", choices=("train", "test"), default=None,
+    which.add_argument("--family", choices=("train", "test", "real"), default=None,
                        help="write or check a corridor family instead: train (the training and validation splits, "
-                            "envs/families/train.json, bench.cases.train_family) or test (the held-out family)")
+                            "envs/families/train.json, bench.cases.train_family), test (the held-out family) or "
+                            "real (the real corridors from the installed sumo-rl, envs/families/real.json, "
+                            "bench.cases.real)")
     which.add_argument("--clairvoyant", action="store_true",
                        help="write or check the clairvoyant drives of the fixed and held-out cases only "
                             "(bench/cases/clairvoyant_drives.parquet, bench.methods.clairvoyant_agent)")
@@ -58,6 +60,10 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
         return heldout.main(args.write)
     if args.family == "train":
         return train_family.main(args.write)
+    if args.family == "real":
+        from ecodrive_bench.bench.cases import real  # noqa: PLC0415  (reads the networks: only when asked)
+
+        return real.main(args.write)
     if args.bounds:
         return bounds(ap.prog, args.write, args.workers, bounds_file)
     if args.clairvoyant:
