@@ -134,10 +134,16 @@ class ScenarioConfig:
     obs_lanes: int | None = param(None, 1, 6, optional=True, unit="-",
         doc="lanes of the observation (grid columns, lane one-hot), lanes..6; None: `lanes`. Lanes the road lacks"
             " read as occupied, so a policy trained on more lanes drives a narrower road.")
+    network: str | None = param(None, text=8192, unit="-",
+        doc="a corridor on a SUMO network instead of the generated arterial: a real corridor's name "
+            "(ingolstadt7, cologne3, cologne8) or a network spec as JSON (envs.network, docs/networks.md); None: "
+            "the arterial. Left out of to_dict() while None, so the arterial's digests stay as they are")
     ev: EVParams = field(default_factory=EVParams)
     reward: RewardConfig = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
+        if isinstance(self.network, Mapping):  # a spec given as plain data: one canonical text, one digest
+            object.__setattr__(self, "network", json.dumps(dict(self.network), sort_keys=True))
         for name in ("spacings", "junction_cycles", "junction_greens", "junction_offsets"):
             value = getattr(self, name)
             if isinstance(value, list):  # JSON has no tuples
@@ -234,7 +240,10 @@ class ScenarioConfig:
         return max((self.cycle, *(self.junction_cycles or ())))
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        d = dataclasses.asdict(self)
+        if d["network"] is None:  # the generated arterial: the dict (and digest) it always had
+            del d["network"]
+        return d
 
     def digest(self, keys: tuple[str, ...] | None = None) -> str:
         d = self.to_dict()

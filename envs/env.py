@@ -11,10 +11,9 @@ from . import rewards
 from .action import make_action
 from .config import ConfigError, ScenarioConfig
 from .family import corridors
-from .network import NetworkSpec, as_spec, build_network
+from .network import NetworkSpec, config_value, corridor_files
 from .observation import GridLogicObservation, RouteGridLogicObservation
 from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
-from .scenario import build
 from .sumo import SumoSession
 from .vehicle import ControlledVehicle, StepMeasure
 
@@ -130,7 +129,8 @@ class EcoDriveEnv(gym.Env):
         check_mode(render_mode)
         if network is not None and family is not None:
             raise ConfigError("network= and family= are not accepted together; accepted: one corridor source")
-        self.network = None if network is None else as_spec(network)
+        if network is not None:
+            overrides["network"] = config_value(network)  # a NetworkError (a ConfigError) names a bad spec
         if isinstance(config, ScenarioConfig):
             base = config.to_dict()
         else:
@@ -168,7 +168,7 @@ class EcoDriveEnv(gym.Env):
     def _use(self, cfg: ScenarioConfig) -> None:
         """Drive the corridor of ``cfg``: its files (built once, cached), session and types."""
         self.cfg = cfg
-        self.files = build(cfg) if self.network is None else build_network(self.network, cfg)
+        self.files = corridor_files(cfg)
         self.session = SumoSession(cfg, self.files)
         self.obs_type = (RouteGridLogicObservation if self.files.route_frame else GridLogicObservation)(cfg, self.files)
         self.action_type = make_action(self._action, cfg)

@@ -364,9 +364,30 @@ def real_spec(name: str) -> NetworkSpec:
 
 
 def as_spec(network: NetworkSpec | Mapping[str, Any] | str) -> NetworkSpec:
-    """``network=`` of EcoDrive-v0 as a ``NetworkSpec``."""
+    """``network=`` of EcoDrive-v0 (or ``ScenarioConfig.network``) as a ``NetworkSpec``: a spec, a
+    mapping of its fields, its JSON text, or a real corridor's name."""
     if isinstance(network, NetworkSpec):
         return network
+    if isinstance(network, str) and network.lstrip().startswith("{"):
+        try:
+            network = json.loads(network)
+        except ValueError as e:
+            raise NetworkError(f"network {network[:40]!r} is not a JSON object ({e})") from None
     if isinstance(network, str):
         return real_spec(network)
     return NetworkSpec.from_dict(network)
+
+
+def config_value(network: NetworkSpec | Mapping[str, Any] | str) -> str:
+    """``ScenarioConfig.network`` for ``network``: a real corridor's name as it is, a spec as JSON."""
+    if isinstance(network, str) and not network.lstrip().startswith("{"):
+        return network
+    return json.dumps(as_spec(network).to_dict(), sort_keys=True)
+
+
+def corridor_files(cfg: ScenarioConfig) -> ScenarioFiles:
+    """The files of the corridor ``cfg`` drives: the generated arterial's (``envs.scenario.build``)
+    or, with ``cfg.network``, those of its network and route (``build_network``)."""
+    from .scenario import build  # noqa: PLC0415
+
+    return build(cfg) if cfg.network is None else build_network(as_spec(cfg.network), cfg)

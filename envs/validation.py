@@ -30,12 +30,15 @@ def each(lo: float, hi: float) -> dict[str, Any]:
 
 def param(default: Any, lo: float | None = None, hi: float | None = None, *, doc: str, unit: str = "",
           lo_open: bool = False, choices: tuple[str, ...] | None = None, each: bool = False,
-          optional: bool = False) -> Any:
+          optional: bool = False, text: int | None = None) -> Any:
     """A config field: ``default``, its meaning ``doc``, its ``unit`` ("-" or "" for none) and its
     accepted values: a number in [lo, hi] ((lo, hi] with ``lo_open``), one of ``choices``, a
-    tuple of such numbers (``each``, None allowed), or a number or None (``optional``)."""
+    tuple of such numbers (``each``, None allowed), a number or None (``optional``), or a text of
+    at most ``text`` characters or None."""
     meta: dict[str, Any] = {"doc": doc, "unit": unit}
-    if choices is not None:
+    if text is not None:
+        meta["text"] = text
+    elif choices is not None:
         meta["choices"] = tuple(choices)
     elif each:
         meta.update(globals()["each"](lo, hi))  # the module's each(): the name is shadowed here
@@ -48,6 +51,8 @@ def accepted_text(meta: Mapping[str, Any], type_name: str = "") -> str:
     """The accepted values of a field, as its error messages and ``--help`` say them."""
     if "choices" in meta:
         return "one of " + ", ".join(map(str, meta["choices"]))
+    if "text" in meta:
+        return f"a text of 1 to {meta['text']} characters, or null"
     if "lo" in meta:
         return ("an integer in " if type_name.startswith("int") else "") + range_text(meta)
     return "true or false" if type_name == "bool" else "any"
@@ -73,6 +78,10 @@ def validate(obj: Any) -> None:
         value = getattr(obj, f.name)
         meta = f.metadata
         name = f.name
+        if "text" in meta:
+            if value is not None and (not isinstance(value, str) or not 0 < len(value) <= meta["text"]):
+                raise ConfigError(f"{name}={short(value)} is not accepted; accepted: {accepted_text(meta)}")
+            continue
         if "choices" in meta:
             if value not in meta["choices"]:
                 raise ConfigError(f"{name}={short(value)} is not accepted; choose one of {', '.join(meta['choices'])}")

@@ -7,8 +7,9 @@ of that city's trips; the scenario's own ``.sumocfg`` gives the hour.
 
 For each, the generator chooses **the route that crosses the most signals**: among the
 least-travel-time paths between every pair of edges the passenger class may drive (Dijkstra over
-edges, ``envs.network.shortest``), the one whose consecutive edges pass the most signal-controlled
-links; ties go to the shorter path, then to the smaller first and last edge ids. The route is cut
+edges, ``envs.network.shortest``), the one that passes the most distinct signals (a signal that
+controls a cluster of junctions counts once, however often the path meets it); ties go to the
+shorter path, then to the smaller first and last edge ids. The route is cut
 after the edge that follows its last signal, so the episode ends where the last signal is behind
 the ego, as on the generated arterial. Its cases are ``CASES_PER_CORRIDOR`` pairs of a SUMO seed
 and an insertion time drawn from ``INSERT_AFTER`` s after the hour's start (the network loaded)
@@ -64,7 +65,7 @@ def most_signals(net: Any) -> list[str]:
     import heapq  # noqa: PLC0415
 
     edges = sorted((e for e in net.getEdges() if e.allows(EGO_CLASS)), key=lambda e: e.getID())
-    succ = {e: {to: any(c.getTLSID() for c in _links(e, to)) for to in e.getOutgoing()
+    succ = {e: {to: bool(_signals(e, to)) for to in e.getOutgoing()
                 if to.allows(EGO_CLASS) and _links(e, to)} for e in edges}
     best: tuple | None = None
     for src in edges:
@@ -87,12 +88,18 @@ def most_signals(net: Any) -> list[str]:
             if not crossings:
                 continue
             path = path[: crossings[-1] + 2]  # cut after the edge that follows the last signal
-            key = (-len(crossings), sum(e.getLength() for e in path), path[0].getID(), path[-1].getID())
+            signals = {s for a, b in zip(path, path[1:]) for s in _signals(a, b)}
+            key = (-len(signals), sum(e.getLength() for e in path), path[0].getID(), path[-1].getID())
             if best is None or key < best[0]:
                 best = (key, [e.getID() for e in path])
     if best is None:
         raise ValueError("the network has no route through a signal")
     return best[1]
+
+
+def _signals(a: Any, b: Any) -> set[str]:
+    """The signals that control the ego's links from edge ``a`` to edge ``b``."""
+    return {c.getTLSID() for c in _links(a, b) if c.getTLSID()}
 
 
 def _sha256(path: Path) -> str:
@@ -141,3 +148,20 @@ def main(write: bool, path: Path | None = None) -> int:
     print(f"{path.name} matches the generator and the installed sumo-rl's files" if ok
           else f"{path.name} differs from the generator (or the installed sumo-rl's files differ)")
     return 0 if ok else 1
+
+
+def variants(names: list[str] | None = None) -> list[Any]:
+    """The real corridors as the harness's variants (``bench.cases.heldout.Variant``): each its
+    scenario ``{"network": name}`` and its cases; ``names`` selects some (a ``FamilyError`` names
+    one that is not a real corridor)."""
+    from ecodrive_bench.bench.cases.case import Case
+    from ecodrive_bench.bench.cases.heldout import FamilyError, Variant
+    from ecodrive_bench.envs.network import real_corridors
+
+    corridors = real_corridors()
+    unknown = [n for n in names or [] if n not in corridors]
+    if unknown:
+        raise FamilyError(f"--variants {unknown[0]!r:.60} is not a real corridor; accepted: {', '.join(corridors)}")
+    return [Variant(name, {"network": name},
+                    tuple(Case(i, int(c["sumo_seed"]), float(c["insert_time"]), i % 10) for i, c in enumerate(corr["cases"])))
+            for name, corr in corridors.items() if names is None or name in names]

@@ -1,4 +1,5 @@
-"""``ecodrive run --profile generalisation``: every method over the held-out corridors.
+"""``ecodrive run --profile generalisation`` and ``--profile real``: every method over a family of
+corridors, the held-out ones (``bench.cases.heldout``) or the real ones (``bench.cases.real``).
 
 A run folder holds one scenario per signal setting, so the profile writes one sub-run per
 variant, each an ordinary run folder (``results.parquet``, ``manifest.json``, step logs; its
@@ -6,7 +7,7 @@ own ``ecodrive report`` works), and beside them the family's table and manifest:
 
     <logs>/<run-id>/<variant>/...            one `ecodrive run` per variant, --transfer implied
     <logs>/<run-id>/generalisation.parquet   every variant's rows, column `variant`, mcap paths
-                                             relative to <run-id>
+                                             relative to <run-id> (real.parquet for --profile real)
     <logs>/<run-id>/manifest.json            the family (version, master seed, file sha256),
                                              the variants and their scenarios, the command
 
@@ -17,6 +18,7 @@ covers every variant folder present.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -31,11 +33,29 @@ from ecodrive_bench.bench.io import atomic_json, atomic_parquet, sha256
 TABLE = "generalisation.parquet"
 
 
+def family_table(profile: str) -> str:
+    """The family table's file name of a family profile: ``generalisation.parquet``, ``real.parquet``."""
+    return TABLE if profile == "generalisation" else f"{profile}.parquet"
+
+
+def _family(profile: str) -> tuple[list[Any], dict[str, Any]]:
+    """(every variant of the profile's family, the manifest's description of its file)."""
+    if profile == "real":
+        from ecodrive_bench.bench.cases import real
+        from ecodrive_bench.envs.network import REAL_FILE
+
+        return real.variants(), {"file": REAL_FILE.name, "version": real.VERSION, "master_seed": real.MASTER_SEED,
+                                 "sha256": sha256(REAL_FILE), "cases_per_variant": real.CASES_PER_CORRIDOR,
+                                 "source": real.SOURCE}
+    return load(), {"file": FAMILY_FILE.name, "version": VERSION, "master_seed": MASTER_SEED,
+                    "sha256": sha256(FAMILY_FILE), "cases_per_variant": CASES_PER_VARIANT}
+
+
 def run_family(opts: RunOptions, progress: bool = True) -> pd.DataFrame:
     """Run ``opts.family`` (the selected variants), then write the family's table and manifest."""
     root = opts.run_dir
     if (root / "results.parquet").is_file():
-        raise UsageError(f"{root} holds a single-scenario run (results.parquet); the generalisation profile "
+        raise UsageError(f"{root} holds a single-scenario run (results.parquet); the {opts.profile} profile "
                          f"writes one sub-folder per variant: use another --run-id")
     variants = [opts.variant(v) for v in opts.family]
     checked: set[str] = set()  # each policy is loaded once, for all variants
@@ -47,7 +67,7 @@ def run_family(opts: RunOptions, progress: bool = True) -> pd.DataFrame:
 
 def _run_variants(opts: RunOptions, root: Path, variants: list[RunOptions], checks: list[Preflight],
                   progress: bool) -> pd.DataFrame:
-    family = load()
+    family, about = _family(opts.profile)
     chosen = {v.name for v in opts.family}
     for v, o, c in zip(opts.family, variants, checks):
         print(f"variant {v.name}: {len(v.cases)} cases per setting", flush=True)
@@ -61,12 +81,10 @@ def _run_variants(opts: RunOptions, root: Path, variants: list[RunOptions], chec
             df["mcap"] = [f"{v.name}/{m}" for m in df.mcap]
             frames.append(df)
     table = pd.concat(frames, ignore_index=True)
-    atomic_parquet(table, root / TABLE)
+    atomic_parquet(table, root / family_table(opts.profile))
     present = [v for v in family if v.name in set(table.variant)]
     atomic_json({
-        "command": " ".join(["ecodrive", "run", *opts.argv]), "profile": "generalisation",
-        "family": {"file": FAMILY_FILE.name, "version": VERSION, "master_seed": MASTER_SEED,
-                   "sha256": sha256(FAMILY_FILE), "cases_per_variant": CASES_PER_VARIANT},
+        "command": " ".join(["ecodrive", "run", *opts.argv]), "profile": opts.profile, "family": about,
         "variants": {v.name: v.scenario for v in present}, "signals": sorted(set(table.signals)),
         "methods": list(dict.fromkeys(table.method)), "transfer": True, "git_sha": git_sha(),
         "episodes": int(len(table)),

@@ -18,7 +18,7 @@ from ecodrive_bench.bench.methods.external import GROUP, registered
 from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS
 from ecodrive_bench.bench.methods.policies import MODELS
 from ecodrive_bench.bench.methods.sb3 import ALGOS as SB3_ALGOS
-from ecodrive_bench.envs.config import SIGNALS
+from ecodrive_bench.envs.config import SIGNALS, ConfigError
 
 RUN_DOC = """The benchmark harness: every method over the fixed test cases, one MCAP per episode.
 
@@ -50,14 +50,16 @@ PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, 
     "paper": 100,
     "full": 100,
     "generalisation": CASES_PER_VARIANT,  # per variant and setting, over bench.cases.heldout's family
+    "real": 30,  # per real corridor and setting (bench.cases.real.CASES_PER_CORRIDOR)
 }
+FAMILY_PROFILES = ("generalisation", "real")  # profiles over a family of corridors, one sub-run each
 
 
 @dataclass
 class RunOptions:
     """What one ``ecodrive run`` does, checked (``parse``); every field has its one-line doc."""
 
-    profile: str = "paper"  # smoke | paper | full | generalisation (PROFILES: cases per setting)
+    profile: str = "paper"  # smoke | paper | full | generalisation | real (PROFILES: cases per setting)
     methods: list[str] | None = None  # the methods asked for; None: every method with a shipped policy
     planners: bool = False  # also the planners (oracle, mpc, clairvoyant), in the same pool as the methods
     signals: list[str] = field(default_factory=lambda: list(SIGNALS))  # signal settings to run
@@ -74,7 +76,7 @@ class RunOptions:
     agent_sha256: dict[str, str] = field(default_factory=dict)  # user method name -> sha256 of its --sb3 zip
     scenario: dict[str, Any] = field(default_factory=dict)  # scenario overrides (--scenario, --set)
     transfer: bool = False  # a policy may drive a scenario other than its training one
-    family: list[Variant] = field(default_factory=list)  # the held-out corridors (profile generalisation)
+    family: list[Variant] = field(default_factory=list)  # the corridors of a family profile (generalisation, real)
     cases: list[Case] | None = None  # the cases per setting; None: the profile's first fixed cases
     argv: list[str] = field(default_factory=list)  # the command line, for the manifest
     failures: list[Any] = field(default_factory=list)  # episodes that failed (bench.harness.failures), filled in
@@ -94,10 +96,12 @@ def parser() -> Parser:
                     help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
                          "experiments (in `nox -s benchmark`); generalisation: every method with a policy, "
                          f"{ORACLE}, {MPC} and {CLAIRVOYANT} included, on each held-out corridor of the family (docs/generalisation.md), "
-                         "its cases, with --transfer implied, one sub-folder per variant")
+                         "its cases, with --transfer implied, one sub-folder per variant; real: every method with a "
+                         "policy, zero-shot, on each real corridor (bench.cases.real, docs/networks.md), one sub-folder "
+                         "per corridor")
     ap.add_argument("--variants", nargs="+", default=None, metavar="NAME",
                     help="with --profile generalisation: only these variants of the family, by full or short name "
-                         "(g1, g2, ...; default: all)")
+                         "(g1, g2, ...; default: all); with --profile real: only these corridors")
     users = registered()
     ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, *PLANNERS, *users],
                     help=f"among {', '.join([*METHODS, *PLANNERS, *users])} (default: every method with a shipped "
@@ -178,8 +182,18 @@ def parse(argv: list[str]) -> RunOptions:
         except FamilyError as e:
             ap.error(str(e))
         opts["transfer"] = True
+    elif opts["profile"] == "real":
+        if opts["scenario"] or opts["set_scenario"]:
+            ap.error("--profile real evaluates on the real corridors; --scenario and --set are for the other profiles")
+        from ecodrive_bench.bench.cases import real
+
+        try:
+            opts["family"] = real.variants(opts["variants"])
+        except (FamilyError, ConfigError) as e:
+            ap.error(str(e))
+        opts["transfer"] = True
     elif opts["variants"]:
-        ap.error("--variants selects corridors of the generalisation family; give --profile generalisation too")
+        ap.error("--variants selects corridors of a family; give --profile generalisation or real too")
     try:
         opts["scenario"] = scenarios.parse_overrides(opts.pop("scenario"), opts.pop("set_scenario"), opts["signals"])
     except ValueError as e:

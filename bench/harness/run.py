@@ -81,7 +81,7 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
     wanted = opts.train_seeds
     runs, skipped = [], []
     factories = opts.factories
-    default = [*METHODS, *PLANNERS] if opts.profile == "generalisation" else METHODS
+    default = [*METHODS, *PLANNERS] if opts.profile == "generalisation" else METHODS  # real: no planner yet
     named = [m for m in (opts.methods if explicit else default) if m not in factories]
     if opts.planners:
         named += [p for p in PLANNERS if p not in named]
@@ -130,6 +130,11 @@ def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
     ``UsageError``, ``CheckpointError``, ``AgentError`` or ``InputError`` (a bad case list, a
     scenario cache entry that cannot be rebuilt)."""
     runs, skipped = resolve_methods(opts)
+    if opts.scenario.get("network") is not None:
+        planned = sorted({m for m, _, _ in runs if m in PLANNERS} | ({"--bounds"} if opts.bounds else set()))
+        if planned:
+            raise UsageError(f"{', '.join(planned)}: the planners and bounds do not plan on a network corridor "
+                             f"(--set network / --network / --profile real) yet; run the other methods there")
     codes = {}
     for label, spec in opts.factories.items():  # a factory that cannot build its agent fails before any episode
         try:

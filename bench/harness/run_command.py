@@ -58,17 +58,18 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str]) -> int:
     opts = parse(argv)
     from ecodrive_bench.bench.harness import failures
-    from ecodrive_bench.bench.harness.generalisation_run import run_family
+    from ecodrive_bench.bench.harness.generalisation_run import family_table, run_family
+    from ecodrive_bench.bench.harness.options import FAMILY_PROFILES
     from ecodrive_bench.bench.harness.run import run
 
     try:
-        df = run_family(opts) if opts.profile == "generalisation" else run(opts)
+        df = run_family(opts) if opts.profile in FAMILY_PROFILES else run(opts)
     except (UsageError, CheckpointError, AgentError, InputError, runlock.InUse) as e:
         return fail(parser().prog, str(e))
     by = ["variant", "signals", "method"] if "variant" in df.columns else ["signals", "method"]
     if len(df):
         print(df.groupby(by)[["energy", "travel_time", "collisions"]].mean().round(2).to_string())
-    table = "generalisation.parquet" if "variant" in df.columns else "results.parquet"
+    table = family_table(opts.profile) if "variant" in df.columns else "results.parquet"
     print(f"results: {opts.run_dir / table}")
     return failures.exit_code(opts.failures)  # 0, or 2 / 3 after failed episodes
 

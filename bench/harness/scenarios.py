@@ -93,11 +93,13 @@ def parse_overrides(path: Path | None, items: list[str], signals: list[str], bui
 def check_buildable(cfg: ScenarioConfig, where: str) -> None:
     """Build ``cfg``'s network (once: the build is cached); an ``InputError`` of one line naming the
     scenario and netconvert's message when it cannot be built."""
-    from ecodrive_bench.envs.scenario import ScenarioBuildError, build
+    from ecodrive_bench.envs.config import ConfigError
+    from ecodrive_bench.envs.network import corridor_files
+    from ecodrive_bench.envs.scenario import ScenarioBuildError
 
     try:
-        build(cfg)
-    except ScenarioBuildError as e:
+        corridor_files(cfg)
+    except (ScenarioBuildError, ConfigError) as e:  # a NetworkError is a ConfigError
         raise InputError(f"{where}: {e}") from None
 
 

@@ -70,7 +70,8 @@ def test_every_config_field_is_declared_with_its_meaning_unit_and_range():
                 continue  # nested configs, declared in their own classes
             meta = f.metadata
             assert meta.get("doc"), f"{cls.__name__}.{f.name} has no doc"
-            assert "choices" in meta or "lo" in meta or f.type == "bool", f"{cls.__name__}.{f.name} has no range"
+            assert "choices" in meta or "lo" in meta or "text" in meta or f.type == "bool", \
+                f"{cls.__name__}.{f.name} has no range"
             assert "choices" in meta or f.type == "bool" or meta.get("unit"), f"{cls.__name__}.{f.name} has no unit"
         assert len(describe(cls)) == len(dataclasses.fields(cls))
 
