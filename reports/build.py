@@ -2,6 +2,7 @@
 sections of the further experiments found in it (reward study, heatmap, mixed traffic).
 
     ecodrive report logs/<run-id> [--out reports/<run-id>] [--generalisation logs/<gen-run-id>]
+                    [--real logs/<real-run-id>]
 
 A folder of ``ecodrive run --profile generalisation`` gets the generalisation section alone; a
 paper run's report gains it, with the in-distribution change beside it, with ``--generalisation``
@@ -31,7 +32,7 @@ from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 from ecodrive_bench.bench.runlock import InUse
 
-from . import bound_sections, claims, experiments, figures, generalisation, headline, metrics, stats, tables
+from . import bound_sections, claims, experiments, figures, generalisation, headline, metrics, real, stats, tables
 from .headline import LEARNED
 from .html import render
 from .html_markdown import experiment_caption
@@ -56,7 +57,7 @@ RECORD = ".report-files.json"  # the files the last report wrote into its folder
 
 
 def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool = True,
-          force_into: bool = False) -> tuple[Path, list[str]]:
+          force_into: bool = False, real_dir: Path | None = None) -> tuple[Path, list[str]]:
     """Write the report of ``run_dir`` into ``out``: the path of ``index.md`` (in ``out`` resolved)
     and the warnings. ``out`` must be new, empty or an earlier report's folder unless
     ``force_into`` (``reports.outdir``). The parts whose time grows with the run, reading every
@@ -71,16 +72,23 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
         gen_dir = run_dir
     if gen_dir is not None:
         generalisation.load(gen_dir)  # a bad table is one line before anything is written
+    if real_dir is not None and not real_dir.is_dir():
+        raise RunError(f"--real {real_dir}: not a run folder (written by `ecodrive run --profile real`)")
+    if real_dir is None and real.present(run_dir):
+        real_dir = run_dir
+    if real_dir is not None:
+        real.load(real_dir)  # a bad table is one line before anything is written
     if (not (run_dir / "results.parquet").is_file() and not experiments.present(run_dir)
-            and not generalisation.present(run_dir)):
+            and not generalisation.present(run_dir) and not real.present(run_dir)):
         raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
                        f"`ecodrive run`?)")
     with staged(out, RECORD, force_into) as stage:  # an Unwritable (OSError) or InUse: one line, nothing written
-        _, warnings = _write(run_dir, stage.scratch, gen_dir, progress)
+        _, warnings = _write(run_dir, stage.scratch, gen_dir, progress, real_dir)
     return stage.out / "index.md", warnings
 
 
-def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool) -> tuple[Path, list[str]]:
+def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool,
+           real_dir: Path | None = None) -> tuple[Path, list[str]]:
     """``build``'s writing, after its checks."""
     page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
@@ -93,6 +101,10 @@ def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool) -> tu
         ind = load_run(run_dir)[0] if (run_dir / "results.parquet").is_file() else None
         gmd, gimages = generalisation.section(gen_dir, out, METHOD_ORDER, ind)
         emd, eimages = gmd + emd, gimages + eimages
+    if real_dir is not None:
+        paper = load_run(run_dir)[0] if (run_dir / "results.parquet").is_file() else None
+        heldout = generalisation.load(gen_dir)[0] if gen_dir is not None else None
+        emd = real.section(real_dir, out, METHOD_ORDER, paper, heldout) + emd
     md, warnings = md + emd, warnings + ewarnings
     if warnings:
         md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
@@ -319,6 +331,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--generalisation", type=Path, default=None, metavar="GEN_RUN",
                     help="add the generalisation section of this `ecodrive run --profile generalisation` folder, "
                          "each method's change on the held-out corridors beside its change in this run")
+    ap.add_argument("--real", type=Path, default=None, metavar="REAL_RUN",
+                    help="add the real-corridors section of this `ecodrive run --profile real` folder: every method on "
+                         "each real corridor, and the learned methods' zero-shot edge beside their edge in this run "
+                         "(and in --generalisation's)")
     ap.add_argument("--force-into", action="store_true",
                     help="write into --out even though it holds files and no earlier report; the report's "
                          "files replace those of the same names, the others are kept")
@@ -338,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
             return fail(ap.prog, f"--readme: this run's scenario is not the paper's ({other}); the headline sets "
                                  f"the paper's numbers beside the run's: give a run on the paper's scenario")
     try:
-        index, warnings = build(args.run_dir, out, args.generalisation, force_into=args.force_into)
+        index, warnings = build(args.run_dir, out, args.generalisation, force_into=args.force_into, real_dir=args.real)
     except (RunError, LogError, OSError, InUse) as e:  # nothing is left behind (reports.outdir)
         return fail(ap.prog, str(e))
     for w in warnings:

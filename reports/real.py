@@ -1,0 +1,191 @@
+"""The report's real-corridors section: every method on the real city corridors of ``ecodrive run
+--profile real`` (``bench.cases.real``), against SUMO's driver and steady driving (``baseline0``)
+on the same corridor and cases, and each learned method's zero-shot edge over steady driving
+beside its edge on the paper's corridor and on the held-out family.
+
+``summary`` and ``edge_rows`` are pure functions of results tables; ``section`` renders them.
+Reads only the real run's ``real.parquet`` and ``manifest.json`` (and, for the edges beside, a
+paper run's and a generalisation run's tables).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ecodrive_bench.bench.io import atomic_csv
+
+from . import headline, tables
+from .edge import REFERENCE, edges
+from .headline import LEARNED
+from .load import RunError
+from .names import name
+
+TABLE = "real.parquet"
+COLUMNS = ("variant", "method", "signals", "case", "train_seed", "energy", "travel_time")
+DRIVER = "baseline"  # SUMO's driver
+RESAMPLES = 2000  # bootstrap resamples of a mean's 95% CI
+SEED = 0  # the bootstrap's generator seed: a report is the same on every rebuild
+
+
+def present(run_dir: Path) -> bool:
+    return (run_dir / TABLE).is_file()
+
+
+def load(run_dir: Path) -> tuple[pd.DataFrame, dict]:
+    """The real run's table and manifest; a ``RunError`` (one line) for anything else."""
+    path = run_dir / TABLE
+    if not path.is_file():
+        raise RunError(f"{run_dir}: no {TABLE} (is this a folder written by `ecodrive run --profile real`?)")
+    try:
+        table = pd.read_parquet(path)
+    except Exception as e:  # pyarrow's errors have no common base
+        raise RunError(f"{path}: not a readable results table ({type(e).__name__})") from None
+    missing = [c for c in COLUMNS if c not in table.columns]
+    if missing:
+        raise RunError(f"{path}: lacks column(s) {', '.join(missing)}; not a real-corridors table")
+    if table.empty:
+        raise RunError(f"{path}: holds no episode")
+    for col in ("energy", "travel_time"):
+        if not pd.api.types.is_numeric_dtype(table[col]) or not np.isfinite(table[col].to_numpy(float)).all():
+            raise RunError(f"{path}: column {col} holds values that are not finite numbers")
+    try:
+        manifest = json.loads((run_dir / "manifest.json").read_text())
+    except (OSError, ValueError):
+        manifest = {}
+    return table, manifest if isinstance(manifest, dict) else {}
+
+
+def mean_ci(values: np.ndarray, seed: int = SEED) -> tuple[float, float, float]:
+    """(mean, 95% CI low, high) of ``values`` [cases] by a seeded percentile bootstrap over them."""
+    x = np.asarray(values, dtype=float)
+    if len(x) < 2:
+        return float(x.mean()), float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    boots = x[rng.integers(0, len(x), size=(RESAMPLES, len(x)))].mean(axis=1)
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    return float(x.mean()), float(lo), float(hi)
+
+
+def summary(results: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
+    """Per (variant, signals, method): mean energy [Wh], travel time [s] and cost E + phi T, each
+    with its 95% CI over cases (a learned method's seeds averaged per case first), and the cost's
+    change against SUMO's driver and against ``baseline0`` on the same cases."""
+    rows = []
+    for (variant, signals), sub in results.groupby(["variant", "signals"]):
+        phi = phis.get(signals, 1.0)
+        sub = sub.assign(cost=sub.energy + phi * sub.travel_time)
+        per_case = sub.groupby(["method", "case"])[["energy", "travel_time", "cost"]].mean()
+        ref = {m: per_case.loc[m].cost for m in (DRIVER, REFERENCE) if m in per_case.index.get_level_values(0)}
+        for method, cases in per_case.groupby(level=0):
+            cases = cases.droplevel(0)
+            row = {"variant": variant, "signals": signals, "method": method, "cases": len(cases),
+                   "seeds": int(sub[sub.method == method].train_seed.nunique())}
+            for col in ("energy", "travel_time", "cost"):
+                row[col], row[f"{col}_ci_low"], row[f"{col}_ci_high"] = mean_ci(cases[col].to_numpy())
+            for tag, r in (("vs_driver", ref.get(DRIVER)), ("vs_baseline0", ref.get(REFERENCE))):
+                common = cases.index.intersection(r.index) if r is not None else []
+                row[f"cost_{tag}"] = (cases.cost[common].mean() / r[common].mean() - 1) if len(common) else float("nan")
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def edge_rows(real: pd.DataFrame, phis: dict[str, float], paper: pd.DataFrame | None,
+              heldout: pd.DataFrame | None) -> pd.DataFrame:
+    """Per (signals, learned method): the edge over ``baseline0`` (``reports.edge``) on the cost,
+    over the real corridors (each corridor weighted equally) with its worst corridor, beside the
+    same edge on the paper's corridor and on the held-out family where those runs are given."""
+    rows = []
+    for signals in sorted(set(real.signals)):
+        phi = phis.get(signals, 1.0)
+        learned = tuple(m for m in LEARNED if m in set(real.method))
+        r = edges(real[real.signals == signals], phi, learned, by=("variant",))
+        p = edges(paper[paper.signals == signals], phi, learned) if paper is not None else pd.DataFrame()
+        h = (edges(heldout[heldout.signals == signals], phi, learned, by=("variant",))
+             if heldout is not None else pd.DataFrame())
+        for method in learned:
+            def get(frame: pd.DataFrame, col: str) -> float:
+                hit = frame[frame.method == method] if not frame.empty else frame
+                return float(hit[col].iloc[0]) if len(hit) and col in hit else float("nan")
+            rows.append({"signals": signals, "method": method, "seeds": int(get(r, "seeds")) if not np.isnan(get(r, "seeds")) else 0,
+                         **{f"real_{c}": get(r, c) for c in ("cost", "cost_ci_low", "cost_ci_high", "cost_worst")},
+                         **{f"paper_{c}": get(p, c) for c in ("cost", "cost_ci_low", "cost_ci_high")},
+                         **{f"heldout_{c}": get(h, c) for c in ("cost", "cost_ci_low", "cost_ci_high")}})
+    return pd.DataFrame(rows)
+
+
+def _ci_text(v: float, lo: float, hi: float, digits: int = 1) -> str:
+    if pd.isna(v):
+        return ""
+    return f"{v:.{digits}f}" + ("" if pd.isna(lo) else f" [{lo:.{digits}f}, {hi:.{digits}f}]")
+
+
+def _pct(v: float, lo: float = float("nan"), hi: float = float("nan")) -> str:
+    if pd.isna(v):
+        return ""
+    return f"{100 * v:+.1f}%" + ("" if pd.isna(lo) else f" [{100 * lo:+.1f}, {100 * hi:+.1f}]")
+
+
+def section(run_dir: Path, out: Path, methods_order: tuple[str, ...], paper: pd.DataFrame | None = None,
+            heldout: pd.DataFrame | None = None) -> list[str]:
+    """Markdown lines; CSVs ``real.csv`` (per corridor) and ``real_edges.csv`` into ``out``."""
+    table, manifest = load(run_dir)
+    phis = headline.phis(table, manifest)
+    order = {m: i for i, m in enumerate([*methods_order, *sorted(set(table.method) - set(methods_order))])}
+    summ = summary(table, phis).sort_values(["variant", "signals", "method"],
+                                            key=lambda c: c.map(order) if c.name == "method" else c)
+    edge = edge_rows(table, phis, paper, heldout)
+    atomic_csv(summ, out / "real.csv")
+    atomic_csv(edge, out / "real_edges.csv")
+    fam = manifest.get("family", {})
+    md = ["## Real corridors", "",
+          f"Run `{run_dir.name}`: {table.variant.nunique()} real corridor(s) of the real case set (version "
+          f"{fam.get('version', '?')}, master seed {fam.get('master_seed', '?')}; RESCO's networks read from the "
+          f"installed sumo-rl package, docs/networks.md), {len(table)} episodes. Each is a route through a real city "
+          "network with its own static signal programs and an hour of its own traffic; every shipped policy drives "
+          "it zero-shot (none trained or selected on it). The signal setting names which specialists drive (those "
+          "trained on the paper's coordinated or uncoordinated corridor); the corridor's signals are its own in both. "
+          "Means with 95% CIs over cases (a learned method's training seeds averaged per case); cost = E + phi T; "
+          "change = method's mean cost / the reference's on the same cases - 1 (negative: cheaper).", ""]
+    for (variant, signals), sub in summ.groupby(["variant", "signals"], sort=False):
+        rows = [{"method": name(r.method), "energy [Wh]": _ci_text(r.energy, r.energy_ci_low, r.energy_ci_high),
+                 "travel time [s]": _ci_text(r.travel_time, r.travel_time_ci_low, r.travel_time_ci_high),
+                 "cost": _ci_text(r.cost, r.cost_ci_low, r.cost_ci_high),
+                 "vs SUMO's driver": _pct(r.cost_vs_driver), "vs Baseline0": _pct(r.cost_vs_baseline0)}
+                for r in sub.itertuples(index=False)]
+        md += [f"### {variant}, {signals} (phi = {phis.get(signals, 1.0):g} Wh/s)", "",
+               tables.frame_markdown(pd.DataFrame(rows).set_index("method"))]
+    if not edge.empty:
+        md += ["### Zero-shot edge over steady driving", "",
+               "Edge = 1 - mean cost / Baseline0's on the same cases and corridor (positive: cheaper than steady "
+               "driving), 95% CI over training seeds; on the real corridors and the held-out family the mean of the "
+               "corridors' edges, and the worst corridor. The paper's corridor and the held-out family need their "
+               "runs (`ecodrive report PAPER_RUN --generalisation GEN_RUN --real REAL_RUN`).", ""]
+        rows = [{"setting": r.signals, "method": name(r.method), "seeds": r.seeds,
+                 "real corridors": _pct(r.real_cost, r.real_cost_ci_low, r.real_cost_ci_high),
+                 "worst real corridor": _pct(r.real_cost_worst),
+                 "paper corridor": _pct(r.paper_cost, r.paper_cost_ci_low, r.paper_cost_ci_high),
+                 "held-out family": _pct(r.heldout_cost, r.heldout_cost_ci_low, r.heldout_cost_ci_high)}
+                for r in edge.itertuples(index=False)]
+        md += [tables.frame_markdown(pd.DataFrame(rows).set_index(["setting", "method"]))]
+    md += ["The top of the scale (`clairvoyant`, `mpc`, `oracle`, the DP bound) does not plan on a network corridor "
+           "yet, so this section has no headroom from Baseline0 to `clairvoyant`: that comparison is not made here.", ""]
+    return md
+
+
+def headline_line(real_dir: Path) -> str:
+    """One line for the README: per setting, the learned method with the largest mean zero-shot edge
+    over steady driving on the real corridors, and SUMO's driver's cost against steady driving."""
+    table, manifest = load(real_dir)
+    phis = headline.phis(table, manifest)
+    edge = edge_rows(table, phis, None, None)
+    parts = []
+    for signals, sub in edge.groupby("signals"):
+        best = sub.loc[sub.real_cost.idxmax()] if sub.real_cost.notna().any() else None
+        if best is not None:
+            parts.append(f"{signals} specialists: best {name(best.method)} "
+                         f"{_pct(best.real_cost, best.real_cost_ci_low, best.real_cost_ci_high)} "
+                         f"(worst corridor {_pct(best.real_cost_worst)})")
+    return "; ".join(parts)
