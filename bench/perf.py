@@ -34,6 +34,8 @@ TIERS = (("AVX-512", "avx512f"), ("AVX2", "avx2"), ("AVX", "avx"), ("SSE4.2", "s
 TARGETS = {  # name: (numerator, denominator, limit, what)
     "env_step_over_raw_step": ("test_env_step", "test_raw_sumo_step", 2.0, "env.step / raw step (medians)"),
     "env_step_over_sim_in_run": ("", "", 2.0, "env.step / its own simulationStep"),
+    "real_env_step_over_raw_step": ("test_real_env_step", "test_real_raw_sumo_step", 1.5,
+                                    "env.step / raw step on ingolstadt7 (medians)"),
     "logging_overhead": ("test_episode_logged", "test_episode_unlogged", 1.05, "episode with / without MCAP"),
     "log_overhead_in_run": ("", "", 1.05, "episode incl. logger / excl. logger"),
 }

@@ -1,0 +1,54 @@
+"""ecodrive run --profile real end to end on one real corridor (cologne3, its 30 cases, steady
+driving only: about 15 s), its report section, and the refusals of one line."""
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+
+from ecodrive_bench.bench.harness.run_command import main as run_main
+from ecodrive_bench.reports.build import main as report_main
+
+
+@pytest.fixture(scope="module")
+def real_run(tmp_path_factory):
+    logs = tmp_path_factory.mktemp("logs")
+    rc = run_main(["--profile", "real", "--variants", "cologne3", "--methods", "baseline0", "--signals",
+                   "coordinated", "--workers", "2", "--logs", str(logs), "--run-id", "real"])
+    assert rc == 0
+    return logs / "real"
+
+
+def test_every_episode_finishes_its_route(real_run):
+    df = pd.read_parquet(real_run / "real.parquet")
+    assert len(df) == 30 and set(df.variant) == {"cologne3"} and set(df.method) == {"baseline0"}
+    assert df.terminated.all() and not df.truncated.any()
+    assert (df.collisions == 0).all() and (df.teleports == 0).all()
+    manifest = json.loads((real_run / "manifest.json").read_text())
+    assert manifest["profile"] == "real" and manifest["family"]["file"] == "real.json"
+    assert manifest["variants"] == {"cologne3": {"network": "cologne3"}}
+    assert (real_run / "cologne3" / "results.parquet").is_file()  # an ordinary run folder per corridor
+
+
+def test_the_report_has_the_real_section(real_run, tmp_path, capsys):
+    assert report_main([str(real_run), "--out", str(tmp_path / "rep")]) == 0
+    md = (tmp_path / "rep" / "index.md").read_text()
+    assert "## Real corridors" in md and "### cologne3, coordinated" in md and "Baseline0" in md
+    assert "does not plan on a network corridor" in md
+    assert "Real corridors" in (tmp_path / "rep" / "index.html").read_text()
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--profile", "real", "--methods", "clairvoyant"], "do not plan on a network corridor"),
+    (["--profile", "real", "--variants", "paris"], "not a real corridor"),
+    (["--profile", "real", "--set", "lanes=3"], "--profile real evaluates on the real corridors"),
+])
+def test_refusals_are_one_line_and_write_nothing(argv, words, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        rc = run_main([*argv, "--logs", str(tmp_path / "logs")])
+        raise SystemExit(rc)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0]
+    assert not (tmp_path / "logs").exists() or not any((tmp_path / "logs").rglob("*.parquet"))

@@ -1,0 +1,53 @@
+"""The real-corridors section's pure parts (reports.real): means with CIs, the changes against
+SUMO's driver and steady driving, the zero-shot edges; and a bad table refused in one line."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ecodrive_bench.reports import real
+from ecodrive_bench.reports.load import RunError
+
+
+def _table() -> pd.DataFrame:
+    rows = []
+    for variant, scale in (("a", 1.0), ("b", 2.0)):
+        for case in range(6):
+            for method, seed, e, t in (("baseline", -1, 100, 50), ("baseline0", -1, 80, 50),
+                                       ("prl", 0, 70, 50), ("prl", 1, 90, 50)):
+                rows.append({"variant": variant, "method": method, "signals": "coordinated", "case": case,
+                             "train_seed": seed, "energy": scale * (e + case), "travel_time": float(t)})
+    return pd.DataFrame(rows)
+
+
+def test_summary_means_and_changes():
+    s = real.summary(_table(), {"coordinated": 1.0}).set_index(["variant", "method"])
+    a = s.loc[("a", "prl")]
+    assert a.energy == pytest.approx(80 + 2.5) and a.travel_time == 50 and a.seeds == 2
+    assert a.energy_ci_low <= a.energy <= a.energy_ci_high
+    assert a.cost_vs_baseline0 == pytest.approx(0.0)  # seeds' mean 82.5 + 50 against 82.5 + 50
+    assert s.loc[("a", "baseline0")].cost_vs_driver == pytest.approx((82.5 + 50) / (102.5 + 50) - 1)
+    assert s.loc[("a", "baseline")].cost_vs_driver == 0.0
+
+
+def test_edges_over_steady_driving_per_corridor_and_worst():
+    t = _table()
+    t.loc[(t.variant == "b") & (t.method == "prl"), "energy"] -= 20  # better on b only
+    e = real.edge_rows(t, {"coordinated": 1.0}, None, None).iloc[0]
+    assert e.method == "prl" and e.seeds == 2
+    assert e.real_cost > 0 and e.real_cost_worst == pytest.approx(0.0)
+    assert np.isnan(e.paper_cost) and np.isnan(e.heldout_cost)  # no such runs given
+
+
+@pytest.mark.parametrize("spoil, words", [
+    (lambda t: t.assign(energy=t.energy.astype(str)), "not finite numbers"),
+    (lambda t: t.assign(travel_time=np.inf), "not finite numbers"),
+    (lambda t: t.iloc[:0], "holds no episode"),
+    (lambda t: t.drop(columns=["variant"]), "lacks column(s) variant"),
+])
+def test_a_bad_table_is_one_line(spoil, words, tmp_path):
+    spoil(_table()).to_parquet(tmp_path / "real.parquet")
+    with pytest.raises(RunError) as e:
+        real.load(tmp_path)
+    assert words in str(e.value) and "\n" not in str(e.value)
