@@ -32,6 +32,7 @@ nox.options.sessions = ["tests", "regression", "crosshost", "lint", "docs", "whe
 def tests(session: nox.Session) -> None:
     """The test suite (CI runs this)."""
     session.run("ecodrive", "cases", "--check")
+    session.run("ecodrive", "cases", "--check", "--family", "real")  # the real corridors against the installed sumo-rl
     session.run("python", "-m", "pytest", "-q", *session.posargs)
 
 
@@ -73,8 +74,24 @@ def benchmark(session: nox.Session) -> None:
         gen = [*pool, "--logs", str(logs), "--run-id", f"{run_id}-generalisation"]
         gen += ["--signals", *opts.signals] if opts.signals else []
         session.run("ecodrive", "run", "--profile", "generalisation", *gen)
-        session.run("ecodrive", "report", str(logs / run_id), "--generalisation", str(logs / f"{run_id}-generalisation"))
+        # zero-shot on the real city corridors (docs/networks.md), beside both
+        real = [*pool, "--logs", str(logs), "--run-id", f"{run_id}-real"]
+        real += ["--signals", *opts.signals] if opts.signals else []
+        session.run("ecodrive", "run", "--profile", "real", *real)
+        session.run("ecodrive", "report", str(logs / run_id), "--generalisation", str(logs / f"{run_id}-generalisation"),
+                    "--real", str(logs / f"{run_id}-real"))
         return
+    session.run("ecodrive", "report", str(logs / run_id))
+
+
+@nox.session
+def real(session: nox.Session) -> None:
+    """Every method with a shipped policy, zero-shot, over the real city corridors (``ecodrive run
+    --profile real``, docs/networks.md), then the report of that run; options go to ``ecodrive run``."""
+    opts = _given(list(session.posargs))
+    session.run("ecodrive", "run", "--profile", "real", *session.posargs)
+    assert opts is not None  # ecodrive run has refused options it could not read
+    run_id, logs = opts.run_id or "real", Path(opts.logs or "logs")
     session.run("ecodrive", "report", str(logs / run_id))
 
 

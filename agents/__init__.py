@@ -5,6 +5,6 @@ from .base import Agent
 from .baseline import BaselineAgent, SteadyBaselineAgent
 from .glosa import GlosaAgent
 
-RULE_BASED = {"baseline": BaselineAgent, "glosa": GlosaAgent, "baseline0": SteadyBaselineAgent}  # no learning
+RULE_BASED = {c.name: c for c in (BaselineAgent, GlosaAgent, SteadyBaselineAgent)}  # no learning, by their names
 
 __all__ = ["Agent", "BaselineAgent", "GlosaAgent", "RULE_BASED", "SteadyBaselineAgent"]

@@ -15,10 +15,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.args import Parser, fail
 
 STEPS_PER_EPISODE = 250  # ~ mean training episode length (exploring episodes run longer than greedy ones)
-LEARNERS = ("prl", "mpdqn", "dqn", "ddpg")  # test_learner_update[...] benchmarks
+LEARNERS = registry.names("learned", generalist=False)  # test_learner_update[...] benchmarks
 CONV_PARTS = ("forward", "backward")  # test_prl_conv_pass[...]: the conv blocks' share of a PRL update
 KINDS = ("matmul", "elementwise", "view", "optimizer")  # test_prl_update_by_kind: a PRL update's op time by kind
 COMPILED = "test_prl_update_compiled"  # the autograd formulation under torch.compile: the alternative

@@ -201,10 +201,11 @@ def lane_frame(shape: Sequence[tuple[float, float]], pos: float) -> tuple[float,
     segs = [(x0, y0, x1, y1, d) for (x0, y0), (x1, y1) in zip(shape, shape[1:]) if (d := math.hypot(x1 - x0, y1 - y0)) > 0]
     if not segs:
         return float(shape[0][0]), float(shape[0][1]), 1.0, 0.0
-    for i, (x0, y0, x1, y1, d) in enumerate(segs):
-        if pos <= d or i == len(segs) - 1:
-            break
-        pos -= d
+    i = 0
+    while pos > segs[i][4] and i < len(segs) - 1:  # walk to the segment that holds pos
+        pos -= segs[i][4]
+        i += 1
+    x0, y0, x1, y1, d = segs[i]
     dx, dy = (x1 - x0) / d, (y1 - y0) / d
     return x0 + dx * pos, y0 + dy * pos, dx, dy
 

@@ -11,6 +11,7 @@ from ecodrive_bench.bench.io import atomic_csv
 from . import figures, headline, metrics, mpc_goal, tables
 from .headline import LEARNED
 from .html_parts import Figure, Page
+from .top import TOP
 
 
 def gaps(results: pd.DataFrame, manifest: dict, out: Path) -> list[str]:
@@ -45,7 +46,7 @@ def headroom(results: pd.DataFrame, manifest: dict, out: Path, page: Page, run_d
                        ignore_index=True)
     goal = mpc_goal.lines(results, phis, run_dir, LEARNED) if "mpc" in set(results.method) else []
     if shares.empty:
-        if "clairvoyant" not in set(results.method):
+        if TOP not in set(results.method):
             return goal
         return ["## Headroom: how much of what information can buy a method buys", "",
                 "Not in this run: the share of the gap needs baseline0 and clairvoyant on the same cases "

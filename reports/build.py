@@ -50,8 +50,7 @@ from .load import (
 from .names import seeded
 from .outdir import staged
 
-METHOD_ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "prl-family", "mpdqn-family", "ddpg", "dqn", "oracle",
-                "mpc", "clairvoyant")
+METHOD_ORDER = headline.ORDER  # the registry's order of methods (bench.registry)
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 RECORD = ".report-files.json"  # the files the last report wrote into its folder (paths relative to it)
 

@@ -13,9 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ecodrive_bench.bench import registry
+
 from .stats import stratified_seed_bootstrap
 
-REFERENCE = "baseline0"  # steady driving: SUMO's driver with its imperfection off, no information
+REFERENCE = registry.with_role("steady")  # steady driving: SUMO's driver with its imperfection off, no information
 METRICS = ("cost", "energy")
 
 

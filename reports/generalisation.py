@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.io import atomic_csv
 
 from . import figures, headline, metrics, tables, top
@@ -20,7 +21,7 @@ from .load import RunError
 from .names import name
 
 TABLE = "generalisation.parquet"
-GENERALIST = {"prl": "prl-family", "mpdqn": "mpdqn-family"}  # specialist -> the same algorithm trained on the family
+GENERALIST = {registry.specialist_of(g): g for g in registry.names("learned", generalist=True)}  # specialist -> the same algorithm trained on the family
 PAPER_CORRIDOR_SLACK = 0.02  # [-] a generalist's cost on the paper's corridor within this share of the specialist's
 COLUMNS = ("variant", "method", "signals", "case", "energy", "travel_time")
 
@@ -205,7 +206,7 @@ def top_of_scale(family: pd.DataFrame, phis: dict[str, float]) -> list[str]:
         v = top.verdicts(vs, top.travel_time(sub, by=("variant",)), LEARNED, by=("variant",))
         verdicts.append(v)
         for r in v.itertuples(index=False):
-            rows.append({"setting": signals, "variant": r.variant, "clairvoyant": f"{r.top_cost:.1f}",
+            rows.append({"setting": signals, "variant": r.variant, top.TOP: f"{r.top_cost:.1f}",
                          "cheapest other": f"{name(r.cheapest)} {r.cheapest_cost:.1f}",
                          f"margin (>= {100 * top.MARGIN:g}%)": f"{100 * r.min_margin:+.1f}%",
                          f"case share (>= {100 * top.CASE_SHARE:g}%)": f"{100 * r.min_case_share:.0f}%",

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.io import atomic_text
 from ecodrive_bench.bench.paper import TABLE4, improvement
 
@@ -27,11 +28,8 @@ from .names import label
 
 START, END = "<!-- headline:start -->", "<!-- headline:end -->"
 SETTINGS = (("coordinated", "coord."), ("uncoordinated", "non-coord."))
-ORDER = ("baseline", "baseline0", "glosa", "prl", "mpdqn", "prl-family", "mpdqn-family", "ddpg", "dqn", "oracle", "mpc",
-         "clairvoyant")
-
-
-LEARNED = ("prl", "mpdqn", "ddpg", "dqn", "prl-family", "mpdqn-family")
+ORDER = registry.table_order()  # the report's order of methods (the registry's)
+LEARNED = tuple(m for m in ORDER if m in registry.names("learned"))
 
 
 def share_text(row) -> str:

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from scipy import signal, stats
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.paper import TABLE4 as PAPER_TABLE4
 from ecodrive_bench.bench.paper import improvement
 from ecodrive_bench.reports.stats import (
@@ -134,7 +135,7 @@ def optimality_gaps(results: pd.DataFrame, phi: float) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def headroom(results: pd.DataFrame, phi: float, low: str = "baseline0", high: str = "clairvoyant",
+def headroom(results: pd.DataFrame, phi: float, low: str = registry.with_role("steady"), high: str = registry.with_role("top"),
              boot: int = BOOTSTRAP_RESAMPLES, seed: int = 0) -> pd.DataFrame:
     """The share of the cost gap between ``low`` (steady driving, no information) and ``high`` (the
     clairvoyant reference: the signal plans and the case's future traffic) that each method closes,

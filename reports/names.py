@@ -1,37 +1,24 @@
 """One display name per method, the paper's where it has one (DQN-27, DDPG+LC2013), and a few
-words on what each method is for a table's or a legend's first use. The method ids (``prl``,
-``mpc``) stay the data's: the CLI, the results tables and the CSVs use them; the README
-headline, the report's tables, captions and figures show these names. A user's own method is
-shown by its id."""
+words on what each method is for a table's or a legend's first use, as the method registry holds
+them (``bench.registry``). The method ids (``prl``, ``mpc``) stay the data's: the CLI, the
+results tables and the CSVs use them; the README headline, the report's tables, captions and
+figures show these names. A method the registry does not know (a run's ``--agent``) is shown by
+its id."""
 from __future__ import annotations
 
-NAME = {
-    "baseline": "Baseline", "baseline0": "Baseline0", "glosa": "GLOSA",
-    "prl": "PRL", "mpdqn": "MP-DQN", "ddpg": "DDPG+LC2013", "dqn": "DQN-27",
-    "prl-family": "PRL-family", "mpdqn-family": "MP-DQN-family",
-    "oracle": "Oracle", "mpc": "MPC", "clairvoyant": "Clairvoyant",
-}
-WHAT = {
-    "baseline": "SUMO's Krauss driver and LC2013",
-    "baseline0": "SUMO's driver, imperfection sigma 0",
-    "glosa": "SUMO's GLOSA device",
-    "prl-family": "trained on the corridor family",
-    "mpdqn-family": "trained on the corridor family",
-    "oracle": "the cost-optimal plan replayed in traffic",
-    "mpc": "re-plans with the signal plans, closed loop",
-    "clairvoyant": "knows the signal plans and the case's future traffic",
-}
+from ecodrive_bench.bench import registry
 
 
 def name(method: str) -> str:
-    """The method's display name; a user's method: its id."""
-    return NAME.get(method, method)
+    """The method's display name; a method the registry does not know: its id."""
+    return registry.display(method)
 
 
 def label(method: str, inside: bool = False) -> str:
     """The display name with what the method is, where a reader needs it: ``MPC (re-plans ...)``;
     ``inside`` parentheses already: ``MPC, re-plans ...``."""
-    what = WHAT.get(method)
+    entry = registry.method(method)
+    what = entry.what if entry is not None else ""
     return name(method) if not what else f"{name(method)}, {what}" if inside else f"{name(method)} ({what})"
 
 

@@ -106,14 +106,18 @@ def edge_rows(real: pd.DataFrame, phis: dict[str, float], paper: pd.DataFrame | 
         h = (edges(heldout[heldout.signals == signals], phi, learned, by=("variant",))
              if heldout is not None else pd.DataFrame())
         for method in learned:
-            def get(frame: pd.DataFrame, col: str) -> float:
-                hit = frame[frame.method == method] if not frame.empty else frame
-                return float(hit[col].iloc[0]) if len(hit) and col in hit else float("nan")
-            rows.append({"signals": signals, "method": method, "seeds": int(get(r, "seeds")) if not np.isnan(get(r, "seeds")) else 0,
-                         **{f"real_{c}": get(r, c) for c in ("cost", "cost_ci_low", "cost_ci_high", "cost_worst")},
-                         **{f"paper_{c}": get(p, c) for c in ("cost", "cost_ci_low", "cost_ci_high")},
-                         **{f"heldout_{c}": get(h, c) for c in ("cost", "cost_ci_low", "cost_ci_high")}})
+            seeds = _value(r, method, "seeds")
+            rows.append({"signals": signals, "method": method, "seeds": 0 if np.isnan(seeds) else int(seeds),
+                         **{f"real_{c}": _value(r, method, c) for c in ("cost", "cost_ci_low", "cost_ci_high", "cost_worst")},
+                         **{f"paper_{c}": _value(p, method, c) for c in ("cost", "cost_ci_low", "cost_ci_high")},
+                         **{f"heldout_{c}": _value(h, method, c) for c in ("cost", "cost_ci_low", "cost_ci_high")}})
     return pd.DataFrame(rows)
+
+
+def _value(frame: pd.DataFrame, method: str, col: str) -> float:
+    """``frame``'s ``col`` for ``method`` (NaN where it has none)."""
+    hit = frame[frame.method == method] if not frame.empty else frame
+    return float(hit[col].iloc[0]) if len(hit) and col in hit else float("nan")
 
 
 def _ci_text(v: float, lo: float, hi: float, digits: int = 1) -> str:

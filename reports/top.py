@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import pandas as pd
 
-TOP = "clairvoyant"
+from ecodrive_bench.bench import registry
+
+TOP = registry.with_role("top")
 MARGIN = 0.05  # [-] the top's cost at least this share below every learned and rule-based method's
 CASE_SHARE = 0.90  # [-] cases on which it is no more expensive than each learned method's seed mean
-PLANNERS = ("oracle", "mpc")  # other references: the top is below them, without a margin
+PLANNERS = tuple(m for m in registry.names("planner") if m != TOP)  # other references: the top is below them, without a margin
 
 
 def against(results: pd.DataFrame, phi: float, by: tuple[str, ...] = (), top: str = TOP) -> pd.DataFrame:

@@ -277,12 +277,12 @@ def run_task(task: LateralTask) -> dict[str, Any]:
 def task_agent(task: LateralTask, env: Any) -> tuple[Agent, str]:
     """(agent, policy sha256) of a task: a rule-based agent, or a learning one holding its
     verified policy (a file that cannot be loaded is a ``CheckpointError`` naming it)."""
-    from ecodrive_bench.agents.registry import POLICY_METHODS, make_agent
+    from ecodrive_bench.bench import registry
     from ecodrive_bench.bench.methods.policies import load_policy, policy_agent
 
     spaces = (env.observation_space, env.action_space)
-    if task.method not in POLICY_METHODS:
-        return make_agent(task.method, *spaces), ""
+    if task.method not in registry.names("learned"):  # a rule-based method: its agent class
+        return registry.load(registry.method(task.method).build)(), ""
     folder = Path(task.policy_dir)
     state, manifest = load_policy(folder, task.method)
     return policy_agent(folder, task.method, spaces, manifest, state), manifest["sha256"]
@@ -304,8 +304,8 @@ def main(argv: list[str] | None = None) -> int:
     line and exit code 2, before any episode runs or any folder is written."""
     import sys
 
-    from ecodrive_bench.agents.registry import METHODS
     from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local, run_ray
+    from ecodrive_bench.bench.harness.options import METHODS
     from ecodrive_bench.bench.io import sha256
     from ecodrive_bench.bench.logs.mcaplog import episode_summary
     from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError
@@ -365,11 +365,11 @@ def lateral_seeds(methods: list[str], models: Path,
     """(the shipped uncoordinated training seeds of each method, [None] for a rule-based one; the
     learning methods skipped for want of one). A learning method without one is a
     ``CheckpointError`` when ``explicit`` (named in --methods), else skipped."""
-    from ecodrive_bench.agents.registry import POLICY_METHODS
+    from ecodrive_bench.bench import registry
     from ecodrive_bench.bench.methods.policies import CheckpointError, family_dir, shipped_seeds
 
     seeds: dict[str, list[int | None]] = {
-        m: list(shipped_seeds(m, "uncoordinated", models)) if m in POLICY_METHODS else [None] for m in methods}
+        m: list(shipped_seeds(m, "uncoordinated", models)) if m in registry.names("learned") else [None] for m in methods}
     missing = [m for m in methods if not seeds[m]]
     if missing and explicit:
         raise CheckpointError(f"--methods {' '.join(missing)}: no shipped uncoordinated policy under {models} (expected "

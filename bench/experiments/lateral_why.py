@@ -25,14 +25,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.experiments import lateral as L
 
 LEADER_RANGE = 30.0  # [m] ego front bumper to the leader's back
 HARD_BRAKE = -2.0  # [m/s^2] the leader's acceleration below this counts as hard braking
 FREE_AHEAD = 30.0  # [m] an adjacent grid column free this far ahead of the ego's front bumper
-METHODS = ("prl", "mpdqn", "dqn")  # the learning methods whose policy chooses the lane (DDPG's is LC2013)
+METHODS = tuple(m.name for m in registry.methods(installed=False) if m.kind == "learned" and not m.generalist
+                and m.interface != "longitudinal")  # the learning methods whose policy chooses the lane (DDPG's is LC2013)
 HEAD_NAMES = ("left", "stay", "right")  # k index 0, 1, 2 (mask order too)
-TRAFFIC_POLICIES = (("prl", 0), ("mpdqn", 0), ("dqn", 0), ("baseline", None))
+TRAFFIC_POLICIES = (*((m, 0) for m in METHODS), (registry.with_role("driver"), None))
 
 
 class NoBrakeScript(L.Script):

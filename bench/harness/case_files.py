@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 import sys
 import tempfile
 from pathlib import Path
@@ -53,6 +54,9 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
     which.add_argument("--bounds", action="store_true",
                        help="write or check the shipped bounds only (bench/cases/shipped_bounds.parquet, "
                             "bench.cases.shipped_bounds)")
+    ap.add_argument("--sample-seed", type=int_in(0, 2**32 - 1), default=None, metavar="S",
+                    help="with --check: the seed of the sample of shipped bounds and drives re-solved (default: a new "
+                         "one each run, printed, so that no file can be tuned to a known sample)")
     ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, metavar="N",
                     help="parallel episodes and DP solves of --write --bounds (>= 1)")
     args = ap.parse_args(argv)
@@ -64,10 +68,13 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
         from ecodrive_bench.bench.cases import real  # noqa: PLC0415  (reads the networks: only when asked)
 
         return real.main(args.write)
+    seed = args.sample_seed if args.sample_seed is not None else secrets.randbelow(2**32)
+    if not args.write:
+        print(f"sample seed {seed} (--sample-seed {seed} draws the same sample)", flush=True)
     if args.bounds:
-        return bounds(ap.prog, args.write, args.workers, bounds_file)
+        return bounds(ap.prog, args.write, args.workers, bounds_file, seed)
     if args.clairvoyant:
-        return clairvoyant(ap.prog, args.write, args.workers)
+        return clairvoyant(ap.prog, args.write, args.workers, seed)
     data = case.generate()
     text = json.dumps(data, indent=1) + "\n"
     if args.write:
@@ -76,10 +83,11 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
         return 0
     ok = case.CASES_FILE.exists() and case.CASES_FILE.read_text() == text
     print("cases.json matches the generator" if ok else "cases.json differs from the generator")
-    return bounds(ap.prog, False, args.workers, bounds_file) or clairvoyant(ap.prog, False, 1) or (0 if ok else 1)
+    return (bounds(ap.prog, False, args.workers, bounds_file, seed) or clairvoyant(ap.prog, False, 1, seed)
+            or (0 if ok else 1))
 
 
-def clairvoyant(prog: str, write: bool, workers: int) -> int:
+def clairvoyant(prog: str, write: bool, workers: int, seed: int | None = None) -> int:
     """Write or check the shipped clairvoyant drives: 0, or 2 after one line per problem."""
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
     from ecodrive_bench.bench.methods import clairvoyant_agent
@@ -88,7 +96,8 @@ def clairvoyant(prog: str, write: bool, workers: int) -> int:
     if not write and not path.exists():
         print(f"{path.name}: not shipped; every clairvoyant case is planned in the run")
         return 0
-    lines = write_clairvoyant(path, workers) if write else clairvoyant_agent.check(path)
+    lines = (write_clairvoyant(path, workers) if write
+             else clairvoyant_agent.check(path, seed=drives.CHECK_SEED if seed is None else seed))
     for line in lines:
         fail(prog, line)
     if not lines and not write:
@@ -129,6 +138,7 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.executors import run_local
     from ecodrive_bench.bench.methods.clairvoyant_agent import choose_set, solve
+    from ecodrive_bench.bench.methods.planners import CLAIRVOYANT
     from ecodrive_bench.bench.oracle.time_price import TIME_TOL
     from ecodrive_bench.bench.progress import bar
 
@@ -139,7 +149,7 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
     kept, todo = current_sets(frame, drives.case_sets())
     tasks = [t for ts in todo.values() for t in ts]
     done: dict[tuple[str, str], list[dict]] = {key: [] for key in todo}
-    for planned in bar(run_local(tasks, workers, solve), total=len(tasks), desc="clairvoyant", unit="case",
+    for planned in bar(run_local(tasks, workers, solve), total=len(tasks), desc=CLAIRVOYANT, unit="case",
                        enabled=progress and bool(tasks)):
         key = (planned["corridor"], planned["signals"])
         done[key].append(planned)
@@ -158,14 +168,15 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
     return []
 
 
-def bounds(prog: str, write: bool, workers: int, path: Path | None) -> int:
+def bounds(prog: str, write: bool, workers: int, path: Path | None, seed: int | None = None) -> int:
     """Write or check the shipped bounds: 0, or 2 after one line per problem."""
     from ecodrive_bench.bench.cases import shipped_bounds
     from ecodrive_bench.bench.harness.errors import UsageError
 
     path = path or shipped_bounds.FILE
     try:
-        lines = write_bounds(path, workers) if write else shipped_bounds.check(path)
+        lines = (write_bounds(path, workers) if write
+                 else shipped_bounds.check(path, seed=shipped_bounds.CHECK_SEED if seed is None else seed))
     except (UsageError, InputError, OSError) as e:  # a run folder or case list refused, a write that failed
         lines = [f"{path}: not written ({e})"]
     for line in lines:

@@ -94,6 +94,9 @@ def run_episode(
             "collisions": info["collisions"], "teleports": info["teleports"],
             "battery_consumed": consumed, "battery_regenerated": regenerated,
         }
+        verify = getattr(agent, "verify", None)  # a replay of a shipped drive or plan checks its outcome first
+        if callable(verify):
+            verify(summary)  # a mismatch raises: a failed episode, its log not published
         if log is not None:
             plan = getattr(agent, "plan_trace", None)  # the oracle's planned trajectory
             if plan is not None:

@@ -25,11 +25,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.pool import RETRIES, Failure, _die_with_parent, describe, run_pool  # noqa: F401 (initializer of running pools)
 from ecodrive_bench.bench.io import atomic_bytes
 from ecodrive_bench.bench.methods.errors import install_hint
-from ecodrive_bench.bench.methods.planners import CLAIRVOYANT, MPC, ORACLE, PLANNERS, identity
+from ecodrive_bench.bench.methods.planners import PLANNERS, identity
 
 EXECUTORS = ("local", "ray")
 # an episode's default wall-clock limit on the local pool (``episode_limit``): a fixed allowance for
@@ -152,11 +153,7 @@ def run_task(task: Task) -> dict[str, Any]:
         _ENVS[env_key], agent = make(task.factory, task.signals, scenario)
         _AGENTS[key] = (agent, code_sha256(task.factory, agent))  # its code's, an --sb3 zip's
     if task.method in PLANNERS and key not in _AGENTS:
-        from ecodrive_bench.bench.methods.clairvoyant_agent import ClairvoyantAgent
-        from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
-        from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
-
-        planner = {ORACLE: OracleAgent, MPC: MPCAgent, CLAIRVOYANT: ClairvoyantAgent}[task.method]
+        planner = registry.load(registry.method(task.method).build)  # its agent class, built from the env's config
         _ENVS[env_key] = env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
         _AGENTS[key] = (planner(env.cfg), identity(task.method))
     if env_key not in _ENVS:
@@ -180,11 +177,11 @@ def task_agent(task: Task, env: Any) -> tuple[Any, str]:
     """(agent, policy sha256) of a built-in method on ``env``: a rule-based one, or a learning
     one holding its verified policy (``bench.methods.policies``; a policy that cannot be loaded
     is a ``CheckpointError`` naming the file)."""
-    from ecodrive_bench.agents.registry import POLICY_METHODS, make_agent
+    learned = registry.names("learned")
     from ecodrive_bench.bench.methods.policies import load_policy, policy_agent, policy_spaces
 
-    if task.method not in POLICY_METHODS:
-        return make_agent(task.method, env.observation_space, env.action_space), ""
+    if task.method not in learned:  # a rule-based method: its agent class, no arguments
+        return registry.load(registry.method(task.method).build)(), ""
     folder = Path(task.policy_dir)
     state, manifest = load_policy(folder, task.method, env.cfg.to_dict(), task.transfer)
     spaces = (policy_spaces(folder, manifest) if task.transfer  # the spaces it trained with: its shapes and input scaling
@@ -206,12 +203,11 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
     while the learning methods' episodes are held back and the others run."""
     if workers <= 1:
         return run_pool(tasks, workers, fn, on_failure, skip, limit=task_limit)
-    from ecodrive_bench.agents.registry import POLICY_METHODS
 
     tasks = list(tasks)
     compile_grid()
     compiled = threading.Event()
-    if not any(getattr(t, "method", None) in POLICY_METHODS for t in tasks):
+    if not any(getattr(t, "method", None) in registry.names("learned") for t in tasks):
         compiled.set()  # no act to compile (the bounds, the rule-based methods, the planners)
 
     def compile_act() -> None:
@@ -227,7 +223,7 @@ def run_local(tasks: Iterable[Any], workers: int, fn: Callable[[Any], dict] = ru
         threading.Thread(target=compile_act, name="compile-greedy-act", daemon=True).start()
 
     def hold(task: Any) -> bool:
-        return not compiled.is_set() and getattr(task, "method", None) in POLICY_METHODS
+        return not compiled.is_set() and getattr(task, "method", None) in registry.names("learned")
 
     return run_pool(tasks, workers, fn, on_failure, skip, hold=hold, limit=task_limit)
 

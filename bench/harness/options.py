@@ -7,7 +7,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from ecodrive_bench.agents.registry import METHODS
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.args import MAX_NAME, Parser, float_in, int_in, name, name_shown
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.cases.heldout import CASES_PER_VARIANT, FamilyError, Variant
@@ -43,6 +43,7 @@ failed episodes (rerun the command to retry them); 130 interrupted (Ctrl-C); 143
 (SIGTERM).
 """
 
+METHODS = (*registry.names("rule-based"), *registry.names("learned"))  # the methods a run runs by default
 MAX_LIMIT_S = 7 * 86400.0  # [s] the largest --episode-limit
 
 PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, mixed, reward and heatmap)
@@ -102,7 +103,7 @@ def parser() -> Parser:
     ap.add_argument("--variants", nargs="+", default=None, metavar="NAME",
                     help="with --profile generalisation: only these variants of the family, by full or short name "
                          "(g1, g2, ...; default: all); with --profile real: only these corridors")
-    users = registered()
+    users = [*registered(), *registry.names("user")]
     ap.add_argument("--methods", nargs="+", default=None, metavar="METHOD", choices=[*METHODS, *PLANNERS, *users],
                     help=f"among {', '.join([*METHODS, *PLANNERS, *users])} (default: every method with a shipped "
                          f"policy; {ORACLE} (the cost-optimal plan replayed, a DP solve per case), {MPC} (re-plans "
@@ -156,7 +157,7 @@ def parse(argv: list[str]) -> RunOptions:
     if opts["models"] != MODELS and not opts["models"].is_dir():  # a typo would drop every learning method
         ap.error(f"--models {opts['models']}: {'not a folder' if opts['models'].exists() else 'no such folder'} "
                  "(expected a folder of policies, <method>-<signals>/s<seed>/; default: the shipped models/)")
-    users = registered()
+    users = {**registered(), **{m.name: m.build for m in registry.methods() if m.kind == "user"}}
     opts["factories"] = {m: users[m] for m in opts["methods"] or [] if m in users}
     if opts["sb3"] or opts["sb3_algo"]:
         opts["agent"] = sb3_spec(ap, opts)
@@ -165,7 +166,7 @@ def parse(argv: list[str]) -> RunOptions:
         if len(label) > MAX_NAME:  # the factory's name is a folder and file name of the run, as --name
             ap.error(f"--agent {opts['agent']!r}: the factory's name {name_shown(label)} is too long for a method "
                      f"name (at most {MAX_NAME} characters); give --name")
-        if label in (*METHODS, *PLANNERS) or label in opts["factories"]:
+        if label in (*METHODS, *PLANNERS, *registry.names("user")) or label in opts["factories"]:
             ap.error(f"--name {label!r} is taken by a built-in or installed method; choose another")
         opts["factories"][label] = opts["agent"]
         opts["agent_sha256"] = {label: opts.pop("sb3_sha256")} if "sb3_sha256" in opts else {}

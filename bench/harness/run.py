@@ -22,15 +22,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ecodrive_bench.agents.registry import METHODS, POLICY_METHODS
-from ecodrive_bench.bench import runlock
+from ecodrive_bench.bench import registry, runlock
 from ecodrive_bench.bench.cases.bounds import attach
 from ecodrive_bench.bench.cases.case import Case, load
 from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.harness import failures, scenarios
 from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.executors import Task, episode_limit, run_local, run_ray
-from ecodrive_bench.bench.harness.options import PROFILES, RunOptions
+from ecodrive_bench.bench.harness.options import METHODS, PROFILES, RunOptions
 from ecodrive_bench.bench.harness.pool import PoolBroken
 from ecodrive_bench.bench.harness.provenance import carry_forward, git_sha, package_versions, process_age
 from ecodrive_bench.bench.harness.run_folder import KEEP, SCENARIO_COLUMNS, case_set_gaps, one_case_set, one_scenario
@@ -87,7 +86,7 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
         named += [p for p in PLANNERS if p not in named]
     for m in [*named, *factories]:
         for s in opts.signals:
-            if m not in POLICY_METHODS:
+            if m not in registry.names("learned"):
                 runs.append((m, s, -1))
                 continue
             have = shipped_seeds(m, s, opts.models)

@@ -107,10 +107,17 @@ def check_cached(method: str, signals: str, ev: Evaluation) -> None:
     """Build (or check in the cache, rebuilding a damaged entry) the scenario ``method`` drives
     in ``signals`` under ``ev``, as its worker will (``bench.methods.env.make_env``): an entry
     that cannot be rebuilt is one ``InputError`` line, before any episode."""
-    from ecodrive_bench.agents.registry import ENV_OVERRIDES
-
     overrides = json.loads(ev.scenario) if ev.scenario else {}
-    check_buildable(setting(signals, deep_merge(overrides, ENV_OVERRIDES.get(method, {}))), f"{method}/{signals}")
+    check_buildable(setting(signals, deep_merge(overrides, _needs(method))), f"{method}/{signals}")
+
+
+def _needs(method: str) -> dict[str, Any]:
+    """The scenario overrides ``method``'s agent needs (the registry's; {} for a user's --agent, whose
+    own are read from its agent)."""
+    from ecodrive_bench.bench import registry
+
+    entry = registry.method(method)
+    return entry.overrides() if entry is not None else {}
 
 
 def _check(where: str, overrides: dict[str, Any], signals: list[str]) -> None:
@@ -148,14 +155,13 @@ class Evaluation:
 def evaluation(method: str, signals: str, policy: str, overrides: dict[str, Any], transfer: bool) -> Evaluation:
     """The evaluation of ``method`` (its policy folder ``policy``, "" for none) on the command's
     scenario; a ``CheckpointError`` when the policy may not or cannot drive it."""
-    from ecodrive_bench.agents.registry import ENV_OVERRIDES
     from ecodrive_bench.bench.methods.policies import check_scenario, read_manifest, trained_scenario
 
     extras, train = {}, None
     if policy:
         folder = Path(policy)
         manifest = read_manifest(folder)
-        env_cfg = setting(signals, deep_merge(overrides, ENV_OVERRIDES.get(method, {})))
+        env_cfg = setting(signals, deep_merge(overrides, _needs(method)))
         extras = check_scenario(folder, manifest, env_cfg.to_dict(), transfer)
         train = trained_scenario(folder, manifest)
     merged = deep_merge(overrides, extras)

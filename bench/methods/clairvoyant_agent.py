@@ -51,6 +51,7 @@ from ecodrive_bench.bench.cases import clairvoyant_drives as drives
 from ecodrive_bench.bench.cases import shipped_bounds
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.hosts import ENERGY_RTOL, close
+from ecodrive_bench.bench.methods.errors import ShippedMismatch
 from ecodrive_bench.bench.methods.not_learning import NotLearning
 from ecodrive_bench.bench.methods.planners import CLAIRVOYANT as NAME
 from ecodrive_bench.bench.oracle import mpc as planner
@@ -94,17 +95,21 @@ class ClairvoyantAgent(NotLearning):
         self.actions: list[tuple[int, float]] | None = None  # the chosen drive's, which the episode repeats
         self.step = 0  # actions taken in this episode
         self.cruise: tuple[float, float] | None = None  # a cruise drive's (target speed [m/s], acceleration cap [m/s^2])
+        self.expected: dict[str, Any] = {}  # the shipped row the episode replays: its travel time and cost (``verify``)
+        self.case_label = ""
 
     # ------------------------------------------------------------------ planning
     def prepare(self, env: Any, case: Case) -> None:
         """Pick the drive the episode repeats: the shipped one, else the cheapest of ``plan``'s."""
         started = time.perf_counter()
         self.env, self.lane_y = env, env.files.lane_y
-        self.tracks, self.rounds, self.actions = None, [], None
+        self.tracks, self.rounds, self.actions, self.expected = None, [], None, {}
+        self.case_label = f"case {case.index}"
         if self.shipped is not None:
             self.actions = drives.lookup(env.cfg, case, self.shipped)
             if self.actions is not None:
-                self.rounds = [{"shipped": str(self.shipped.name), **drives.about(env.cfg, case, self.shipped)}]
+                self.expected = drives.about(env.cfg, case, self.shipped)
+                self.rounds = [{"shipped": str(self.shipped.name), **self.expected}]
                 return
         tried = self.plan(env, case)
         best = tried[pick(np.array([d[0] for d in tried]), np.array([d[1] for d in tried]), 0.0)]
@@ -161,7 +166,11 @@ class ClairvoyantAgent(NotLearning):
         if info["travel_time"] == 0.0:  # the reset: a new episode
             self.step, self.taken = 0, []
         if self.actions is not None:  # the chosen drive, action for action
-            lateral, accel = self.actions[min(self.step, len(self.actions) - 1)]
+            if self.step >= len(self.actions):
+                raise ShippedMismatch(f"clairvoyant, {self.case_label}: its drive has {len(self.actions)} actions and "
+                                      f"the episode goes on past them; the drive is not this case's (rebuild: "
+                                      f"{drives.REBUILD})")
+            lateral, accel = self.actions[self.step]
             self.step += 1
             return lateral, np.full(3, accel, dtype=np.float32)
         out = self._cruise(obs) if self.cruise is not None else self._closed_loop(obs, info)
@@ -231,6 +240,25 @@ class ClairvoyantAgent(NotLearning):
             target = float(here.v[1]) if here is not None and len(here.v) > 1 else cfg.speed_limit
         return k_index, self._towards(target, v)
 
+    def verify(self, summary: dict[str, Any]) -> None:
+        """Called with the episode's summary before its log is published: a replayed shipped drive
+        must give its row's travel time exactly and its energy (the row's cost less phi times the
+        time) within ``ENERGY_RTOL``, and use every action; else ``ShippedMismatch``, one line."""
+        if not self.expected:
+            return
+        want_t = float(self.expected["travel_time"])
+        want_e = float(self.expected["cost"]) - self.cfg.reward.phi * want_t
+        got_t, got_e = float(summary["travel_time"]), float(summary["energy"])
+        at = f"clairvoyant, {self.case_label}: its shipped drive ({drives.FILE.name})"
+        if got_t != want_t:
+            raise ShippedMismatch(f"{at} says {want_t:g} s, the replay took {got_t:g} s; rebuild: {drives.REBUILD}")
+        if not close(got_e, want_e, ENERGY_RTOL):
+            raise ShippedMismatch(f"{at} says {want_e:.6g} Wh, the replay used {got_e:.6g} Wh (beyond a relative "
+                                  f"{ENERGY_RTOL:g}); rebuild: {drives.REBUILD}")
+        if self.actions is not None and self.step != len(self.actions):
+            raise ShippedMismatch(f"{at} has {len(self.actions)} actions, the episode ended after {self.step}; "
+                                  f"rebuild: {drives.REBUILD}")
+
     @property
     def plan_trace(self) -> dict[str, Any] | None:
         """What planning the case found (step log metadata)."""
@@ -281,11 +309,12 @@ def choose_set(planned: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [drives.entry(p, price, k) for p, k in zip(planned, choices(costs, times, price))]
 
 
-def sample(frame, per_setting: int = drives.CHECK_PER_SETTING) -> list[tuple[str, Any]]:
+def sample(frame, per_setting: int = drives.CHECK_PER_SETTING, seed: int = drives.CHECK_SEED) -> list[tuple[str, Any]]:
     """The rows ``check`` re-plans: ``per_setting`` of each signal setting drawn over all its sets
-    (seed ``drives.CHECK_SEED``), and one more of a set with a positive price of time where the
-    draw holds none, so that a choice the price moved is checked too."""
-    rng = np.random.default_rng(drives.CHECK_SEED)
+    (``seed``: ``ecodrive cases --check`` draws a new one each run and prints it), and one more of a
+    set with a positive price of time where the draw holds none, so that a choice the price moved
+    is checked too."""
+    rng = np.random.default_rng(seed)
     out = []
     for s in sorted(set(frame.signals)):
         rows = frame[frame.signals == s].sort_values(["corridor", "case"], ignore_index=True)
@@ -297,7 +326,8 @@ def sample(frame, per_setting: int = drives.CHECK_PER_SETTING) -> list[tuple[str
     return out
 
 
-def check(path: Path = drives.FILE, per_setting: int = drives.CHECK_PER_SETTING) -> list[str]:
+def check(path: Path = drives.FILE, per_setting: int = drives.CHECK_PER_SETTING,
+          seed: int = drives.CHECK_SEED) -> list[str]:
     """One line per drift ([]: none) on a sample of the shipped cases (``sample``), planned again
     and chosen at their set's stored price: the lane decisions and the travel times exactly, SUMO's
     driver's time exactly, the accelerations and the cost within the cross-host tolerances. The
@@ -308,7 +338,7 @@ def check(path: Path = drives.FILE, per_setting: int = drives.CHECK_PER_SETTING)
         return [str(e)]
     sets = {(corridor, s): (scenario, {c.index: c for c in cases}) for corridor, s, scenario, cases in drives.case_sets()}
     lines = []
-    for s, r in sample(frame, per_setting):
+    for s, r in sample(frame, per_setting, seed):
         at = f"{path}: {r.corridor} {s} case {int(r.case)}"
         if (r.corridor, s) not in sets or int(r.case) not in sets[(r.corridor, s)][1]:
             lines.append(f"{at}: no such case in the sets of bench.cases (corridor {r.corridor!r}); rebuild: {drives.REBUILD}")

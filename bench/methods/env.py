@@ -15,10 +15,11 @@ def make_env(agent: Agent | str, signals: str, config: dict[str, Any] | None = N
              family: str | None = None) -> EcoDriveEnv:
     """The raw env for an agent (or a method name), with the agent's scenario overrides; ``family``:
     a split of the corridor families, one corridor drawn per reset (``envs.family``)."""
-    from ecodrive_bench.agents.registry import ACTION_INTERFACE, ENV_OVERRIDES
+    from ecodrive_bench.bench import registry
 
     if isinstance(agent, str):
-        interface, overrides = ACTION_INTERFACE[agent], ENV_OVERRIDES.get(agent, {})
+        entry = registry.method(agent)
+        interface, overrides = entry.interface, entry.overrides()
     else:
         interface, overrides = agent.action_interface, agent.env_overrides
     cfg = deep_merge(config or {}, overrides)

@@ -12,10 +12,10 @@ the options and a command's ``--help`` need not.
 """
 from __future__ import annotations
 
-ORACLE = "oracle"
-MPC = "mpc"
-CLAIRVOYANT = "clairvoyant"
-PLANNERS = (ORACLE, MPC, CLAIRVOYANT)
+from ecodrive_bench.bench import registry
+
+PLANNERS = registry.names("planner", installed=False)
+ORACLE, MPC, CLAIRVOYANT = PLANNERS  # the registry's planners, in its order
 
 
 def identity(method: str) -> str:

@@ -106,10 +106,11 @@ def policy_agent(folder: Path, method: str, spaces: tuple[Any, Any], manifest: d
     accept is a ``CheckpointError`` naming the file: plain data of the wrong structure passes
     ``load_torch`` but not this."""
     from ecodrive_bench.agents.registry import make_agent
+    from ecodrive_bench.bench import registry
 
     config = manifest.get("agent_config") or {}
     try:  # an experiment's policy (ecodrive train --set) is built with the config it trained with
-        agent = make_agent(method, *spaces, **{**acting_config(config), **overrides})
+        agent = make_agent(registry.algorithm(method), *spaces, **{**acting_config(config), **overrides})
     except (TypeError, ValueError) as e:
         raise CheckpointError(f"{folder / 'manifest.json'}: agent_config {config!r} not accepted ({e})") from None
     try:
@@ -228,12 +229,12 @@ def trained_scenario(folder: Path, manifest: dict[str, Any]) -> ScenarioConfig:
 
 def policy_spaces(folder: Path, manifest: dict[str, Any]) -> tuple[Any, Any]:
     """(observation space, action space) the policy was trained with, from its manifest."""
-    from ecodrive_bench.agents.registry import ACTION_INTERFACE
+    from ecodrive_bench.bench import registry
     from ecodrive_bench.envs.action import make_action
     from ecodrive_bench.envs.observation import observation_space
 
     cfg = trained_scenario(folder, manifest)
-    return observation_space(cfg), make_action(ACTION_INTERFACE[manifest["method"]], cfg).space
+    return observation_space(cfg), make_action(registry.interface(manifest["method"]), cfg).space
 
 
 def check_scenario(folder: Path, manifest: dict[str, Any], scenario: dict[str, Any], transfer: bool = False) -> dict:

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.args import Parser, fail, int_in
 from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, load_policy, policy_dir
 from ecodrive_bench.envs.action import LATERAL
@@ -145,8 +146,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", type=int_in(1, 100), default=10, help="validation cases to drive (1-100)")
     ap.add_argument("--run", type=Path, default=None, help="a training run folder: use its latest networks")
     args = ap.parse_args(argv)
-    if args.method not in ("prl", "mpdqn"):
-        ap.error(f"--method {args.method!r} is not accepted; accepted: prl, mpdqn (P-DQN heads)")
+    heads = [m.name for m in registry.methods(installed=False) if m.kind == "learned" and not m.generalist
+             and m.interface == "parameterized"]  # the P-DQN heads
+    if args.method not in heads:
+        ap.error(f"--method {args.method!r} is not accepted; accepted: {', '.join(heads)} (P-DQN heads)")
     if args.signals not in SIGNALS:
         ap.error(f"--signals {args.signals!r} is not accepted; accepted: {', '.join(SIGNALS)}")
     try:

@@ -27,6 +27,7 @@ ego into that share of the episodes (``bench.training.braking``), an experiment 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import os
 import sys
@@ -78,12 +79,10 @@ NOT_SET = ("seed", "multipass")  # agent config fields --set may not change (--s
 
 
 def config_class(method: str) -> type:
-    """The agent config dataclass of a learning method."""
-    from ecodrive_bench.agents.ddpg import DDPGConfig
-    from ecodrive_bench.agents.dqn import DQNConfig
-    from ecodrive_bench.agents.pdqn import PDQNConfig
+    """The agent config dataclass of a learning method (``agents.registry.config_class``)."""
+    from ecodrive_bench.agents.registry import config_class as of
 
-    return {"prl": PDQNConfig, "mpdqn": PDQNConfig, "dqn": DQNConfig, "ddpg": DDPGConfig}[method]
+    return of(method)
 
 
 def fields_help() -> str:
@@ -210,7 +209,8 @@ def train(method: str, signals: str, episodes: int, seed: int, out: Path, checkp
     state = read_checkpoint(ckpt) if ckpt.exists() else None  # a file that is no checkpoint: refused before anything runs
     torch.set_num_threads(1)
     env = make_env(method, signals, scenario, family)
-    decay = {} if method not in ("prl", "mpdqn", "dqn") else {"eps_decay_episodes": episodes}
+    explores = "eps_decay_episodes" in {f.name for f in dataclasses.fields(config_class(method))}  # epsilon-greedy
+    decay = {"eps_decay_episodes": episodes} if explores else {}
     agent = make_agent(method, env.observation_space, env.action_space, seed=seed, **{**decay, **(agent_config or {})})
     dev = parse_device(device)
     if dev.type == "cuda":  # cuBLAS needs this before its first call to run deterministically

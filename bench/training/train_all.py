@@ -42,11 +42,11 @@ from ecodrive_bench.envs.config import SIGNALS
 def stale(trained: dict, method: str, signals: str) -> list[str]:
     """Scenario fields in which a policy trained under ``trained`` differs from what today's
     ``bench.training.train`` would train it under (``envs.config.diff``)."""
-    from ecodrive_bench.agents.registry import ENV_OVERRIDES
+    from ecodrive_bench.bench import registry
     from ecodrive_bench.bench.cases.setting import deep_merge
     from ecodrive_bench.envs.config import ScenarioConfig, diff
 
-    return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, ENV_OVERRIDES.get(method, {}))).to_dict())
+    return diff(trained, ScenarioConfig.from_dict(deep_merge({"signals": signals}, registry.method(method).overrides())).to_dict())
 
 
 def manifest(folder: Path) -> dict | None:

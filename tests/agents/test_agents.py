@@ -215,9 +215,9 @@ def test_training_smoke_and_checkpoint_round_trip(method, tmp_path):
 
 
 def _interface(method: str) -> str:
-    from ecodrive_bench.agents.registry import ACTION_INTERFACE
+    from ecodrive_bench.bench import registry
 
-    return ACTION_INTERFACE[method]
+    return registry.interface(method)
 
 
 def _same(x, y) -> bool:

@@ -207,3 +207,31 @@ def test_a_damaged_file_is_one_line_and_nothing_is_overwritten(tmp_path, capsys)
     assert pd.read_parquet(tmp_path / "bounds.parquet").bound_source.tolist() == [SOLVED]
     assert got.energy_bound.isna().all()
     assert (bad.read_bytes(), case.CASES_FILE.read_bytes()) == before
+
+
+@pytest.mark.parametrize("spoil, words", [
+    (lambda r: r.update(cost_bound=r["cost_bound"] - 50.0), "says cost"),  # a bound made better than it is
+    (lambda r: r.update(speed=[*r["speed"][:-1], 40.0]), "do not follow its speeds"),
+    (lambda r: r.update(speed=[*r["speed"][:-1], 40.0], x=[*r["x"][:-1], r["x"][-2] + 40.0]), "leaves the limits"),
+    (lambda r: r.update(bound_energy=r["bound_energy"] * 0.9, cost_bound=r["cost_bound"] - 0.1 * r["bound_energy"]),
+     "where its speeds use"),
+    (lambda r: r.update(x=[v + 1.0 for v in r["x"]]), "not from the insertion"),
+])
+def test_an_edited_row_with_its_digest_recomputed_is_refused_on_lookup(spoil, words, tmp_path, capsys):
+    """Every lookup checks the row's plan against the DP's identities (``consistency``): an edited
+    row is solved instead, with one line, never used as a bound or a plan."""
+    table = shipped_bounds.read()
+    frame = table.frame.copy()
+    i = int(np.flatnonzero(frame.signals == SIGNALS)[0])
+    row = frame.iloc[i].to_dict()
+    spoil(row)
+    for k, v in row.items():
+        frame.at[frame.index[i], k] = v
+    path = tmp_path / "bounds.parquet"
+    shipped_bounds.save(frame, path)  # its content digest recomputed
+    bad = shipped_bounds.read(path)  # the digest holds: the file reads
+    cfg = setting(SIGNALS, None)
+    assert bad.plan(cfg, float(row["depart_time"])) is None
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and "solved instead" in err[0]
+    assert table.plan(cfg, float(row["depart_time"])) is not None  # the shipped row passes

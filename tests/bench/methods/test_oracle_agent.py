@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ecodrive_bench.agents.registry import LEARNING, RULE_BASED, make_agent
+from ecodrive_bench.agents import RULE_BASED
+from ecodrive_bench.agents.registry import LEARNING, make_agent
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.harness.options import parse
