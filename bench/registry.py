@@ -145,20 +145,22 @@ class CaseSet:
     """One set of fixed cases a run evaluates on."""
 
     name: str  # its id: the profile that runs it (paper / generalisation / real)
-    reader: str  # module:attr that reads it (the run's cases, or its variants)
+    reader: str  # module:attr that reads it: the fixed cases, or a family's variants (names=None: all)
+    writer: str  # module:attr of its generator's ``main(write)``: ecodrive cases --write / --check
     file: str  # the shipped file, relative to the package (what ecodrive cases writes and checks)
     family: str  # ecodrive cases --family value that writes and checks it ("" for the paper's cases)
     what: str  # a few words
 
 
 CASE_SETS: tuple[CaseSet, ...] = (
-    CaseSet("paper", "ecodrive_bench.bench.cases.case:load", "bench/cases/cases.json", "",
+    CaseSet("paper", "ecodrive_bench.bench.cases.case:load", "", "bench/cases/cases.json", "",
             "the paper's corridor: 100 fixed cases per signal setting"),
-    CaseSet("generalisation", "ecodrive_bench.bench.cases.heldout:load", "envs/families/heldout.json", "test",
-            "the held-out family of generated corridors, 10 cases per corridor and setting"),
-    CaseSet("real", "ecodrive_bench.bench.cases.real:variants", "envs/families/real.json", "real",
-            "real city corridors (RESCO's networks in the installed sumo-rl), 30 cases each"),
+    CaseSet("generalisation", "ecodrive_bench.bench.cases.heldout:variants", "ecodrive_bench.bench.cases.heldout:main",
+            "envs/families/heldout.json", "test", "the held-out family of generated corridors, 10 cases per corridor and setting"),
+    CaseSet("real", "ecodrive_bench.bench.cases.real:variants", "ecodrive_bench.bench.cases.real:main",
+            "envs/families/real.json", "real", "real city corridors (RESCO's networks in the installed sumo-rl), 30 cases each"),
 )
+FAMILY_PROFILES = tuple(c.name for c in CASE_SETS if c.family)  # run profiles over a family of corridors
 
 
 def case_set(name: str) -> CaseSet | None:

@@ -168,6 +168,11 @@ def select(family: list[Variant], names: list[str] | None) -> list[Variant]:
     return [v for v in family if v.name in names or v.name.split("-")[0] in names]
 
 
+def variants(names: list[str] | None = None) -> list[Variant]:
+    """The family's variants (``names``: only those, by full or short name; ``select``)."""
+    return select(load(), names)
+
+
 def main(write: bool, path: Path | None = None) -> int:
     """``ecodrive cases --generalisation --write|--check``."""
     path = FAMILY_FILE if path is None else path

@@ -26,8 +26,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.args import InputError, Parser, fail, int_in
-from ecodrive_bench.bench.cases import case, heldout, train_family
+from ecodrive_bench.bench.cases import case, train_family
 from ecodrive_bench.bench.hosts import DP_RTOL
 
 
@@ -43,7 +44,7 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
     which.add_argument("--generalisation", action="store_true",
                        help="write or check the held-out family instead (envs/families/heldout.json, "
                             "bench.cases.heldout); the same as --family test")
-    which.add_argument("--family", choices=("train", "test", "real"), default=None,
+    which.add_argument("--family", choices=("train", *(c.family for c in registry.CASE_SETS if c.family)), default=None,
                        help="write or check a corridor family instead: train (the training and validation splits, "
                             "envs/families/train.json, bench.cases.train_family), test (the held-out family) or "
                             "real (the real corridors from the installed sumo-rl, envs/families/real.json, "
@@ -60,14 +61,12 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
     ap.add_argument("--workers", type=int_in(1), default=os.cpu_count() or 1, metavar="N",
                     help="parallel episodes and DP solves of --write --bounds (>= 1)")
     args = ap.parse_args(argv)
-    if args.generalisation or args.family == "test":
-        return heldout.main(args.write)
     if args.family == "train":
         return train_family.main(args.write)
-    if args.family == "real":
-        from ecodrive_bench.bench.cases import real  # noqa: PLC0415  (reads the networks: only when asked)
-
-        return real.main(args.write)
+    family = "test" if args.generalisation else args.family
+    if family is not None:  # a case set of the registry: its generator writes or checks it
+        chosen = next(c for c in registry.CASE_SETS if c.family == family)
+        return registry.load(chosen.writer)(args.write)
     seed = args.sample_seed if args.sample_seed is not None else secrets.randbelow(2**32)
     if not args.write:
         print(f"sample seed {seed} (--sample-seed {seed} draws the same sample)", flush=True)

@@ -22,8 +22,8 @@ from typing import Any
 
 import pandas as pd
 
-from ecodrive_bench.bench import runlock
-from ecodrive_bench.bench.cases.heldout import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION, load
+from ecodrive_bench.bench import registry, runlock
+from ecodrive_bench.bench.cases.heldout import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION
 from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import RunOptions
 from ecodrive_bench.bench.harness.provenance import git_sha
@@ -40,14 +40,14 @@ def family_table(profile: str) -> str:
 
 def _family(profile: str) -> tuple[list[Any], dict[str, Any]]:
     """(every variant of the profile's family, the manifest's description of its file)."""
+    every = registry.load(registry.case_set(profile).reader)()  # the registry's case set
     if profile == "real":
         from ecodrive_bench.bench.cases import real
         from ecodrive_bench.envs.network import REAL_FILE
 
-        return real.variants(), {"file": REAL_FILE.name, "version": real.VERSION, "master_seed": real.MASTER_SEED,
-                                 "sha256": sha256(REAL_FILE), "cases_per_variant": real.CASES_PER_CORRIDOR,
-                                 "source": real.SOURCE}
-    return load(), {"file": FAMILY_FILE.name, "version": VERSION, "master_seed": MASTER_SEED,
+        return every, {"file": REAL_FILE.name, "version": real.VERSION, "master_seed": real.MASTER_SEED,
+                       "sha256": sha256(REAL_FILE), "cases_per_variant": real.CASES_PER_CORRIDOR, "source": real.SOURCE}
+    return every, {"file": FAMILY_FILE.name, "version": VERSION, "master_seed": MASTER_SEED,
                     "sha256": sha256(FAMILY_FILE), "cases_per_variant": CASES_PER_VARIANT}
 
 

@@ -53,7 +53,7 @@ PROFILES = {  # name: cases per setting (full: `nox -s benchmark` adds lateral, 
     "generalisation": CASES_PER_VARIANT,  # per variant and setting, over bench.cases.heldout's family
     "real": 30,  # per real corridor and setting (bench.cases.real.CASES_PER_CORRIDOR)
 }
-FAMILY_PROFILES = ("generalisation", "real")  # profiles over a family of corridors, one sub-run each
+FAMILY_PROFILES = registry.FAMILY_PROFILES  # profiles over a family of corridors (the registry's case sets), one sub-run each
 
 
 @dataclass
@@ -172,24 +172,12 @@ def parse(argv: list[str]) -> RunOptions:
         opts["agent_sha256"] = {label: opts.pop("sb3_sha256")} if "sb3_sha256" in opts else {}
     elif opts["name"]:
         ap.error("--name names an --agent or --sb3; give --agent package.module:factory or --sb3 MODEL.zip too")
-    if opts["profile"] == "generalisation":
+    if opts["profile"] in FAMILY_PROFILES:
         if opts["scenario"] or opts["set_scenario"]:
-            ap.error("--profile generalisation evaluates on its family's corridors; --scenario and --set "
+            ap.error(f"--profile {opts['profile']} evaluates on its family's corridors; --scenario and --set "
                      "are for the other profiles")
-        from ecodrive_bench.bench.cases import heldout
-
-        try:
-            opts["family"] = heldout.select(heldout.load(), opts["variants"])
-        except FamilyError as e:
-            ap.error(str(e))
-        opts["transfer"] = True
-    elif opts["profile"] == "real":
-        if opts["scenario"] or opts["set_scenario"]:
-            ap.error("--profile real evaluates on the real corridors; --scenario and --set are for the other profiles")
-        from ecodrive_bench.bench.cases import real
-
-        try:
-            opts["family"] = real.variants(opts["variants"])
+        try:  # the case set's reader (bench.registry): its variants, or those named
+            opts["family"] = registry.load(registry.case_set(opts["profile"]).reader)(opts["variants"])
         except (FamilyError, ConfigError) as e:
             ap.error(str(e))
         opts["transfer"] = True

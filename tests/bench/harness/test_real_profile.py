@@ -42,7 +42,7 @@ def test_the_report_has_the_real_section(real_run, tmp_path, capsys):
 @pytest.mark.parametrize("argv, words", [
     (["--profile", "real", "--methods", "clairvoyant"], "do not plan on a network corridor"),
     (["--profile", "real", "--variants", "paris"], "not a real corridor"),
-    (["--profile", "real", "--set", "lanes=3"], "--profile real evaluates on the real corridors"),
+    (["--profile", "real", "--set", "lanes=3"], "--profile real evaluates on its family's corridors"),
 ])
 def test_refusals_are_one_line_and_write_nothing(argv, words, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
