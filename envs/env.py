@@ -10,7 +10,7 @@ import numpy as np
 from . import rewards
 from .action import make_action
 from .config import ConfigError, ScenarioConfig
-from .family import corridors
+from .family import check_caller, corridors
 from .network import NetworkSpec, config_value, corridor_files
 from .observation import GridLogicObservation, RouteGridLogicObservation
 from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
@@ -142,6 +142,8 @@ class EcoDriveEnv(gym.Env):
         base.update(overrides)
         self._base, self._action = base, action
         self.family = None if family is None else corridors(family)  # a ConfigError names a bad split
+        if family is not None:
+            check_caller(family, base)
         self.corridor: str | None = None if family is None else self.family[0].name
         self._use(self.family[0].config(base) if self.family else ScenarioConfig.from_dict(base))
         self.observation_space = self.obs_type.space

@@ -18,6 +18,7 @@ module only reads them, so the env stays below the benchmark's layers.
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -83,14 +84,44 @@ def _corridors(path: Path, entries: Any, what: str) -> tuple[Corridor, ...]:
     return tuple(out)
 
 
-@cache
 def corridors(split: str) -> tuple[Corridor, ...]:
-    """The corridors of ``split`` (one of ``SPLITS``), read once per process."""
-    if split not in SPLITS:
-        raise ConfigError(f"family={split!r} is not accepted; accepted: {', '.join(SPLITS)}")
+    """The corridors of ``split`` (one of ``SPLITS``), read once per process; a ``ConfigError`` of
+    one line for anything else (a list, a name not in ``SPLITS``)."""
+    if not isinstance(split, str) or split not in SPLITS:
+        raise ConfigError(f"family={split!r:.60} is not accepted; accepted: {', '.join(SPLITS)}")
+    return _split(split)
+
+
+def set_fields(split: str) -> tuple[str, ...]:
+    """The scenario fields the corridors of ``split`` set (and ``obs_lanes``, which every family env
+    observes): a family env refuses them from its caller."""
+    return tuple(sorted({k for c in corridors(split) for k in c.scenario} | {"obs_lanes"}))
+
+
+@cache
+def _split(split: str) -> tuple[Corridor, ...]:
     if split == "test":
         return _corridors(HELDOUT_FILE, read(HELDOUT_FILE).get("variants"), "'variants'")
     splits = read(TRAIN_FILE).get("splits")
     if not isinstance(splits, dict):
         raise ConfigError(f"{TRAIN_FILE}: 'splits' must be an object of 'train' and 'validation'")
     return _corridors(TRAIN_FILE, splits.get(split), f"split {split!r}")
+
+
+_WARNED_TEST = False  # the held-out split sampled: said once per process
+
+
+def check_caller(split: str, base: dict[str, Any]) -> None:
+    """Refuse the scenario fields a family sets per corridor where the caller gave another value
+    than the default (they would be replaced silently), naming them; warn once per process when an
+    env samples the held-out test split (evaluation's, never training's or selection's)."""
+    global _WARNED_TEST
+    defaults = ScenarioConfig().to_dict()
+    clash = sorted(k for k in set_fields(split) if k in base and base[k] != defaults.get(k))
+    if clash:
+        raise ConfigError(f"family={split!r} sets {', '.join(clash)} per corridor; they are not accepted with it "
+                          f"(given: {', '.join(f'{k}={base[k]!r:.40}' for k in clash)})")
+    if split == "test" and not _WARNED_TEST:
+        _WARNED_TEST = True
+        warnings.warn("family='test' samples the held-out corridors: evaluate on them, never train or select on "
+                      "them (docs/generalisation.md)", UserWarning, stacklevel=4)

@@ -63,3 +63,40 @@ def test_an_env_without_a_family_takes_no_corridor_option():
             env.reset(options={"corridor": "t01"})
     finally:
         env.close()
+
+
+def test_family_of_the_wrong_type_is_a_config_error():
+    import gymnasium as gym
+
+    from ecodrive_bench.envs.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"family=\['train'\] is not accepted; accepted: train, validation, test"):
+        gym.make("EcoDrive-v0", family=["train"])
+
+
+@pytest.mark.parametrize("given, named", [({"lanes": 2}, "lanes"), ({"obs_lanes": 3}, "obs_lanes"),
+                                          ({"config": {"spacings": [300.0] * 4}}, "spacings")])
+def test_fields_the_family_sets_are_refused_not_replaced(given, named):
+    import gymnasium as gym
+
+    from ecodrive_bench.envs.config import ConfigError
+
+    with pytest.raises(ConfigError, match=rf"family='train' sets {named} per corridor; they are not accepted"):
+        gym.make("EcoDrive-v0", family="train", **given)
+    gym.make("EcoDrive-v0", family="train", lanes=5).close()  # the default itself is no clash
+
+
+def test_the_test_split_warns_once_per_process(monkeypatch):
+    import warnings
+
+    import gymnasium as gym
+
+    from ecodrive_bench.envs import family
+
+    monkeypatch.setattr(family, "_WARNED_TEST", False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym.make("EcoDrive-v0", family="test").close()
+        gym.make("EcoDrive-v0", family="test").close()
+    said = [w for w in caught if "held-out corridors" in str(w.message)]
+    assert len(said) == 1 and issubclass(said[0].category, UserWarning)
