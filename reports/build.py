@@ -69,25 +69,26 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
                        f"generalisation`)")
     if gen_dir is None and generalisation.present(run_dir):
         gen_dir = run_dir
+    notes: list[str] = []  # rows dropped from the family tables: the report's warnings
     if gen_dir is not None:
-        generalisation.load(gen_dir)  # a bad table is one line before anything is written
+        notes += generalisation.load(gen_dir)[2]  # a bad table is one line before anything is written
     if real_dir is not None and not real_dir.is_dir():
         raise RunError(f"--real {real_dir}: not a run folder (written by `ecodrive run --profile real`)")
     if real_dir is None and real.present(run_dir):
         real_dir = run_dir
     if real_dir is not None:
-        real.load(real_dir)  # a bad table is one line before anything is written
+        notes += real.load(real_dir)[2]  # a bad table is one line before anything is written
     if (not (run_dir / "results.parquet").is_file() and not experiments.present(run_dir)
             and not generalisation.present(run_dir) and not real.present(run_dir)):
         raise RunError(f"{run_dir}: no results.parquet and no experiment folders (is this a folder written by "
                        f"`ecodrive run`?)")
     with staged(out, RECORD, force_into) as stage:  # an Unwritable (OSError) or InUse: one line, nothing written
-        _, warnings = _write(run_dir, stage.scratch, gen_dir, progress, real_dir)
+        _, warnings = _write(run_dir, stage.scratch, gen_dir, progress, real_dir, notes)
     return stage.out / "index.md", warnings
 
 
 def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool,
-           real_dir: Path | None = None) -> tuple[Path, list[str]]:
+           real_dir: Path | None = None, notes: list[str] | None = None) -> tuple[Path, list[str]]:
     """``build``'s writing, after its checks."""
     page = Page(run_name=run_dir.name)
     if (run_dir / "results.parquet").is_file():
@@ -102,9 +103,9 @@ def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool,
         emd, eimages = gmd + emd, gimages + eimages
     if real_dir is not None:
         paper = load_run(run_dir)[0] if (run_dir / "results.parquet").is_file() else None
-        heldout = generalisation.load(gen_dir)[0] if gen_dir is not None else None
+        heldout = generalisation.load(gen_dir)[0] if gen_dir is not None else None  # its notes: in ``notes``
         emd = real.section(real_dir, out, METHOD_ORDER, paper, heldout) + emd
-    md, warnings = md + emd, warnings + ewarnings
+    md, warnings = md + emd, warnings + ewarnings + list(notes or [])
     if warnings:
         md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
     atomic_text("\n".join(md), out / "index.md")

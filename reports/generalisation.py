@@ -6,7 +6,6 @@ Reads only the generalisation run's ``generalisation.parquet`` and ``manifest.js
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pandas as pd
@@ -17,7 +16,7 @@ from ecodrive_bench.bench.io import atomic_csv
 from . import figures, headline, metrics, tables, top
 from .edge import edges
 from .headline import LEARNED
-from .load import RunError
+from .load import load_family
 from .names import name
 
 TABLE = "generalisation.parquet"
@@ -30,23 +29,10 @@ def present(run_dir: Path) -> bool:
     return (run_dir / TABLE).is_file()
 
 
-def load(run_dir: Path) -> tuple[pd.DataFrame, dict]:
-    """The family's results table and manifest; a ``RunError`` (one line) for anything else."""
-    path = run_dir / TABLE
-    if not path.is_file():
-        raise RunError(f"{run_dir}: no {TABLE} (is this a folder written by `ecodrive run --profile generalisation`?)")
-    try:
-        table = pd.read_parquet(path)
-    except Exception as e:  # pyarrow's errors have no common base
-        raise RunError(f"{path}: not a readable results table ({type(e).__name__})") from None
-    missing = [c for c in COLUMNS if c not in table.columns]
-    if missing:
-        raise RunError(f"{path}: lacks column(s) {', '.join(missing)}; not a generalisation table")
-    try:
-        manifest = json.loads((run_dir / "manifest.json").read_text())
-    except (OSError, ValueError):
-        manifest = {}
-    return table, manifest if isinstance(manifest, dict) else {}
+def load(run_dir: Path) -> tuple[pd.DataFrame, dict, list[str]]:
+    """The family's results table, manifest and notes on dropped rows, read as every results table
+    is (``reports.load.load_family``); a ``RunError`` (one line) for a table it cannot use."""
+    return load_family(run_dir, TABLE, "generalisation")
 
 
 def _percent(fraction: float) -> str:
@@ -59,7 +45,7 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...],
             in_distribution: pd.DataFrame | None = None) -> tuple[list[str], list[tuple[str, Path]]]:
     """Markdown lines and (title, PNG) figures; CSVs ``generalisation.csv`` (per variant) and
     ``generalisation_summary.csv`` into ``out``. ``in_distribution``: a paper run's results."""
-    table, manifest = load(run_dir)
+    table, manifest, _ = load(run_dir)
     per_variant = metrics.changes_vs_baseline(table, by=("variant", "signals"))
     ind = metrics.changes_vs_baseline(in_distribution) if in_distribution is not None else None
     summary = metrics.generalisation_summary(per_variant, ind)

@@ -1,7 +1,6 @@
 """Read a run folder: the results table, the manifest and step logs. No simulator here."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,7 @@ class RunError(RuntimeError):
 
 # what every report reads from a results table; other columns are drawn where present
 REQUIRED_COLUMNS = ("method", "signals", "case", "energy", "travel_time", "mcap")
-KEY = ("signals", "method", "train_seed", "case")  # one episode; train_seed where the table has it
+KEY = ("signals", "method", "train_seed", "case")  # one episode; train_seed where the table has it (and variant)
 TEXT = {"method": "a method name", "signals": "a signal setting", "mcap": "the step log's path"}
 INTEGER = {"case": ("a test case index", 0), "train_seed": ("a training seed (-1 for a rule-based method)", -1)}
 # numeric columns the report reads: a missing or infinite value drops the row, except that a missing
@@ -26,6 +25,64 @@ METRIC = {"energy": "energy in Wh", "travel_time": "travel time in s", "collisio
 MAY_BE_MISSING = ("cost_bound", "energy_bound")
 FLAGS = ("terminated", "truncated")
 SHOWN_CASES = 5  # cases named per method and setting in a note on dropped rows
+TABLE_CAP = 1 << 30  # [bytes] the largest results table read (a paper run's is some hundred kB)
+MANIFEST_CAP = 16 << 20  # [bytes] the largest manifest read
+MANIFEST_OBJECTS = ("family", "variants", "scenario")  # manifest keys whose value must be a JSON object
+
+
+def read_manifest(path: Path) -> dict:
+    """A run folder's manifest ({} where there is none): a regular JSON file of at most
+    ``MANIFEST_CAP`` bytes holding an object, whose ``MANIFEST_OBJECTS`` are objects where present;
+    a ``RunError`` of one line otherwise (a FIFO or ``/dev/zero`` is refused before it is read)."""
+    from ecodrive_bench.bench.args import InputError, read_json
+
+    if not path.exists() and not path.is_symlink():
+        return {}
+    try:
+        manifest = read_json(path, "manifest", MANIFEST_CAP)
+    except InputError as e:
+        raise RunError(str(e)) from None
+    if not isinstance(manifest, dict):
+        raise RunError(f"{path}: a JSON {type(manifest).__name__}, expected an object")
+    for key in MANIFEST_OBJECTS:
+        if key in manifest and not isinstance(manifest[key], dict):
+            raise RunError(f"{path}: {key!r} is a JSON {type(manifest[key]).__name__}, expected an object")
+    return manifest
+
+
+def read_table(path: Path) -> pd.DataFrame:
+    """A results table (parquet) read only as a regular file of at most ``TABLE_CAP`` bytes."""
+    import os
+    import stat
+
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise RunError(f"{path}: not a readable results table ({e.strerror or type(e).__name__})") from None
+    if not stat.S_ISREG(st.st_mode) or st.st_size > TABLE_CAP:
+        raise RunError(f"{path}: not a regular file of at most {TABLE_CAP} bytes; expected a results table")
+    try:
+        return pd.read_parquet(path)
+    except Exception as e:  # pyarrow's errors for a truncated or foreign file have no common base
+        raise RunError(f"{path}: not a readable results table ({type(e).__name__}: {str(e).splitlines()[0]})") from None
+
+
+def load_family(run_dir: Path, table: str, profile: str) -> tuple[pd.DataFrame, dict, list[str]]:
+    """A family run's table (``generalisation.parquet``, ``real.parquet``), its manifest and the
+    notes on dropped rows, read as ``load_run`` reads a run's: every column checked
+    (``check_results``, and ``variant`` as non-empty printable text), bad rows dropped with a note,
+    an empty table or one of the wrong shape refused in one line."""
+    path = run_dir / table
+    if not path.is_file():
+        raise RunError(f"{run_dir}: no {table} (is this a folder written by `ecodrive run --profile {profile}`?)")
+    manifest = read_manifest(run_dir / "manifest.json")
+    frame = read_table(path)
+    if "variant" not in frame.columns:
+        raise RunError(f"{path}: no 'variant' column; a table written by `ecodrive run --profile {profile}` has one")
+    ok = frame["variant"].map(lambda v: isinstance(v, str) and v != "" and v.isprintable()).to_numpy(bool)
+    _refuse_first(path, "variant", frame["variant"], ok, "a corridor name (non-empty printable text) in every row")
+    frame, notes = check_results(frame, path)
+    return frame, manifest, notes
 
 
 def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict, list[str]]:
@@ -34,16 +91,8 @@ def load_run(run_dir: Path) -> tuple[pd.DataFrame, dict, list[str]]:
     res, man = run_dir / "results.parquet", run_dir / "manifest.json"
     if not res.is_file():
         raise RunError(f"{run_dir}: no results.parquet (is this a folder written by `ecodrive run`?)")
-    try:
-        manifest = json.loads(man.read_text()) if man.is_file() else {}
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise RunError(f"{man}: not valid JSON ({e})") from None
-    if not isinstance(manifest, dict):
-        raise RunError(f"{man}: a JSON {type(manifest).__name__}, expected an object")
-    try:
-        results = pd.read_parquet(res)
-    except Exception as e:  # pyarrow's errors for a truncated or foreign file have no common base
-        raise RunError(f"{res}: not a readable results table ({type(e).__name__}: {str(e).splitlines()[0]})") from None
+    manifest = read_manifest(man)
+    results = read_table(res)
     results, notes = check_results(results, res)
     return results, manifest, notes
 
@@ -96,7 +145,7 @@ def check_results(results: pd.DataFrame, where: Path | str) -> tuple[pd.DataFram
                 notes.append(_dropped(df[bad], where, f"with {why} {col}"))
                 dropped |= bad
     df = df[~dropped]
-    key = [c for c in KEY if c in df.columns]
+    key = [c for c in ("variant", *KEY) if c in df.columns]  # a family table's episodes are per corridor too
     copies = df.duplicated(keep="first")
     if copies.any():
         notes.append(_dropped(df[copies], where, "that are exact copies of another row (one of each kept)"))

@@ -9,7 +9,6 @@ paper run's and a generalisation run's tables).
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -20,11 +19,10 @@ from ecodrive_bench.bench.io import atomic_csv
 from . import headline, tables
 from .edge import REFERENCE, edges
 from .headline import LEARNED
-from .load import RunError
+from .load import RunError, load_family
 from .names import name
 
 TABLE = "real.parquet"
-COLUMNS = ("variant", "method", "signals", "case", "train_seed", "energy", "travel_time")
 DRIVER = "baseline"  # SUMO's driver
 RESAMPLES = 2000  # bootstrap resamples of a mean's 95% CI
 SEED = 0  # the bootstrap's generator seed: a report is the same on every rebuild
@@ -34,28 +32,14 @@ def present(run_dir: Path) -> bool:
     return (run_dir / TABLE).is_file()
 
 
-def load(run_dir: Path) -> tuple[pd.DataFrame, dict]:
-    """The real run's table and manifest; a ``RunError`` (one line) for anything else."""
-    path = run_dir / TABLE
-    if not path.is_file():
-        raise RunError(f"{run_dir}: no {TABLE} (is this a folder written by `ecodrive run --profile real`?)")
-    try:
-        table = pd.read_parquet(path)
-    except Exception as e:  # pyarrow's errors have no common base
-        raise RunError(f"{path}: not a readable results table ({type(e).__name__})") from None
-    missing = [c for c in COLUMNS if c not in table.columns]
-    if missing:
-        raise RunError(f"{path}: lacks column(s) {', '.join(missing)}; not a real-corridors table")
-    if table.empty:
-        raise RunError(f"{path}: holds no episode")
-    for col in ("energy", "travel_time"):
-        if not pd.api.types.is_numeric_dtype(table[col]) or not np.isfinite(table[col].to_numpy(float)).all():
-            raise RunError(f"{path}: column {col} holds values that are not finite numbers")
-    try:
-        manifest = json.loads((run_dir / "manifest.json").read_text())
-    except (OSError, ValueError):
-        manifest = {}
-    return table, manifest if isinstance(manifest, dict) else {}
+def load(run_dir: Path) -> tuple[pd.DataFrame, dict, list[str]]:
+    """The real run's table, manifest and notes on dropped rows, read as every results table is
+    (``reports.load.load_family``); a ``RunError`` (one line) for a table it cannot use."""
+    table, manifest, notes = load_family(run_dir, TABLE, "real")
+    if "train_seed" not in table.columns:
+        raise RunError(f"{run_dir / TABLE}: no 'train_seed' column; a table written by `ecodrive run --profile real` "
+                       f"has one")
+    return table, manifest, notes
 
 
 def mean_ci(values: np.ndarray, seed: int = SEED) -> tuple[float, float, float]:
@@ -135,7 +119,7 @@ def _pct(v: float, lo: float = float("nan"), hi: float = float("nan")) -> str:
 def section(run_dir: Path, out: Path, methods_order: tuple[str, ...], paper: pd.DataFrame | None = None,
             heldout: pd.DataFrame | None = None) -> list[str]:
     """Markdown lines; CSVs ``real.csv`` (per corridor) and ``real_edges.csv`` into ``out``."""
-    table, manifest = load(run_dir)
+    table, manifest, _ = load(run_dir)
     phis = headline.phis(table, manifest)
     order = {m: i for i, m in enumerate([*methods_order, *sorted(set(table.method) - set(methods_order))])}
     summ = summary(table, phis).sort_values(["variant", "signals", "method"],
@@ -182,7 +166,7 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...], paper: pd.
 def headline_line(real_dir: Path) -> str:
     """One line for the README: per setting, the learned method with the largest mean zero-shot edge
     over steady driving on the real corridors, and SUMO's driver's cost against steady driving."""
-    table, manifest = load(real_dir)
+    table, manifest, _ = load(real_dir)
     phis = headline.phis(table, manifest)
     edge = edge_rows(table, phis, None, None)
     parts = []

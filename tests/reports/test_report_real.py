@@ -40,14 +40,52 @@ def test_edges_over_steady_driving_per_corridor_and_worst():
     assert np.isnan(e.paper_cost) and np.isnan(e.heldout_cost)  # no such runs given
 
 
+def _with_mcap(t: pd.DataFrame) -> pd.DataFrame:
+    return t.assign(mcap=[f"{v}/{s}/{m}/case-{c:03d}.mcap" for v, s, m, c in zip(t.variant, t.signals, t.method, t.case)])
+
+
 @pytest.mark.parametrize("spoil, words", [
-    (lambda t: t.assign(energy=t.energy.astype(str)), "not finite numbers"),
-    (lambda t: t.assign(travel_time=np.inf), "not finite numbers"),
-    (lambda t: t.iloc[:0], "holds no episode"),
-    (lambda t: t.drop(columns=["variant"]), "lacks column(s) variant"),
+    (lambda t: t.assign(energy="many"), "column 'energy'"),
+    (lambda t: t.assign(travel_time=np.inf), "no row is left"),
+    (lambda t: t.iloc[:0], "has no rows"),
+    (lambda t: t.drop(columns=["variant"]), "no 'variant' column"),
+    (lambda t: t.assign(signals="sideways"), "column 'signals'"),
 ])
 def test_a_bad_table_is_one_line(spoil, words, tmp_path):
-    spoil(_table()).to_parquet(tmp_path / "real.parquet")
+    spoil(_with_mcap(_table())).to_parquet(tmp_path / "real.parquet")
     with pytest.raises(RunError) as e:
         real.load(tmp_path)
+    assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_bad_rows_are_dropped_with_a_note(tmp_path):
+    t = _with_mcap(_table())
+    t.loc[0, "energy"] = np.nan
+    t.to_parquet(tmp_path / "real.parquet")
+    table, _, notes = real.load(tmp_path)
+    assert len(table) == len(t) - 1 and len(notes) == 1 and "NaN" in notes[0]
+
+
+@pytest.mark.parametrize("manifest, words", [
+    ("fifo", "not a regular file"),
+    ("zero", "not a regular file"),
+    ('{"family": [1, 2], "variants": {}}', "'family' is a JSON list, expected an object"),
+    ('{"variants": "g1"}', "'variants' is a JSON str, expected an object"),
+])
+def test_the_generalisation_folder_is_read_as_carefully_as_a_run(manifest, words, tmp_path):
+    """``report --generalisation`` reads its folder through the one reader of family tables."""
+    import os
+
+    from ecodrive_bench.reports import generalisation
+
+    _with_mcap(_table()).to_parquet(tmp_path / "generalisation.parquet")
+    path = tmp_path / "manifest.json"
+    if manifest == "fifo":
+        os.mkfifo(path)
+    elif manifest == "zero":
+        path.symlink_to("/dev/zero")
+    else:
+        path.write_text(manifest)
+    with pytest.raises(RunError) as e:
+        generalisation.load(tmp_path)
     assert words in str(e.value) and "\n" not in str(e.value)
