@@ -168,8 +168,54 @@ def _not_finite(s: Any) -> tuple[str, Any] | None:
     return next(((f, v) for f, v in fields if not math.isfinite(v)), None)
 
 
-def steps(path: Path, steps: list[Any]) -> None:
-    """Every ``/step`` message checked (see the module's docstring)."""
+STEP_TOL = 1e-6  # [s] a step's time after the one before it, against the scenario's step length
+
+
+def _links_per_signal(path: Path, steps: list[Any], tls_ids: list[str]) -> None:
+    """Each approached signal is one of ``tls_ids`` and its highest link is within every step's state
+    string of that signal."""
+    index = {t: k for k, t in enumerate(tls_ids)}
+    far: dict[str, tuple[int, int]] = {}
+    for i, s in enumerate(steps):
+        if s.signal.tls:
+            if s.signal.tls not in index:
+                raise _refuse(path, f"step {i} signal.tls", f"{s.signal.tls!r:.60} is not one of the geometry's signals")
+            far[s.signal.tls] = max(far.get(s.signal.tls, (-1, -1)), (s.signal.link, i))
+    for tls, (link, i) in far.items():
+        k = index[tls]
+        for j, s in enumerate(steps):
+            n = len(s.tls_states[k])
+            if link >= n and j == 0:  # the signal's state strings are too short from the start
+                raise _refuse(path, f"step {i} signal.link", f"{link} is outside the signal states' links 0..{n - 1}")
+            if link >= n:
+                raise _refuse(path, f"step {j} tls_states", f"a state string of {n} links for {tls!r:.40}, where "
+                                                            f"step {i} approaches its link {link}")
+
+
+def timing(meta: dict[str, str]) -> tuple[float, int] | None:
+    """(step length [s], the most steps an episode of it holds) from a log's ``config_json`` (the
+    scenario it ran), or None where the log names no scenario (a training or fleet log)."""
+    try:
+        cfg = json.loads(meta.get("config_json", ""))
+        dt, longest = float(cfg["step_length"]), float(cfg["max_episode_time"])
+    except (ValueError, KeyError, TypeError):
+        return None
+    if not (SHORTEST_STEP_S < dt and math.isfinite(longest) and 0 < longest):
+        return None
+    return dt, min(MAX_STEPS, math.ceil(longest / dt - 1e-9) + 1)  # its steps and the reset's
+
+
+def steps(path: Path, steps: list[Any], clock: tuple[float, int] | None = None,
+          tls_ids: list[str] | None = None) -> None:
+    """Every ``/step`` message checked (see the module's docstring); with ``clock`` (``timing``'s
+    step length and step count of the log's scenario), no more steps than an episode of it holds,
+    each step ``step length`` after the one before it. With ``tls_ids`` (the geometry's signals, one
+    per state string), a signal approached is one of them and its link is in every step's state
+    string of that signal (a real network's signals differ in their links); without, in every
+    state string (the generated corridor's share one layout)."""
+    if clock is not None and len(steps) > clock[1]:
+        raise _refuse(path, "steps", f"{len(steps)} steps where an episode of its scenario holds at most {clock[1]} "
+                                     f"({clock[0]:g} s steps)")
     states = len(steps[0].tls_states) if steps else 0  # signal states per step, the same in every step
     shortest: tuple[int, int] | None = None  # the shortest state string of any step, and the first step with it
     seen: set[str] = set()  # signals approached
@@ -182,6 +228,9 @@ def steps(path: Path, steps: list[Any]) -> None:
                 raise _refuse(path, f"{at} {bad[0]}", f"{bad[1]!r}; the writer's are finite")
         if not 0 <= s.time <= MAX_TIME_S:
             raise _refuse(path, f"{at} time", f"{s.time!r} s is outside [0, {MAX_TIME_S:g}] s")
+        if clock is not None and i and abs(s.time - steps[i - 1].time - clock[0]) > STEP_TOL:
+            raise _refuse(path, f"{at} time", f"{s.time!r} s follows {steps[i - 1].time!r} s; the writer's steps are "
+                                              f"{clock[0]:g} s apart, as its scenario's")
         if not (s.grid_rows and s.grid_cols and len(s.grid) == s.grid_rows * s.grid_cols):
             raise _refuse(path, f"{at} grid", f"{len(s.grid)} bytes for grid_rows x grid_cols = {s.grid_rows} x "
                                               f"{s.grid_cols}; the writer's grid fills its shape")
@@ -203,6 +252,9 @@ def steps(path: Path, steps: list[Any]) -> None:
             if s.signal.link < 0:
                 raise _refuse(path, f"{at} signal.link", f"{s.signal.link} is negative")
             far = max(far, (s.signal.link, i))
+    if tls_ids is not None and len(tls_ids) == states:
+        _links_per_signal(path, steps, tls_ids)
+        return
     link, i = far
     least, j = shortest or (0, 0)
     if link >= least:

@@ -236,7 +236,7 @@ def read_log(path: str | Path) -> LogData:
         data.warning = f"{path}: log is corrupt after {len(data.steps)} steps ({type(e).__name__}: {e})"
     data.geometry = content.geometry(path, geometry or "")
     data.plan = content.plan(path, plan) if plan is not None else None
-    content.steps(path, data.steps)
+    content.steps(path, data.steps, content.timing(data.meta), data.geometry.get("tls"))
     data.complete = footer and data.episode is not None and not data.warning
     if not data.complete and not data.warning:
         data.warning = f"{path}: log is incomplete ({len(data.steps)} steps, no episode summary)"

@@ -184,3 +184,43 @@ def test_bytes_after_the_closing_magic_make_a_log_unreadable(craft, tmp_path):
         with open(path, "rb") as f:
             list(bounded.records(path, f))
     assert "unreadable" in check(path)
+
+
+def _scenario(**fields) -> dict[str, str]:
+    """The ``config_json`` metadata of a log of the paper's scenario (1 s steps, 900 s episodes)."""
+    from ecodrive_bench.envs.config import ScenarioConfig
+
+    return {"config_json": json.dumps({**ScenarioConfig().to_dict(), **fields})}
+
+
+@pytest.mark.parametrize("steps, field", [
+    (lambda c: [c.step(0)] * 500, "step 1 time: 200.0 s follows 200.0 s"),  # a small file of one step, copied
+    (lambda c: [c.step(i) for i in range(950)], "950 steps where an episode of its scenario holds at most 901"),
+    (lambda c: [c.step(0), c.step(1), c.step(3)], "step 2 time: 203.0 s follows 201.0 s"),
+])
+def test_a_log_whose_steps_do_not_follow_its_scenarios_clock_is_refused(steps, field, craft, tmp_path, capsys):
+    """Step times must increase by the scenario's step, and no more steps than an episode of the
+    scenario holds: ``view``'s work is bounded by a real episode's (docs/reliability.md)."""
+    path = craft.write_log(tmp_path / "case-000.mcap", steps=steps(craft), meta=_scenario())
+    with pytest.raises(LogError) as e:
+        read_log(path)
+    assert field in _one_line(str(e.value))
+    assert view.main([str(path), "--save", str(tmp_path / "out.rrd")]) == 2
+    assert not (tmp_path / "out.rrd").exists()
+
+
+def test_signals_of_different_layouts_are_read_by_their_own_state_strings(craft, tmp_path):
+    """A real network's signals have different numbers of links: a link is checked against the state
+    string of the signal it approaches (the geometry's ``tls``), not the shortest of them."""
+    geo = {**craft.GEOMETRY, "tls": ["A", "B"], "stop_lines": [100.0, 300.0]}
+
+    def at(i, tls, link):
+        s = craft.step(i, tls_states=["GGrr", "GGGGGGrrrrrr"])
+        s.signal.tls, s.signal.link = tls, link
+        return s
+
+    ok = craft.write_log(tmp_path / "ok.mcap", steps=[at(0, "A", 3), at(1, "B", 10)], geometry=geo, meta=_scenario())
+    assert read_log(ok).complete
+    bad = craft.write_log(tmp_path / "bad.mcap", steps=[at(0, "A", 5)], geometry=geo, meta=_scenario())
+    with pytest.raises(LogError, match=r"step 0 signal.link: 5 is outside the signal states' links 0..3"):
+        read_log(bad)

@@ -32,7 +32,7 @@ def test_the_report_leaves_out_each_crafted_log_with_a_warning(craft, bomb, tmp_
     assert main([str(run), "--out", str(tmp_path / "report")]) == 0
     err = capsys.readouterr().err
     index = (tmp_path / "report" / "index.md").read_text()
-    for path, field in ((logs[("prl", 0)], "step 29 tls_states: a state string of 3 links, where step 29 approaches link 3"),
+    for path, field in ((logs[("prl", 0)], "step 29 tls_states: a state string of 3 links for 'J1'"),
                         (logs[("oracle", 0)], "plan: has time, speed but no x"),
                         (logs[("prl", 1)], "claims 1073741824 bytes")):
         said = [line for line in err.splitlines() if str(path) in line]
