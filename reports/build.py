@@ -196,10 +196,14 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
     if overrides:
         warnings.append(f"this run's scenario is not the paper's ({overrides}): the paper's "
                         f"Table 4 numbers are beside this run's for reference only, and its claims are NOT CHECKED")
-    parts, partial = _return_parts(results, run_dir, warnings, progress)
+    parts, partial, refused = _return_parts(results, run_dir, warnings, progress)
     if partial:
         md += [f"**{partial} step log(s) are partial** (cut short after the results were written); they are left "
                "out of the return split and the trajectories, and listed under Warnings.", ""]
+    if refused:
+        md += [f"**{refused} step log(s) were refused by the log reader** (missing, unreadable, past a size limit or "
+               "holding what no log of the writer holds; each reason under Warnings); they are left out of the "
+               "return split and the trajectories.", ""]
     if parts is not None:
         atomic_csv(parts, out / "return_parts.csv")
         md += ["## Return by reward component", "",
@@ -213,7 +217,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
     md += ["## Distributions over seed groups (fig:rwd_bar)", ""]
     page.manifest, page.results, page.table4, page.statistics, page.seeds = manifest, results, t4, st, seeds
     page.methods = methods
-    page.parts, page.partial_logs = parts, partial
+    page.parts, page.partial_logs, page.refused_logs = parts, partial, refused
     page.bootstrap = (f"Per-episode bootstrap (BCa, {stats.BOOTSTRAP_RESAMPLES} resamples) "
                       f"{int(stats.CI_LEVEL * 100)}% confidence intervals of the mean and of the IQM.")
     settings = sorted(set(results.signals))
@@ -294,18 +298,20 @@ def _bound_plan(run_dir: Path, sub: pd.DataFrame, case: int, warnings: list[str]
 
 
 def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str],
-                  progress: bool = True) -> tuple[pd.DataFrame | None, int]:
-    """Per method and setting, the mean episode sum of each reward component (from the logs),
-    and the number of partial logs left out (a partial log never counts as an episode). Reading
-    every step log is most of a paper run's report (about 20 s for its 4000 logs)."""
-    rows, partial = [], 0
+                  progress: bool = True) -> tuple[pd.DataFrame | None, int, int]:
+    """Per method and setting, the mean episode sum of each reward component (from the logs), the
+    number of partial logs left out (cut short: a partial log never counts as an episode) and the
+    number refused by the reader (``LogError``: unreadable, past a limit, crafted content), each
+    with its reason in ``warnings``. Reading every step log is most of a paper run's report (about
+    20 s for its 4000 logs)."""
+    rows, partial, refused = [], 0, 0
     for r in tqdm(results.itertuples(index=False), total=len(results), desc="return split", unit="log",
                   disable=None if progress else True):
         try:
             sums, warn = component_sums(resolve_log(run_dir, r.mcap))
         except (LogError, OSError) as e:
             warnings.append(str(e))
-            partial += 1
+            refused += 1
             continue
         if warn:
             warnings.append(f"{warn} (left out of the return split)")
@@ -313,12 +319,12 @@ def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str],
             continue
         rows.append({"method": r.method, "signals": r.signals, "case": r.case, **sums})
     if not rows:
-        return None, partial
+        return None, partial, refused
     parts = metrics.return_parts(pd.DataFrame(rows))
     order = {m: i for i, m in enumerate([*METHOD_ORDER, *sorted(set(parts.method) - set(METHOD_ORDER))])}
     parts = parts.sort_values(["signals", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
     keep = [c for c in parts.columns if c in ("method", "signals", "episodes") or (parts[c] != 0).any()]
-    return parts[keep].reset_index(drop=True), partial
+    return parts[keep].reset_index(drop=True), partial, refused
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -342,7 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or Path("reports") / args.run_dir.resolve().name  # "..": the folder's own name, not ""
     if args.readme is not None:
         if not args.readme.is_file():
-            return fail(ap.prog, f"--readme {args.readme}: no such file")
+            there = args.readme.exists() or args.readme.is_symlink()
+            return fail(ap.prog, f"--readme {args.readme}: {'not a regular file (a FIFO, a device, a folder or a link to one); accepted: a README.md text file' if there else 'no such file'}")
         try:
             headline.check(args.readme)
         except UnicodeDecodeError:

@@ -242,6 +242,9 @@ def parts_section(page: Page) -> str:
     partial = (f"<p class='warn'>{page.partial_logs} step log(s) are partial (cut short after the results were "
                "written); they are left out here and from the trajectories, and listed under Warnings.</p>"
                if page.partial_logs else "")
+    partial += (f"<p class='warn'>{page.refused_logs} step log(s) were refused by the log reader (missing, "
+                "unreadable, past a size limit or holding what no log of the writer holds); they are left out here "
+                "and from the trajectories, each reason under Warnings.</p>" if page.refused_logs else "")
     return ("<section id='return'><h2>Return by reward component</h2>" + partial
             + "<div class='scroll'><table class='parts'><caption>Mean per episode of each reward component's sum, "
               "read from the step logs, in reward units (form r: speed and jerk penalties, lane-change penalty, "

@@ -38,6 +38,7 @@ class Page:
     seeds: pd.DataFrame | None = None
     parts: pd.DataFrame | None = None
     partial_logs: int = 0
+    refused_logs: int = 0  # step logs the reader refused (a reason each under Warnings)
     violins: list[Figure] = field(default_factory=list)
     trajectories: list[Figure] = field(default_factory=list)
     compare: str | None = None

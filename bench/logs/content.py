@@ -66,10 +66,26 @@ def _shown(v: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+class _Twice(ValueError):
+    """A JSON object that names one key twice (the key is the message)."""
+
+
+def _once(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise _Twice(k)
+        out[k] = v
+    return out
+
+
 def parse_json(path: Path, where: str, text: str) -> Any:
-    """The JSON value of a log's text field; one line naming it when it is not JSON."""
+    """The JSON value of a log's text field; one line naming it when it is not JSON, or when an
+    object names a key twice (the writer's never do; which value would count is undefined)."""
     try:
-        value = json.loads(text)
+        value = json.loads(text, object_pairs_hook=_once)
+    except _Twice as e:
+        raise _refuse(path, where, f"an object names the key {str(e)!r:.40} twice") from None
     except RecursionError:
         raise _refuse(path, where, f"JSON nested more than {JSON_DEPTH} deep") from None
     except ValueError as e:  # JSONDecodeError, an integer of too many digits

@@ -57,7 +57,7 @@ def test_the_report_is_the_same_from_any_working_directory(smoke, tmp_path, monk
 @pytest.mark.parametrize("damage, words", [
     ("mcap_file", "not a run folder"),
     ("manifest_list", "expected an object"),
-    ("manifest_text", "not valid JSON"),
+    ("manifest_text", "not a readable JSON file"),
     ("results_truncated", "not a readable results table"),
     ("results_no_energy", "no 'energy' column"),
 ])
@@ -362,3 +362,29 @@ def test_the_readme_headline_is_refused_for_another_scenario(smoke_report, tmp_p
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--readme: this run's scenario is not the paper's (lanes=3)" in err[0]
     assert "old" in readme.read_text() and not (tmp_path / "rep").exists()
+
+
+def test_a_refused_log_is_named_as_refused_not_partial(smoke, tmp_path, capsys):
+    """A log the reader refuses (here: garbage) is counted apart from a partial one, with its reason."""
+    run_dir = copy(smoke, tmp_path)
+    (run_dir / "coordinated" / "baseline" / "case-001.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(100))
+    assert main([str(run_dir), "--out", str(tmp_path / "report")]) == 0
+    md = (tmp_path / "report" / "index.md").read_text()
+    assert "1 step log(s) were refused by the log reader" in md and "are partial" not in md
+    assert "refused by the log reader" in (tmp_path / "report" / "index.html").read_text()
+    assert "case-001.mcap" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind", ["fifo", "zero"])
+def test_a_readme_that_is_not_a_regular_file_says_so(kind, smoke, tmp_path, capsys):
+    import os
+
+    readme = tmp_path / "README.md"
+    if kind == "fifo":
+        os.mkfifo(readme)
+    else:
+        readme.symlink_to("/dev/zero")
+    assert main([str(smoke), "--out", str(tmp_path / "report"), "--readme", str(readme)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a regular file" in err[0] and "no such file" not in err[0]
+    assert not (tmp_path / "report").exists()

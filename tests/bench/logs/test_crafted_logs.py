@@ -138,6 +138,8 @@ CRAFTED = {  # name: (write_log's arguments, given the craft helpers; the field 
     "signal link out of range": (lambda c: {"steps": _link(c, 24)},
                                  "step 7 signal.link: 24 is outside the signal states' links 0..23"),
     "time past any simulation": (lambda c: {"steps": _steps(c, 3, time=1e300)}, "step 3 time: 1e+300 s is outside"),
+    "a plan key twice": (lambda c: {"plan_json": '{"time": [200.0], "x": [1.0], "speed": [1.0], "travel_time": 1.0, '
+                                                 '"x": [2.0]}'}, "plan: an object names the key 'x' twice"),
 }
 
 
