@@ -3,13 +3,15 @@ naming the value and the accepted range, exit code 2, and nothing touched."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import re
+import signal
 import stat
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -212,3 +214,30 @@ def one_line(text: str, limit: int = 200) -> str:
     """The first line of ``text``, cut to ``limit`` characters."""
     first = next((line.strip() for line in text.splitlines() if line.strip()), "")
     return first if len(first) <= limit else first[: limit - 3] + "..."
+
+
+INTERRUPTED, TERMINATED = 130, 143  # exit codes: 128 + SIGINT, 128 + SIGTERM, as a shell reports them
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread by ``sigterm_raises``: a command ends as on Ctrl-C (a
+    ``BaseException``, as ``KeyboardInterrupt``: no ``except Exception`` swallows it), its
+    ``finally`` blocks removing what it made."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def sigterm_raises() -> Iterator[None]:
+    """SIGTERM raises ``Terminated`` in the main thread meanwhile (elsewhere nothing changes)."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -26,7 +26,7 @@ from pathlib import Path
 import pandas as pd
 from tqdm import tqdm
 
-from ecodrive_bench.bench.args import Parser, fail
+from ecodrive_bench.bench.args import INTERRUPTED, TERMINATED, Parser, Terminated, fail, sigterm_raises
 from ecodrive_bench.bench.io import atomic_csv, atomic_text
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
@@ -361,9 +361,17 @@ def main(argv: list[str] | None = None) -> int:
             return fail(ap.prog, f"--readme: this run's scenario is not the paper's ({other}); the headline sets "
                                  f"the paper's numbers beside the run's: give a run on the paper's scenario")
     try:
-        index, warnings = build(args.run_dir, out, args.generalisation, force_into=args.force_into, real_dir=args.real)
+        with sigterm_raises():
+            index, warnings = build(args.run_dir, out, args.generalisation, force_into=args.force_into,
+                                    real_dir=args.real)
     except (RunError, LogError, OSError, InUse) as e:  # nothing is left behind (reports.outdir)
         return fail(ap.prog, str(e))
+    except KeyboardInterrupt:  # the scratch folder is removed on the way out (reports.outdir)
+        print(f"interrupted: no report written; {out} is as it was", file=sys.stderr)
+        return INTERRUPTED
+    except Terminated:
+        print(f"terminated (SIGTERM): no report written; {out} is as it was", file=sys.stderr)
+        return TERMINATED
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     print(f"report: {index} and {index.with_suffix('.html')}")

@@ -36,6 +36,11 @@ finished report takes its place without losing a file that is not the report's.
   earlier report's listed files.
 - ``--out`` is held (``bench.runlock.hold_folder``) from before the build to the end of the
   moves: a second report into it is refused rather than pruning this one's files.
+- A scratch folder holds a marker (``SCRATCH_MARKER``: the building process's pid and host) from
+  its creation until the report leaves it. A build killed outright (SIGKILL, a power cut) cannot
+  remove its scratch; the next build into the same ``--out``, holding it, removes every scratch
+  folder of that ``--out`` whose marker names a process of this host that is gone (and nothing
+  without such a marker: it is not the report's).
 """
 from __future__ import annotations
 
@@ -53,6 +58,8 @@ from ecodrive_bench.bench.io import Unwritable, prune_unwritten, refuse_links
 from ecodrive_bench.bench.runlock import hold_folder
 
 DIR_FLAGS = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW
+SCRATCH_MARKER = ".ecodrive-report-scratch"  # in a scratch folder: {"pid", "host"} of the build that made it
+MARKER_CAP = 4096  # [bytes] the largest scratch marker read
 LAST = ("index.html", "index.md")  # moved in last, in this order: the pages follow what they show
 WHAT, OTHER = "report folder", "another --out"
 
@@ -126,9 +133,12 @@ def staged(out: Path, record: str, force_into: bool = False) -> Iterator[Stage]:
             raise Unwritable(f"folder {target} is not writable ({e.strerror or e})") from None
         new = bool(made) and made[-1].path == target
         with hold_folder(target, WHAT, OTHER):
+            _sweep_stale(target)
             scratch = _scratch(target, new)
             try:
+                _mark(scratch.path)
                 yield Stage(target, scratch.path)
+                os.unlink(scratch.path / SCRATCH_MARKER)  # the report's folder holds the report alone
                 _publish(scratch.path, target, record, made[-1] if new else None)
             finally:
                 _remove(scratch)
@@ -219,6 +229,61 @@ def _renames_into(scratch: Path, target: Path) -> bool:
         raise Unwritable(f"folder {target} is not writable ({e.strerror or e})") from None
     os.unlink(dest)
     return True
+
+
+def _mark(scratch: Path) -> None:
+    """Write the scratch folder's marker: this process's pid and host."""
+    import json
+    import socket
+
+    fd = os.open(scratch / SCRATCH_MARKER, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
+
+
+def _stale(folder: Path) -> bool:
+    """Whether ``folder`` is a scratch folder (a real folder with a regular marker) of a build of
+    this host whose process is gone."""
+    import json
+    import socket
+
+    try:
+        if not stat.S_ISDIR(os.lstat(folder).st_mode):
+            return False
+        fd = os.open(folder / SCRATCH_MARKER, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError:
+        return False
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return False
+        mark = json.loads(os.read(fd, MARKER_CAP + 1)[:MARKER_CAP])
+    except (OSError, ValueError):
+        return False
+    finally:
+        os.close(fd)
+    if not isinstance(mark, dict) or mark.get("host") != socket.gethostname() or not isinstance(mark.get("pid"), int):
+        return False
+    try:
+        os.kill(mark["pid"], 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # alive, another user's
+        return False
+    return False  # alive: its build may still be going
+
+
+def _sweep_stale(target: Path) -> None:
+    """Remove the scratch folders of ``target`` left by builds that were killed (``_stale``)."""
+    places = [(target.parent, f".{target.name}.tmp-"), (target, ".report.tmp-")]
+    for folder, prefix in places:
+        try:
+            names = [n for n in os.listdir(folder) if n.startswith(prefix)]
+        except OSError:
+            continue
+        for n in names:
+            if _stale(folder / n):
+                with suppress(OSError):
+                    shutil.rmtree(folder / n)
 
 
 def _remove(made: Made) -> None:

@@ -3,11 +3,9 @@ import runs back up to a runner for them (an agent's own, ``AgentError``, is ``b
 print it and exit 2."""
 from __future__ import annotations
 
+from ecodrive_bench.bench.args import Terminated  # noqa: F401  (SIGTERM's exception, re-exported: its home is bench.args)
+
 
 class UsageError(Exception):
     """Bad input to ``ecodrive run`` found after parsing; printed as one line, nothing touched."""
 
-
-class Terminated(BaseException):
-    """SIGTERM, raised in the main thread by ``ecodrive run``'s handler: the run ends as on Ctrl-C
-    (a ``BaseException``, as ``KeyboardInterrupt``: no ``except Exception`` swallows it)."""

@@ -7,38 +7,14 @@ Ctrl-C (SIGINT) and SIGTERM end the run at once, as one line: the pool kills its
 (``bench.harness.pool``), finished episodes are kept, exit 130 or 143."""
 from __future__ import annotations
 
-import contextlib
-import signal
 import sys
-from collections.abc import Iterator
-from typing import Any
 
 from ecodrive_bench.bench import runlock
-from ecodrive_bench.bench.args import InputError, fail
-from ecodrive_bench.bench.harness.errors import Terminated, UsageError
+from ecodrive_bench.bench.args import INTERRUPTED, TERMINATED, InputError, Terminated, fail, sigterm_raises
+from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import parse, parser
 from ecodrive_bench.bench.methods.errors import AgentError
 from ecodrive_bench.bench.methods.policies import CheckpointError
-
-INTERRUPTED, TERMINATED = 130, 143  # 128 + SIGINT, 128 + SIGTERM, as a shell reports them
-
-
-def _terminate(signum: int, frame: Any) -> None:
-    raise Terminated
-
-
-@contextlib.contextmanager
-def sigterm_raises() -> Iterator[None]:
-    """SIGTERM raises ``Terminated`` in the main thread meanwhile (elsewhere nothing changes)."""
-    try:
-        previous = signal.signal(signal.SIGTERM, _terminate)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def main(argv: list[str] | None = None) -> int:
