@@ -125,25 +125,48 @@ def make(spec: str, signals: str, config: dict[str, Any] | None = None) -> tuple
 
 def code_sha256(spec: str, agent: Any) -> str:
     """The sha256 of the code behind ``agent``, built from ``spec``: for ``--sb3`` its zip's
-    (the agent's ``sha256``); else over the files (name and bytes) of the factory's module, the
-    module of ``spec`` and the agent class's module, those of this package left out (the run's
-    ``git_sha`` names them). A change to any of those files changes it; other modules they
-    import do not."""
+    (the agent's ``sha256``); else over the files (name and bytes) of the modules of ``spec``, of
+    the factory and of the agent's class, each module standing for its whole top-level package:
+    every ``.py`` file under the package's folder (at most ``MAX_HASHED`` files), so a change to any
+    module of the package, one the agent imports included, changes it. A module outside a package
+    (``myagents.py`` in the current folder) stands for its own file; a change to another top-level
+    module it imports does not change it. This package's modules are left out (the run's
+    ``git_sha`` names them)."""
     if spec.startswith("sb3:"):
         return str(getattr(agent, "sha256", ""))
     factory = load_factory(spec)
     inner = getattr(agent, "agent", agent)  # ``Checked`` holds the user's agent
     names = {spec.split(":")[0], getattr(factory, "__module__", None), type(inner).__module__}
-    files = sorted({str(Path(f).resolve()) for n in names if n and not n.startswith("ecodrive_bench.")
-                    and (f := getattr(sys.modules.get(n), "__file__", None))})
+    files = sorted({f for n in names if n and not n.startswith("ecodrive_bench.") for f in _code_files(n)})
     h = hashlib.sha256()
     for f in files:
-        h.update(Path(f).name.encode() + b"\0")
+        h.update(f.encode() + b"\0")
         try:
             h.update(Path(f).read_bytes())
         except OSError:
             h.update(b"(unreadable)")
     return h.hexdigest()
+
+
+MAX_HASHED = 2000  # [-] .py files of one agent package hashed into its identity
+
+
+def _code_files(module: str) -> list[str]:
+    """The files that stand for ``module`` in ``code_sha256``: the ``.py`` files of its top-level
+    package's folders, or its own file outside a package."""
+    top = sys.modules.get(module.split(".")[0])
+    folders = list(getattr(top, "__path__", []) or [])
+    if not folders:
+        f = getattr(sys.modules.get(module), "__file__", None)
+        return [str(Path(f).resolve())] if f else []
+    out: list[str] = []
+    for folder in folders:
+        for root, dirs, names in os.walk(folder):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__" and not d.startswith("."))
+            out += [str((Path(root) / n).resolve()) for n in sorted(names) if n.endswith(".py")]
+            if len(out) > MAX_HASHED:
+                return out[:MAX_HASHED]
+    return out
 
 
 class _Interface:

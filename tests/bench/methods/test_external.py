@@ -176,3 +176,28 @@ def test_an_agent_module_found_nowhere_names_the_folder_and_the_fix(tmp_path, mo
     (tmp_path / "myagents_here.py").write_text("def make(observation_space, action_space):\n    return None\n")
     sys.modules.pop("myagents_here", None)
     assert callable(load_factory("myagents_here:make"))  # from the current folder, as `python -m` finds it
+
+
+def test_the_agents_identity_covers_its_whole_package(tmp_path, monkeypatch):
+    """A change to any module of the agent's package, one the factory's module only imports
+    included, changes the code's sha256; a lone module's identity is its own file."""
+    import importlib
+    import sys
+
+    from ecodrive_bench.bench.methods.external import code_sha256
+
+    pkg = tmp_path / "theiragents"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "helpers.py").write_text("GAIN = 0.5\n")
+    (pkg / "agent.py").write_text(
+        "import numpy as np\nfrom .helpers import GAIN\n\n\nclass A:\n    name = 'a'\n    action_interface = 'parameterized'\n"
+        "    env_overrides = {}\n\n    def act(self, obs, info, explore=False):\n        return 1, np.full(3, GAIN, dtype=np.float32)\n\n\n"
+        "def make(observation_space, action_space):\n    return A()\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for m in ("theiragents", "theiragents.agent", "theiragents.helpers"):
+        sys.modules.pop(m, None)
+    agent = importlib.import_module("theiragents.agent").make(None, None)
+    before = code_sha256("theiragents.agent:make", agent)
+    (pkg / "helpers.py").write_text("GAIN = 0.6\n")  # only a module the agent imports
+    assert code_sha256("theiragents.agent:make", agent) != before
