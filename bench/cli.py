@@ -12,7 +12,7 @@ from ecodrive_bench.bench.args import InputError, Parser, fail
 # subcommand -> (module, one-line description)
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("ecodrive_bench.bench.harness.run_command", "evaluate methods over the fixed test cases: MCAP logs, results.parquet, manifest"),
-    "report": ("ecodrive_bench.reports.build", "rebuild the paper's tables and figures from a run folder"),
+    "report": ("ecodrive_bench.reports.command", "rebuild the paper's tables and figures from a run folder"),
     "view": ("ecodrive_bench.bench.logs.view", "open step logs in the Rerun viewer, or save an .rrd recording"),
     "regress": ("ecodrive_bench.bench.regression.check", "check the paper's claims and the own reference on the CI cases"),
     "train": ("ecodrive_bench.bench.training.train", "train one learning method on one signal setting (resumable)"),

@@ -103,14 +103,14 @@ def test_a_module_run_with_python_m_names_itself_so():
     assert out.stderr.startswith("python -m ecodrive_bench.bench.harness.run_command: error: ")
 
 
-# commands whose --help still imports torch or the report's stack: train and train-all list the
-# agents' config fields (dataclasses beside the torch networks); report builds its parser in
-# reports/build.py, which imports pandas and matplotlib at the top
-HEAVY_HELP = ("train", "train-all", "report")
+# commands whose --help still imports torch: train and train-all list the agents' config fields
+# (dataclasses beside the torch networks)
+HEAVY_HELP = ("train", "train-all")
 # what a help must not import: torch for every other command; for `ecodrive` and `ecodrive run`
 # also the runners' stack (SUMO, the compiled kernels, the tables)
 NOT_FOR_HELP = {"": ("torch", "numpy", "pandas", "libsumo", "numba", "scipy", "mcap"),
-                "run": ("torch", "pandas", "libsumo", "numba", "scipy", "mcap", "matplotlib")}
+                "run": ("torch", "pandas", "libsumo", "numba", "scipy", "mcap", "matplotlib"),
+                "report": ("torch", "pandas", "libsumo", "numba", "scipy", "matplotlib")}
 HELP_IMPORTS = """
 import contextlib, io, json, sys
 from ecodrive_bench.bench.cli import main

@@ -85,7 +85,7 @@ def toy(tmp_path, monkeypatch):
 def test_a_toy_method_is_one_module_and_one_entry(toy, capsys, monkeypatch):
     from ecodrive_bench.bench.harness.options import parser
     from ecodrive_bench.bench.harness.run_command import main as run_main
-    from ecodrive_bench.reports.build import main as report_main
+    from ecodrive_bench.reports.command import main as report_main
 
     assert registry.method("toy").display == "Toy cruise" and registry.names("user") == ("toy",)
     monkeypatch.setenv("COLUMNS", "200")

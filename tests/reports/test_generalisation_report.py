@@ -55,7 +55,7 @@ def test_the_family_summary_beside_the_in_distribution_change():
     (lambda p: (p.mkdir(), pd.DataFrame({"x": [1]}).to_parquet(p / "generalisation.parquet")), "lacks column"),
 ])
 def test_a_bad_generalisation_folder_is_one_line(make, words, tmp_path, monkeypatch, capsys):
-    from ecodrive_bench.reports.build import main
+    from ecodrive_bench.reports.command import main
 
     run = tmp_path / "run"
     run.mkdir()

@@ -14,7 +14,8 @@ import pytest
 
 from ecodrive_bench.reports import build as report_build
 from ecodrive_bench.reports import outdir
-from ecodrive_bench.reports.build import build, main
+from ecodrive_bench.reports.build import build
+from ecodrive_bench.reports.command import main
 
 
 def snapshot(folder: Path) -> dict[str, bytes | None]:

@@ -10,7 +10,8 @@ import pytest
 
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import run
-from ecodrive_bench.reports.build import build, main
+from ecodrive_bench.reports.build import build
+from ecodrive_bench.reports.command import main
 
 
 @pytest.fixture(scope="module")
@@ -229,7 +230,7 @@ def test_numbers_stored_as_text_are_read_as_numbers(smoke, tmp_path, capsys):
 def test_report_files_are_never_written_through_a_planted_link(smoke_report, tmp_path, capsys):
     """``index.html`` and ``table4.csv`` planted as links to a file outside are replaced, not
     written through; a report folder that is a link is refused in one line."""
-    from ecodrive_bench.reports.build import main as report_main
+    from ecodrive_bench.reports.command import main as report_main
 
     victim = tmp_path / "victim.txt"
     victim.write_text("precious\n")

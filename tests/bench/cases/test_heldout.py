@@ -152,7 +152,7 @@ def test_a_shipped_policy_drives_a_held_out_variant_with_transfer(tiny):
 
 
 def test_the_report_of_a_generalisation_run(tiny, tmp_path):
-    from ecodrive_bench.reports.build import main as report
+    from ecodrive_bench.reports.command import main as report
 
     _, root, opts = tiny
     assert report([str(root), "--out", str(tmp_path / "r")]) == 0

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from ecodrive_bench.bench.harness.run_command import main as run_main
-from ecodrive_bench.reports.build import main as report_main
+from ecodrive_bench.reports.command import main as report_main
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import json
 
 import pandas as pd
 
-from ecodrive_bench.reports.build import main
+from ecodrive_bench.reports.command import main
 
 
 def test_the_report_leaves_out_each_crafted_log_with_a_warning(craft, bomb, tmp_path, capsys):
