@@ -173,9 +173,9 @@ def parse(argv: list[str]) -> RunOptions:
     elif opts["name"]:
         ap.error("--name names an --agent or --sb3; give --agent package.module:factory or --sb3 MODEL.zip too")
     if opts["profile"] in FAMILY_PROFILES:
-        if opts["scenario"] or opts["set_scenario"]:
-            ap.error(f"--profile {opts['profile']} evaluates on its family's corridors; --scenario and --set "
-                     "are for the other profiles")
+        if opts["scenario"] or opts["set_scenario"] or opts["network"]:
+            ap.error(f"--profile {opts['profile']} evaluates on its family's corridors; --scenario, --set and "
+                     "--network are for the other profiles")
         try:  # the case set's reader (bench.registry): its variants, or those named
             opts["family"] = registry.load(registry.case_set(opts["profile"]).reader)(opts["variants"])
         except (FamilyError, ConfigError) as e:
@@ -184,12 +184,27 @@ def parse(argv: list[str]) -> RunOptions:
     elif opts["variants"]:
         ap.error("--variants selects corridors of a family; give --profile generalisation or real too")
     try:
-        opts["scenario"] = scenarios.parse_overrides(opts.pop("scenario"), opts.pop("set_scenario"), opts["signals"])
+        opts["scenario"] = scenarios.parse_overrides(opts.pop("scenario"), opts.pop("set_scenario"), opts["signals"],
+                                                     network=opts.pop("network"))
     except ValueError as e:
         ap.error(str(e))
+    if opts["scenario"].get("network") is not None:  # a network's own insertion window
+        opts["cases"] = network_cases(opts["scenario"]["network"], PROFILES[opts["profile"]])
     for flag in ("variants", "agent", "sb3", "sb3_algo", "name", "sb3_sha256"):  # folded into factories, family, ...
         opts.pop(flag, None)
     return RunOptions(**opts, argv=list(argv))
+
+
+def network_cases(network: str, n: int) -> list[Case]:
+    """The first ``n`` fixed cases moved onto a network's insertion window: the same SUMO seeds, each
+    insertion time mapped from the fixed cases' range (``INSERT_RANGE``) onto the spec's [lo, hi]."""
+    from ecodrive_bench.bench.cases.case import INSERT_RANGE, load
+    from ecodrive_bench.envs.network import as_spec
+
+    lo, hi = as_spec(network).insert
+    a, b = INSERT_RANGE
+    return [Case(c.index, c.sumo_seed, round(lo + (c.insert_time - a) / (b - a) * (hi - lo), 1), c.group)
+            for c in load()[:n]]
 
 
 def sb3_spec(ap: Parser, opts: dict[str, Any]) -> str:

@@ -40,12 +40,42 @@ def add_options(ap) -> None:
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", dest="set_scenario",
                     help="override one scenario field, after --scenario (repeatable; e.g. lanes=3, "
                          "spacings=[300,600,440,500], ev.mass=1500)")
+    ap.add_argument("--network", default=None, metavar="SPEC.json|NAME",
+                    help="evaluate on a route through a SUMO network (docs/networks.md): a JSON file of a network "
+                         "spec (net, demand, route, insert; paths relative to the file) or a real corridor's name "
+                         "(ingolstadt7, cologne3, cologne8); the same as --set network=...; --transfer for policies")
     ap.add_argument("--transfer", action="store_true",
                     help="let a policy drive a scenario other than the one it was trained on (recorded in "
                          "the logs and results)")
 
 
-def parse_overrides(path: Path | None, items: list[str], signals: list[str], build: bool = True) -> dict[str, Any]:
+def network_value(spec: str) -> str:
+    """``--network``'s value as ``ScenarioConfig.network``: a real corridor's name as it is; a JSON
+    file's spec (read with bounds, its paths taken relative to the file) as its JSON text."""
+    from ecodrive_bench.envs.network import config_value, real_corridors
+
+    if "/" not in spec and not spec.endswith(".json") and spec in real_corridors():
+        return spec
+    path = Path(spec)
+    data = read_json(path, "--network")
+    if not isinstance(data, dict):
+        raise InputError(f"--network {path}: a JSON {type(data).__name__}; expected an object with net, demand, "
+                         f"route and insert (or one of the real corridors: {', '.join(real_corridors())})")
+    here = path.resolve().parent
+    for key in ("net", "demand"):
+        value = data.get(key)
+        if isinstance(value, str):
+            data[key] = str(here / value)
+        elif isinstance(value, list):
+            data[key] = [str(here / v) if isinstance(v, str) else v for v in value]
+    try:
+        return config_value(data)
+    except ConfigError as e:
+        raise InputError(f"--network {path}: {e}") from None
+
+
+def parse_overrides(path: Path | None, items: list[str], signals: list[str], build: bool = True,
+                    network: str | None = None) -> dict[str, Any]:
     """The overrides of ``--scenario`` and ``--set``, each validated on the corridor of every
     setting in ``signals``; an ``InputError`` (a ValueError) is one line naming the option, the value
     and the range. The file is read with bounds (``bench.args.read_json``: a regular file of at
@@ -84,6 +114,9 @@ def parse_overrides(path: Path | None, items: list[str], signals: list[str], bui
         at[name] = value
         out = deep_merge(out, nested)
         _check(f"--set {shown}", out, signals)
+    if network is not None:
+        out = {**out, "network": network_value(network)}
+        _check(f"--network {one_line(network, 80)}", out, signals)
     if build and out:
         for s in signals:
             check_buildable(setting(s, out), "--scenario/--set")
