@@ -95,7 +95,7 @@ def parser() -> Parser:
     ap = Parser(description=RUN_DOC)
     ap.add_argument("--profile", default="paper", choices=list(PROFILES),
                     help="smoke: 3 cases per setting; paper: the 100 fixed cases; full: paper plus section 5's "
-                         "experiments (in `nox -s benchmark`); generalisation: every method with a policy, "
+                         "experiments (`nox -s benchmark -- --profile full`; the main job runs paper); generalisation: every method with a policy, "
                          f"{ORACLE}, {MPC} and {CLAIRVOYANT} included, on each held-out corridor of the family (docs/generalisation.md), "
                          "its cases, with --transfer implied, one sub-folder per variant; real: every method with a "
                          "policy, zero-shot, on each real corridor (bench.cases.real, docs/networks.md), one sub-folder "
