@@ -14,8 +14,9 @@ stopped counts as its agent's failure (a hang in ``act`` would come back on ever
 that gives up (its workers keep dying before they take an episode, ``pool.PoolBroken``) is one
 line and the record ``errors/pool.txt``; the finished rows are still written.
 
-Exit codes of ``ecodrive run`` (``exit_code``): 0 all finished; 2 bad input, an agent acting
-outside its action space among them; 3 finished with failed episodes (130 Ctrl-C and 143 SIGTERM:
+Exit codes of ``ecodrive run`` (``exit_code``): 0 all finished; 2 bad input (a policy file that
+cannot drive found during the run among them); 3 finished with failed episodes, an agent that
+raised or acted outside its action space among them (130 Ctrl-C and 143 SIGTERM:
 ``bench.harness.run_command``).
 """
 from __future__ import annotations
@@ -80,7 +81,7 @@ class Failures:
 
     def __call__(self, f: Failure) -> None:
         task = f.task
-        bad = isinstance(f.error, (AgentError, CheckpointError))
+        bad = isinstance(f.error, CheckpointError)  # a policy file refused; an agent's own failure is exit 3
         agent = f.agent or isinstance(f.error, AgentError)
         where = "" if f.step is None else f" at step {f.step}"
         timeout = isinstance(f.error, TaskTimeout)

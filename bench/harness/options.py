@@ -39,8 +39,8 @@ A worker that dies is replaced and its episode rerun (at most twice more); an ep
 fails, or whose agent raises, is one line on stderr (its traceback in ``<run>/errors/``) and no
 row; so is an episode past its wall-clock limit (``--episode-limit``), whose worker is killed.
 Exit codes: 0 done; 2 bad input, or the run folder in use by another command; 3 finished with
-failed episodes (rerun the command to retry them); 130 interrupted (Ctrl-C); 143 terminated
-(SIGTERM).
+failed episodes, an agent that raised or returned an action outside its space among them (rerun
+the command to retry them); 130 interrupted (Ctrl-C); 143 terminated (SIGTERM).
 """
 
 METHODS = (*registry.names("rule-based"), *registry.names("learned"))  # the methods a run runs by default

@@ -14,6 +14,9 @@ Exits 1 on any failed check. Tolerances and their reasons: ``docs/regression.md`
 """
 from __future__ import annotations
 
+import os
+import shutil
+import stat
 import sys
 import tempfile
 from pathlib import Path
@@ -179,6 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     from ecodrive_bench.bench.regression import mixed as regression_mixed
 
     logs = str(args.logs) if args.logs is not None else tempfile.mkdtemp(prefix="ecodrive-regression-")
+    made = os.stat(logs) if args.logs is None else None  # the folder this command made: removed after a pass
     br.PROFILES["regression"] = CI_CASES  # for this run only: `ecodrive run` offers no such profile
     try:
         opts = parse(["--profile", "regression", "--logs", logs])
@@ -218,7 +222,23 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {status:12s} {name:50s} {detail}")
             failed |= status == "FAIL"
     print("\nregression: FAILED" if failed else "\nregression: ok")
+    if made is not None:
+        if failed:
+            print(f"regression: its logs are kept in {logs}", file=sys.stderr)
+        else:
+            _remove_made(Path(logs), made)
     return 1 if failed else 0
+
+
+def _remove_made(folder: Path, made: os.stat_result) -> None:
+    """Remove ``folder`` with its contents if it is still the folder this command made (the same
+    device and inode, not a link); anything else is left as it is."""
+    try:
+        st = os.lstat(folder)
+    except OSError:
+        return
+    if stat.S_ISDIR(st.st_mode) and (st.st_dev, st.st_ino) == (made.st_dev, made.st_ino):
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -88,7 +88,7 @@ def test_an_action_outside_the_space_stops_the_run_with_one_line(user_module, tm
                "--methods", "baseline", "--signals", "coordinated", "--workers", "1"])
     err = [ln for ln in capsys.readouterr().err.strip().splitlines()
            if ln.strip() and not ln.startswith("episodes:")]  # progress bar
-    assert rc == 2 and len(err) == 1 and "outside the action space" in err[0] and "9." in err[0]
+    assert rc == 3 and len(err) == 1 and "outside the action space" in err[0] and "9." in err[0]  # the agent failed
     assert "too_fast/coordinated case 000" in err[0] and "step 0" in err[0]
     table = pd.read_parquet(tmp_path / "logs" / "smoke" / "results.parquet")  # the baseline's rows are kept
     assert set(table.method) == {"baseline"} and len(table) == 3
