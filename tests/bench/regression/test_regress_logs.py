@@ -20,8 +20,8 @@ def test_the_folder_it_made_is_removed(tmp_path):
 def test_another_folder_under_its_name_is_kept(tmp_path):
     made = Path(tempfile.mkdtemp(dir=tmp_path))
     identity = os.stat(made)
-    made.rmdir()
-    made.mkdir()  # someone else's folder now
+    made.rename(tmp_path / "moved")  # the folder made lives on elsewhere ...
+    made.mkdir()  # ... and someone else's stands under its name
     (made / "theirs.txt").write_text("keep")
     _remove_made(made, identity)
     assert (made / "theirs.txt").read_text() == "keep"
