@@ -47,22 +47,23 @@ def main(argv: list[str] | None = None) -> int:
     from ecodrive_bench.bench.logs.mcaplog import LogError
     from ecodrive_bench.bench.runlock import InUse
 
-    from . import claims, headline
+    from . import claims, headline, real
     from .build import _manifest, build
     from .load import RunError, load_run
 
+    real_only = real.present(args.run_dir) and not (args.run_dir / "results.parquet").is_file()
     out = args.out or Path("reports") / args.run_dir.resolve().name  # "..": the folder's own name, not ""
     if args.readme is not None:
         if not args.readme.is_file():
             there = args.readme.exists() or args.readme.is_symlink()
             return fail(ap.prog, f"--readme {args.readme}: {'not a regular file (a FIFO, a device, a folder or a link to one); accepted: a README.md text file' if there else 'no such file'}")
         try:
-            headline.check(args.readme)
+            (real.check_readme if real_only else headline.check)(args.readme)
         except UnicodeDecodeError:
             return fail(ap.prog, f"--readme {args.readme}: not a UTF-8 text file")
         except ValueError as e:
             return fail(ap.prog, f"--readme {e}")
-        other = claims.overrides_text(_manifest(args.run_dir).get("scenario_overrides") or {})
+        other = "" if real_only else claims.overrides_text(_manifest(args.run_dir).get("scenario_overrides") or {})
         if other:
             return fail(ap.prog, f"--readme: this run's scenario is not the paper's ({other}); the headline sets "
                                  f"the paper's numbers beside the run's: give a run on the paper's scenario")
@@ -81,7 +82,10 @@ def main(argv: list[str] | None = None) -> int:
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
     print(f"report: {index} and {index.with_suffix('.html')}")
-    if args.readme is not None:
+    if args.readme is not None and real_only:  # a real run: the README's real-corridors block
+        real.rewrite_readme(args.readme, args.run_dir)
+        print(f"real corridors: {args.readme}")
+    elif args.readme is not None:
         results, manifest, _ = load_run(args.run_dir)  # its notes were printed with the report's warnings
         try:
             headline.rewrite(args.readme, results, args.run_dir.name, manifest)
