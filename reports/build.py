@@ -4,7 +4,6 @@ corridors). The command (its options, ``--readme``, the exit codes) is ``reports
 which imports this module once its options are read, so that ``--help`` imports nothing heavy."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -27,11 +26,13 @@ from .load import (
     load_plan,
     load_run,
     load_steps,
+    read_manifest,
     stop_lines,
     unfinished_warnings,
 )
 from .names import seeded
 from .outdir import staged
+from .top import TOP
 
 METHOD_ORDER = headline.ORDER  # the registry's order of methods (bench.registry)
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
@@ -70,24 +71,48 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
     return stage.out / "index.md", warnings
 
 
+class _Phases:
+    """One line on stderr as each phase of the build ends, with its time (a redirected log shows
+    where the time goes; ``progress=False``: none)."""
+
+    def __init__(self, enabled: bool) -> None:
+        import time
+
+        self.enabled, self.clock = enabled, time.perf_counter
+        self.start = self.last = self.clock()
+
+    def done(self, what: str) -> None:
+        now = self.clock()
+        if self.enabled:
+            print(f"report: {what} in {now - self.last:.1f} s ({now - self.start:.0f} s in all)", file=sys.stderr,
+                  flush=True)
+        self.last = now
+
+
 def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool,
            real_dir: Path | None = None, notes: list[str] | None = None) -> tuple[Path, list[str]]:
     """``build``'s writing, after its checks."""
     page = Page(run_name=run_dir.name)
+    phases = _Phases(progress)
     if (run_dir / "results.parquet").is_file():
         md, warnings = _single_vehicle(run_dir, out, page, progress)
+        phases.done("Table 4, statistics, return split, violins and trajectories")
     else:
         md, warnings = [f"# Report: {run_dir.name}", ""], []
         page.manifest = _manifest(run_dir)
     emd, eimages, ewarnings = experiments.sections(run_dir, out)
+    if emd:
+        phases.done("the experiments' sections")
     if gen_dir is not None:
         ind = load_run(run_dir)[0] if (run_dir / "results.parquet").is_file() else None
         gmd, gimages = generalisation.section(gen_dir, out, METHOD_ORDER, ind)
         emd, eimages = gmd + emd, gimages + eimages
+        phases.done("the held-out corridors' section")
     if real_dir is not None:
         paper = load_run(run_dir)[0] if (run_dir / "results.parquet").is_file() else None
         heldout = generalisation.load(gen_dir)[0] if gen_dir is not None else None  # its notes: in ``notes``
         emd = real.section(real_dir, out, METHOD_ORDER, paper, heldout) + emd
+        phases.done("the real corridors' section")
     md, warnings = md + emd, warnings + ewarnings + list(notes or [])
     if warnings:
         md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
@@ -97,17 +122,17 @@ def _write(run_dir: Path, out: Path, gen_dir: Path | None, progress: bool,
     page.mixed_claims = _mixed_claims(run_dir)
     page.warnings = warnings
     atomic_text(render(page), out / "index.html")
+    phases.done("index.md and index.html")
     return out / "index.md", warnings
 
 
 def _manifest(run_dir: Path) -> dict:
     """The manifest of an experiments-only folder, if one is there, for the page's provenance ({} if
     none or unreadable: the page then says so; nothing else reads it)."""
-    try:
-        manifest = json.loads((run_dir / "manifest.json").read_text())
-    except (OSError, ValueError):
+    try:  # read with bounds: a FIFO or /dev/zero is refused, not waited on
+        return read_manifest(run_dir / "manifest.json")
+    except RunError:
         return {}
-    return manifest if isinstance(manifest, dict) else {}
 
 
 def _mixed_claims(run_dir: Path) -> pd.DataFrame | None:
@@ -238,10 +263,12 @@ def _trajectory_cases(results: pd.DataFrame, compare: str) -> list[tuple[str, in
 
 def _trajectory(run_dir: Path, out: Path, sub: pd.DataFrame, compare: str, signals: str, case: int, page: Page,
                 warnings: list[str]) -> list[str]:
-    """The baseline-against-``compare`` figure of one case (with the oracle's plan when the run has
-    it) into ``page``, and its markdown lines; none when neither drive can be drawn."""
+    """The baseline-against-``compare`` figure of one case (with ``clairvoyant``'s drive, the top of
+    the scale the headroom is measured to, and the oracle's plan, where the run has them) into
+    ``page``, and its markdown lines; none when neither drive can be drawn."""
     trajs, bands, longest = {}, None, 0
-    for method in ("baseline", compare):
+    top = [TOP] if TOP in set(sub[sub.case == case].method) else []
+    for method in ("baseline", compare, *top):
         rows = sub[(sub.method == method) & (sub.case == case)].sort_values("train_seed")
         row = rows.iloc[0]  # a learned method's lowest training seed, named in the legend and caption
         path = resolve_log(run_dir, row.mcap)
