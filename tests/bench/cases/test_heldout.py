@@ -68,8 +68,8 @@ def test_variants_are_chosen_by_full_or_short_name():
 
 @pytest.mark.parametrize("args, words", [
     (["--profile", "generalisation", "--variants", "nope"], "unknown variant 'nope'"),
-    (["--variants", "g1"], "give --profile generalisation too"),
-    (["--profile", "generalisation", "--set", "lanes=3"], "--scenario and --set are for the other profiles"),
+    (["--variants", "g1"], "give --profile generalisation or real too"),
+    (["--profile", "generalisation", "--set", "lanes=3"], "--scenario, --set and --network are for the other profiles"),
 ])
 def test_bad_input_is_one_line_exit_2(args, words, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sys, "argv", ["ecodrive run"])
