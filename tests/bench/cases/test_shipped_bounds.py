@@ -198,7 +198,9 @@ def test_a_damaged_file_is_one_line_and_nothing_is_overwritten(tmp_path, capsys)
     assert "Traceback" not in out.err + out.out
     assert case_files.main(["--check"], bounds_file=bad) == 2  # cases.json checked, then the bounds
     out = capsys.readouterr()
-    assert out.out.strip() == "cases.json matches the generator" and len(out.err.strip().splitlines()) == 1
+    lines = out.out.strip().splitlines()
+    assert lines[0].startswith("sample seed ") and "--sample-seed" in lines[0]  # drawn per run, printed
+    assert lines[1:] == ["cases.json matches the generator"] and len(out.err.strip().splitlines()) == 1
     # a run solves (one note line), and writes only its own table
     got = attach(tmp_path, results(terminated=False), 1, lambda tasks, w, fn: map(fn, tasks), progress=False,
                  shipped=bad)
