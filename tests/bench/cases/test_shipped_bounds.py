@@ -237,3 +237,15 @@ def test_an_edited_row_with_its_digest_recomputed_is_refused_on_lookup(spoil, wo
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and "solved instead" in err[0]
     assert table.plan(cfg, float(row["depart_time"])) is not None  # the shipped row passes
+
+
+def test_the_check_draws_its_sample_seed_per_run_and_prints_it(tmp_path, capsys):
+    bad = tmp_path / "shipped_bounds.parquet"
+    bad.write_bytes(b"PAR1 not a table")  # fails at once: only the seed line matters here
+    seeds = []
+    for _ in range(2):
+        case_files.main(["--check", "--bounds"], bounds_file=bad)
+        seeds.append(capsys.readouterr().out.splitlines()[0])
+    assert seeds[0] != seeds[1] and all(s.startswith("sample seed ") for s in seeds)
+    case_files.main(["--check", "--bounds", "--sample-seed", "5"], bounds_file=bad)
+    assert capsys.readouterr().out.splitlines()[0] == "sample seed 5 (--sample-seed 5 draws the same sample)"
