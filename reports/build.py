@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 from tqdm import tqdm
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.io import atomic_csv, atomic_text
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
@@ -35,6 +36,10 @@ from .outdir import staged
 from .top import TOP
 
 METHOD_ORDER = headline.ORDER  # the registry's order of methods (bench.registry)
+# the method drawn against SUMO's driver: the first specialist by the registry's order, else a
+# rule-based method that is neither SUMO's driver nor steady driving (GLOSA)
+_COMPARED = tuple(m.name for m in sorted(registry.methods(installed=False), key=lambda m: (m.kind != "learned", m.order))
+                  if (m.kind == "learned" and not m.generalist) or (m.kind == "rule-based" and not m.role))
 TRAJECTORY_CASES = 3  # per signal setting, as in the paper's fig:compare1/2
 RECORD = ".report-files.json"  # the files the last report wrote into its folder (paths relative to it)
 
@@ -229,7 +234,7 @@ def _single_vehicle(run_dir: Path, out: Path, page: Page, progress: bool = True)
     page.bootstrap = (f"Per-episode bootstrap (BCa, {stats.BOOTSTRAP_RESAMPLES} resamples) "
                       f"{int(stats.CI_LEVEL * 100)}% confidence intervals of the mean and of the IQM.")
     settings = sorted(set(results.signals))
-    compare = next((m for m in ("prl", "mpdqn", "ddpg", "glosa") if m in methods), None)
+    compare = next((m for m in _COMPARED if m in methods), None)
     page.compare = compare
     drawn = compare is not None and "baseline" in methods
     shown = _trajectory_cases(results, compare) if drawn else []
