@@ -1,6 +1,8 @@
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import signal
 import tempfile
 from pathlib import Path
@@ -16,8 +18,9 @@ import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
-# keep Rerun's config/data out of the user's home during tests
+# keep Rerun's config/data out of the user's home during tests; the folder goes with the session
 _XDG = Path(tempfile.mkdtemp(prefix="ecodrive-xdg-"))
+atexit.register(shutil.rmtree, _XDG, True)
 os.environ.setdefault("XDG_CONFIG_HOME", str(_XDG / "config"))
 os.environ.setdefault("XDG_DATA_HOME", str(_XDG / "data"))
 
