@@ -77,8 +77,9 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
 
 
 class _Phases:
-    """One line on stderr as each phase of the build ends, with its time (a redirected log shows
-    where the time goes; ``progress=False``: none)."""
+    """One line on stdout as each phase of the build ends, with its time (a redirected log shows
+    where the time goes; stderr keeps the warnings and the one error line; ``progress=False``:
+    none)."""
 
     def __init__(self, enabled: bool) -> None:
         import time
@@ -89,8 +90,7 @@ class _Phases:
     def done(self, what: str) -> None:
         now = self.clock()
         if self.enabled:
-            print(f"report: {what} in {now - self.last:.1f} s ({now - self.start:.0f} s in all)", file=sys.stderr,
-                  flush=True)
+            print(f"report: {what} in {now - self.last:.1f} s ({now - self.start:.0f} s in all)", flush=True)
         self.last = now
 
 

@@ -52,7 +52,7 @@ def test_the_family_summary_beside_the_in_distribution_change():
 @pytest.mark.parametrize("make, words", [
     (lambda p: None, "not a run folder"),
     (lambda p: (p.mkdir(), (p / "generalisation.parquet").write_text("junk")), "not a readable results table"),
-    (lambda p: (p.mkdir(), pd.DataFrame({"x": [1]}).to_parquet(p / "generalisation.parquet")), "lacks column"),
+    (lambda p: (p.mkdir(), pd.DataFrame({"x": [1]}).to_parquet(p / "generalisation.parquet")), "no 'variant' column"),
 ])
 def test_a_bad_generalisation_folder_is_one_line(make, words, tmp_path, monkeypatch, capsys):
     from ecodrive_bench.reports.command import main

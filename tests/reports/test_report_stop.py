@@ -63,13 +63,13 @@ def test_a_live_builds_scratch_is_kept(tmp_path):
 
 REPORT = """
 import sys, time
-from ecodrive_bench.reports import build
+from ecodrive_bench.reports import build, command
 def slow(run_dir, out, *args, **kw):
     (out / "index.md").write_text("half a report")
     print("building", flush=True)
     time.sleep(60)
 build._write = slow
-sys.exit(build.main([sys.argv[1], "--out", sys.argv[2]]))
+sys.exit(command.main([sys.argv[1], "--out", sys.argv[2]]))
 """
 
 
