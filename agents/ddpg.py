@@ -12,7 +12,7 @@ it down, so the output slows down as it nears a bound instead of crossing it. A 
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -20,9 +20,7 @@ import torch
 import torch.nn.functional as F
 from gymnasium import spaces
 
-from ecodrive_bench.envs.validation import param
-
-from .base import check_config
+from .configs import DDPGConfig  # its config lives in agents.configs, read without torch
 from .device import CPU, OnDevice, host
 from .inference import NumpyNets, ddpg_greedy
 from .nets import (
@@ -44,41 +42,6 @@ from .nets import (
     zero_grads,
 )
 from .replay import Replay
-
-
-@dataclass
-class DDPGConfig:
-    gamma: float = param(0.99, 0.0, 1.0, unit="-",
-                          doc="discount factor (Table 2)")
-    tau_critic: float = param(0.01, 0.0, 1.0, unit="1/update", lo_open=True,
-                               doc="soft-update rate of the target critic, tau_1 (Table 2)")
-    tau_actor: float = param(0.001, 0.0, 1.0, unit="1/update", lo_open=True,
-                              doc="soft-update rate of the target actor, tau_2 (Table 2)")
-    lr_critic: float = param(1e-4, 0.0, 1.0, unit="-", lo_open=True,
-                              doc="Adam step size of the critic, alpha (Table 2)")
-    lr_actor: float = param(1e-5, 0.0, 1.0, unit="-", lo_open=True,
-                             doc="Adam step size of the actor, beta (Table 2)")
-    batch_size: int = param(128, 1, None, unit="transitions",
-                             doc="minibatch size (Table 2)")
-    replay_size: int = param(500_000, 1, None, unit="transitions",
-                              doc="replay capacity (Table 2)")
-    ou_theta: float = param(0.15, 0.0, 1.0, unit="1/step",
-                             doc="OU mean reversion per step (not in the paper)")
-    ou_sigma: float = param(0.2, 0.0, None, unit="-",
-                             doc="OU noise scale in units of the half action range (not in the paper)")
-    learning_starts: int = param(1000, 0, None, unit="transitions",
-                                  doc="transitions stored before the first update (not in the paper)")
-    reward_scale: float = param(0.01, 0.0, None, unit="-", lo_open=True,
-                                 doc="rewards are multiplied by this for learning")
-    grad_clip: float = param(10.0, 0.0, None, unit="-", lo_open=True,
-                              doc="max gradient norm per network (not in the paper)")
-    bound: str = param("invert", choices=("invert", "tanh"),
-                        doc="'invert': inverting gradients at [-1, 1]; 'tanh': squash (saturates, see above)")
-    seed: int = param(0, 0, None, unit="-",
-                       doc="seeds network initialisation and the agent's numpy Generator")
-
-    def __post_init__(self) -> None:
-        check_config(self)
 
 
 class DDPGAgent(OnDevice):

@@ -5,7 +5,7 @@ removes the actions whose lateral part is unsafe, when acting and in the target 
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -13,9 +13,7 @@ import torch
 import torch.nn.functional as F
 from gymnasium import spaces
 
-from ecodrive_bench.envs.validation import param
-
-from .base import check_config
+from .configs import DQNConfig  # its config lives in agents.configs, read without torch
 from .device import CPU, OnDevice, host
 from .inference import NumpyNets, dqn_greedy
 from .nets import (
@@ -39,37 +37,6 @@ from .nets import (
 from .replay import Replay
 
 N_LAT = 3  # action index = lon * 3 + lat, lat index i is k = (-1, 0, +1)[i]
-
-
-@dataclass
-class DQNConfig:
-    gamma: float = param(0.99, 0.0, 1.0, unit="-",
-                          doc="discount factor (Table 2)")
-    tau: float = param(0.01, 0.0, 1.0, unit="1/update", lo_open=True,
-                        doc="soft-update rate of the target network, tau_1 (Table 2)")
-    lr: float = param(1e-4, 0.0, 1.0, unit="-", lo_open=True,
-                       doc="Adam step size, alpha (Table 2)")
-    batch_size: int = param(128, 1, None, unit="transitions",
-                             doc="minibatch size (Table 2)")
-    replay_size: int = param(500_000, 1, None, unit="transitions",
-                              doc="replay capacity (Table 2)")
-    eps_init: float = param(1.0, 0.0, 1.0, unit="-",
-                             doc="initial exploration factor (Table 2)")
-    eps_end: float = param(0.01, 0.0, 1.0, unit="-",
-                            doc="final exploration factor (Table 2)")
-    eps_decay_episodes: int = param(1000, 1, None, unit="episodes",
-                                     doc="episodes of linear decay (eq. 12)")
-    learning_starts: int = param(1000, 0, None, unit="transitions",
-                                  doc="transitions stored before the first update (not in the paper)")
-    reward_scale: float = param(0.01, 0.0, None, unit="-", lo_open=True,
-                                 doc="rewards are multiplied by this for learning")
-    grad_clip: float = param(10.0, 0.0, None, unit="-", lo_open=True,
-                              doc="max gradient norm (not in the paper)")
-    seed: int = param(0, 0, None, unit="-",
-                       doc="seeds network initialisation and the agent's numpy Generator")
-
-    def __post_init__(self) -> None:
-        check_config(self)
 
 
 class DQNAgent(OnDevice):

@@ -10,7 +10,7 @@ evaluated with only x_k non-zero, so the other parameters cannot leak into it.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -19,9 +19,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from torch.func import functional_call
 
-from ecodrive_bench.envs.validation import param
-
-from .base import check_config
+from .configs import PDQNConfig  # its config lives in agents.configs, read without torch
 from .device import CPU, OnDevice, host
 from .inference import NumpyNets, pdqn_greedy
 from .nets import (
@@ -47,49 +45,6 @@ from .nets import (
 from .replay import NStepWindow, Replay
 
 K = 3  # lateral choices: k = -1, 0, +1
-
-
-@dataclass
-class PDQNConfig:
-    gamma: float = param(0.99, 0.0, 1.0, unit="-",
-                          doc="discount factor (Table 2)")
-    tau_q: float = param(0.01, 0.0, 1.0, unit="1/update", lo_open=True,
-                          doc="soft-update rate of the target Q network, tau_1 (Table 2)")
-    tau_param: float = param(0.001, 0.0, 1.0, unit="1/update", lo_open=True,
-                              doc="soft-update rate of the target parameter network, tau_2 (Table 2)")
-    lr_q: float = param(1e-4, 0.0, 1.0, unit="-", lo_open=True,
-                         doc="Adam step size of the Q network, alpha (Table 2)")
-    lr_param: float = param(1e-5, 0.0, 1.0, unit="-", lo_open=True,
-                             doc="Adam step size of the parameter network, beta (Table 2)")
-    batch_size: int = param(128, 1, None, unit="transitions",
-                             doc="minibatch size B (Table 2)")
-    replay_size: int = param(500_000, 1, None, unit="transitions",
-                              doc="replay capacity R (Table 2)")
-    eps_init: float = param(1.0, 0.0, 1.0, unit="-",
-                             doc="initial exploration factor (Table 2)")
-    eps_end: float = param(0.01, 0.0, 1.0, unit="-",
-                            doc="final exploration factor (Table 2)")
-    eps_decay_episodes: int = param(1000, 1, None, unit="episodes",
-                                     doc="episodes of linear decay, N in eq. 12 (Table 2)")
-    ou_theta: float = param(0.15, 0.0, 1.0, unit="1/step",
-                             doc="OU mean reversion per step (eq. 13; not in the paper: DDPG's usual value)")
-    ou_sigma: float = param(0.2, 0.0, None, unit="-",
-                             doc="OU noise scale, in units of the half action range (not in the paper)")
-    learning_starts: int = param(1000, 0, None, unit="transitions",
-                                  doc="transitions stored before the first update (not in the paper)")
-    reward_scale: float = param(0.01, 0.0, None, unit="-", lo_open=True,
-                                 doc="rewards are multiplied by this for learning (raw rewards are ~1e2)")
-    grad_clip: float = param(10.0, 0.0, None, unit="-", lo_open=True,
-                              doc="max gradient norm per network (not in the paper)")
-    multipass: bool = param(False, doc="MP-DQN's multi-pass Q evaluation (beyond the paper)")
-    n_step: int = param(1, 1, 100, unit="steps",
-                         doc="n-step Bellman targets, gamma^m max_k Q'(s_{t+m}) after m <= n rewards (1 = the paper; beyond the paper)")
-    twin_q: bool = param(False, doc="clipped double Q (TD3, Fujimoto et al. 2018): two Q networks, targets use their minimum (beyond the paper)")
-    seed: int = param(0, 0, None, unit="-",
-                       doc="seeds network initialisation and the agent's numpy Generator")
-
-    def __post_init__(self) -> None:
-        check_config(self)
 
 
 class PDQNAgent(OnDevice):

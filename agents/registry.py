@@ -12,10 +12,8 @@ LEARNING = ("prl", "mpdqn", "dqn", "ddpg")  # the algorithms ``ecodrive train --
 
 
 def config_class(algorithm: str) -> type:
-    """The config dataclass of a learning algorithm (imports its module, torch with it)."""
-    from .ddpg import DDPGConfig
-    from .dqn import DQNConfig
-    from .pdqn import PDQNConfig
+    """The config dataclass of a learning algorithm (``agents.configs``: no torch)."""
+    from .configs import DDPGConfig, DQNConfig, PDQNConfig
 
     if algorithm not in LEARNING:
         raise ValueError(f"unknown algorithm {algorithm!r}; accepted: {', '.join(LEARNING)}")

@@ -15,7 +15,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("ecodrive_bench.reports.command", "rebuild the paper's tables and figures from a run folder"),
     "view": ("ecodrive_bench.bench.logs.view", "open step logs in the Rerun viewer, or save an .rrd recording"),
     "regress": ("ecodrive_bench.bench.regression.check", "check the paper's claims and the own reference on the CI cases"),
-    "train": ("ecodrive_bench.bench.training.train", "train one learning method on one signal setting (resumable)"),
+    "train": ("ecodrive_bench.bench.training.train_command", "train one learning method on one signal setting (resumable)"),
     "train-all": ("ecodrive_bench.bench.training.train_all", "train every learning method for both settings (resumable)"),
     "qcheck": ("ecodrive_bench.bench.training.qcheck", "compare a trained critic's Q values with the returns it earns"),
     "lateral": ("ecodrive_bench.bench.experiments.lateral", "the lateral scenarios A and B (section 5.4)"),

@@ -43,10 +43,12 @@ import numpy as np
 
 from ecodrive_bench.bench.methods.policies import CheckpointError
 from ecodrive_bench.bench.methods.scripted import brake, place_ahead, release
+from ecodrive_bench.bench.training.recipes import (
+    RATE_RANGE,  # accepted RATE (its home: the recipes, which the command reads too)
+)
 from ecodrive_bench.envs.observation import HEADING_EAST, occupancy_grid
 from ecodrive_bench.envs.vehicle import LATERAL_START
 
-RATE_RANGE = (0.0, 1.0)  # [events per episode] accepted RATE (a probability; 0: off)
 # [m] uniform: ego front bumper to the leader's back bumper after the insertion step. SUMO refuses
 # to insert a leader closer than the ego's secure gap plus minGap (about 19 m at the speed limit)
 GAP = (20.0, 40.0)

@@ -59,3 +59,5 @@ def is_recipe(method: str, signals: str, agent_config: dict[str, Any], paper: bo
     """Whether ``agent_config`` (the fields a run overrides) is exactly the recipe's (``paper``:
     the paper's, no fields)."""
     return dict(agent_config) == recipe(method, signals, paper).overrides
+
+RATE_RANGE = (0.0, 1.0)  # [events per episode] accepted --braking-leaders RATE (a probability; 0: off; bench.training.braking)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import json
 import os
 import sys
 import time
@@ -41,91 +40,41 @@ import pandas as pd
 import torch
 
 from ecodrive_bench.agents.device import parse as parse_device
-from ecodrive_bench.agents.registry import LEARNING, make_agent
-from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
+from ecodrive_bench.agents.registry import make_agent
 from ecodrive_bench.bench.cases import train_family
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.cases.setting import deep_merge
 from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.harness.provenance import git_sha, package_versions
-from ecodrive_bench.bench.io import Unwritable, atomic_file, atomic_parquet, atomic_torch_save, writable_dir
+from ecodrive_bench.bench.io import atomic_file, atomic_parquet, atomic_torch_save
 from ecodrive_bench.bench.logs.mcaplog import write_train_log
 from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, load_torch, policy_dir, save_policy
 from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.bench.training import family as generalist
-from ecodrive_bench.bench.training.braking import NO_SCRIPT, RATE_RANGE, BrakingLeaders
+from ecodrive_bench.bench.training.braking import NO_SCRIPT, BrakingLeaders
 from ecodrive_bench.bench.training.braking import spec as braking_spec
-from ecodrive_bench.bench.training.recipes import VALIDATION_CASES, is_recipe, recipe
-from ecodrive_bench.envs.config import SIGNALS, ConfigError, added_values, backfill, flat
+from ecodrive_bench.bench.training.recipes import VALIDATION_CASES
+from ecodrive_bench.bench.training.train_command import (  # noqa: F401  (the command and its helpers, re-exported)
+    NOT_SET,
+    SELECTION,
+    agent_overrides,
+    config_class,
+    fields_help,
+    main,
+)
+from ecodrive_bench.envs.config import ConfigError, added_values, backfill, flat
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
 VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/cases/cases.json's test cases)
 # an empty $ECODRIVE_RUNS counts as unset, as $ECODRIVE_CACHE does (it would mean the current folder)
 RUNS = Path(os.environ.get("ECODRIVE_RUNS") or Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train")
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
-# Checkpoint selection on the validation cases: criterion -> sign (+1: higher is better).
-# "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
-# "return" is the greedy return under the training reward, shaping penalties included.
-SELECTION = {"objective": -1, "return": +1}
 # What ``_checkpoint`` writes: key -> type. ``best`` (a dict) is optional; so are the identity's
 # ``agent_config`` and ``scenario`` (dicts), which older checkpoints lack.
 CHECKPOINT_KEYS: dict[str, type | tuple[type, ...]] = {
     "identity": dict, "agent": dict, "replay": str, "rng": dict, "rows": list, "episode": int, "wall_time": (int, float)}
 IDENTITY_KEYS: dict[str, type] = {"method": str, "signals": str, "seed": int}
-
-
-NOT_SET = ("seed", "multipass")  # agent config fields --set may not change (--seed; the method itself)
-
-
-def config_class(method: str) -> type:
-    """The agent config dataclass of a learning method (``agents.registry.config_class``)."""
-    from ecodrive_bench.agents.registry import config_class as of
-
-    return of(method)
-
-
-def fields_help() -> str:
-    """``--help`` text: every field ``--set`` accepts, per config, from its declaration."""
-    from ecodrive_bench.envs.validation import describe
-
-    out = ["agent config fields for --set FIELD=VALUE (name = default [unit]: meaning (accepted values)):"]
-    for methods, m in (("prl, mpdqn", "prl"), ("dqn", "dqn"), ("ddpg", "ddpg")):
-        out += [f"  {methods} ({config_class(m).__name__}):"] + [f"    {line}" for line in describe(config_class(m), NOT_SET)]
-    return "\n".join(out)
-
-
-def agent_overrides(method: str, items: list[str]) -> dict[str, Any]:
-    """``FIELD=VALUE`` strings -> typed overrides of ``method``'s agent config dataclass; a
-    ValueError names the bad item and the accepted fields or values."""
-    import dataclasses
-
-    from ecodrive_bench.envs.validation import ConfigError, describe
-
-    cls = config_class(method)
-    defaults = {f.name: f.default for f in dataclasses.fields(cls) if f.name not in NOT_SET}
-    out: dict[str, Any] = {}
-    for item in items:
-        name, sep, raw = item.partition("=")
-        if not sep or name not in defaults:
-            raise ConfigError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(defaults)} "
-                             f"(`ecodrive train --help` gives each field's meaning and range)")
-        kind = type(defaults[name])
-        if kind is bool:
-            if raw.lower() not in ("true", "false"):
-                raise ConfigError(f"--set {item!r}: {name} takes true or false")
-            out[name] = raw.lower() == "true"
-        else:
-            try:
-                out[name] = kind(raw)
-            except ValueError:
-                line = next(d for d in describe(cls) if d.startswith(f"{name} = "))
-                raise ConfigError(f"--set {item!r}: {name} takes a {kind.__name__}; {line}") from None
-    try:
-        cls(**out)  # range checks (agents.base.check_config)
-    except ValueError as e:
-        raise ConfigError(f"--set {' '.join(items)}: {e}") from None
-    return out
 
 
 def read_checkpoint(path: Path) -> dict[str, Any]:
@@ -385,81 +334,6 @@ def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity
     atomic_parquet(pd.DataFrame(rows), out / "metrics.parquet")
     write_train_log(out / "train.mcap", rows, {"method": identity["method"], "signals": identity["signals"],
                                                "seed": identity["seed"], "git_sha": git_sha()})
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = Parser(description=__doc__, epilog=fields_help())
-    ap.add_argument("--method", required=True, help=f"one of {', '.join(LEARNING)}")
-    ap.add_argument("--signals", required=True, help=f"one of {', '.join(SIGNALS)}")
-    ap.add_argument("--episodes", type=int_in(1, 100_000), default=None,
-                    help="training episodes (1-100000; default: the recipe's, bench.training.recipes)")
-    ap.add_argument("--seed", type=int_in(0), default=0, help="seed of the agent and of the episode draws (>= 0)")
-    ap.add_argument("--checkpoint-every", type=int_in(1), default=25, help="episodes between checkpoints (>= 1)")
-    ap.add_argument("--out", type=Path, default=None, help="run folder (default $ECODRIVE_RUNS or ~/.cache/ecodrive-bench/runs/train, then <method>-<signals>-s<seed>)")
-    ap.add_argument("--validation-cases", type=int_in(0, 100), default=None,
-                    help=f"validation cases scored at every checkpoint (0-100; 0 exports the final policy; default "
-                         f"{VALIDATION_CASES}, with --family all {train_family.N_VALIDATION * train_family.VALIDATION_CASES} "
-                         f"of the validation corridors)")
-    ap.add_argument("--select", default="objective", choices=list(SELECTION),
-                    help="checkpoint exported: least validation E_f + phi T_f (objective, default) or highest validation return")
-    ap.add_argument("--models", type=Path, default=MODELS, help="folder the policy is exported to, as <method>-<signals>/ (default: the shipped models/)")
-    ap.add_argument("--no-export", action="store_true", help="do not write <models>/<method>-<signals>/ at the end")
-    ap.add_argument("--device", default="cpu",
-                    help="where the networks train: cpu (default, the tested path), cuda or cuda:N where torch sees one")
-    ap.add_argument("--paper", action="store_true",
-                    help="the paper's schedule and Table 2 (1000 episodes, none of the recipe's departures); an "
-                         "experiment where the recipe departs from the paper")
-    ap.add_argument("--braking-leaders", type=float_in(*RATE_RANGE), default=0.0, metavar="RATE",
-                    help="share of episodes (0-1; default 0: off) with a scripted leader braking ahead of the ego "
-                         "(bench.training.braking); an experiment")
-    ap.add_argument("--family", choices=generalist.SPLITS, default=None,
-                    help="train over the corridor family's train split (a corridor per episode), select on its "
-                         "validation corridors, export as <method>-family (docs/generalisation.md)")
-    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                    help="override an agent config field (repeatable); a run whose config is not the recipe's is an "
-                         "experiment, exported only to an explicit --models DIR")
-    args = ap.parse_args(argv)
-    if args.method not in LEARNING:
-        ap.error(f"--method {args.method!r} is not accepted; choose one of {', '.join(LEARNING)}")
-    if args.signals not in SIGNALS:
-        ap.error(f"--signals {args.signals!r} is not accepted; choose one of {', '.join(SIGNALS)}")
-    rec, chosen = recipe(args.method, args.signals), recipe(args.method, args.signals, paper=args.paper)
-    args.episodes = chosen.episodes if args.episodes is None else args.episodes
-    try:
-        given = agent_overrides(args.method, args.set)
-        parse_device(args.device)
-    except ValueError as e:
-        ap.error(str(e))
-    base = chosen.overrides
-    overrides = {**base, **given}
-    suffix = (("+paper" if chosen != rec else "")
-              + "".join(f"+{k}={v}" for k, v in sorted(overrides.items()) if k not in base or base[k] != v)
-              + (f"+e{args.episodes}" if args.episodes != chosen.episodes else "")
-              + (f"+braking={args.braking_leaders:g}" if args.braking_leaders else ""))
-    name = generalist.method_name(args.method, args.family)
-    out = args.out or RUNS / f"{name}-{args.signals}-s{args.seed}{suffix}"
-    reference = (is_recipe(args.method, args.signals, overrides) and args.episodes == rec.episodes
-                 and not args.braking_leaders)
-    experiment_to_shipped = not reference and args.models.resolve() == MODELS.resolve()
-    try:
-        writable_dir(out)
-    except Unwritable as e:
-        return fail(ap.prog, str(e))
-    if experiment_to_shipped and not args.no_export:
-        print(f"note: an experiment ({', '.join(suffix.split('+')[1:])}); it is not exported to the shipped models/"
-              " (give --models DIR to export it elsewhere)", file=sys.stderr)
-    try:
-        df = train(args.method, args.signals, args.episodes, args.seed, out, args.checkpoint_every,
-                   models=None if args.no_export or experiment_to_shipped else args.models,
-                   command=["ecodrive", "train", *(argv if argv is not None else sys.argv[1:])],
-                   validation_cases=args.validation_cases, agent_config=overrides or None, select=args.select,
-                   device=args.device, braking_leaders=args.braking_leaders, family=args.family)
-    except CheckpointError as e:
-        return fail(ap.prog, str(e))
-    tail = df.tail(FINAL_WINDOW)
-    print(json.dumps({"episodes": len(df), "energy": round(float(tail.energy.mean()), 2),
-                      "travel_time": round(float(tail.travel_time.mean()), 2)}))
-    return 0
 
 
 if __name__ == "__main__":
