@@ -43,3 +43,9 @@ def test_the_readme_opens_with_its_two_commands_and_a_short_status():
     assert len(commands) == 2
     status = re.search(r"^\*\*Status\.\*\*.*?(?=\n\n)", text, re.S | re.M)
     assert status and len(status.group(0).splitlines()) <= 8 and "docs/results.md" in status.group(0)
+
+
+def test_the_readme_says_what_it_is_in_300_words_before_its_first_code_example():
+    text = (DOC.parents[1] / "README.md").read_text()
+    first_example = text.index("## The environment in five lines")
+    assert len(text[:first_example].split()) <= 300
