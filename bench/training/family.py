@@ -21,7 +21,6 @@ from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.envs.family import OBS_LANES, TRAIN_FILE, Corridor
 
 SUFFIX = "-family"  # a generalist's method name: <method>-family
-SPLITS = ("train",)  # what --family accepts: the split a generalist trains on
 
 
 def method_name(method: str, family: str | None) -> str:

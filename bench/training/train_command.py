@@ -37,12 +37,12 @@ from ecodrive_bench.bench.cases import train_family
 from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError
 from ecodrive_bench.bench.training.recipes import RATE_RANGE, VALIDATION_CASES, is_recipe, recipe
 from ecodrive_bench.envs.config import SIGNALS
-from ecodrive_bench.envs.family import SPLITS
 
 # Checkpoint selection on the validation cases: criterion -> sign (+1: higher is better).
 # "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
 # "return" is the greedy return under the training reward, shaping penalties included.
 SELECTION = {"objective": -1, "return": +1}
+TRAIN_SPLITS = ("train",)  # what --family accepts: the split a generalist trains on (never validation or test)
 NOT_SET = ("seed", "multipass")  # agent config fields --set may not change (--seed; the method itself)
 
 
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--braking-leaders", type=float_in(*RATE_RANGE), default=0.0, metavar="RATE",
                     help="share of episodes (0-1; default 0: off) with a scripted leader braking ahead of the ego "
                          "(bench.training.braking); an experiment")
-    ap.add_argument("--family", choices=SPLITS, default=None,
+    ap.add_argument("--family", choices=TRAIN_SPLITS, default=None,
                     help="train over the corridor family's train split (a corridor per episode), select on its "
                          "validation corridors, export as <method>-family (docs/generalisation.md)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
