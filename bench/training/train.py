@@ -1,29 +1,7 @@
-"""Train a learning method on one signal setting, resumably.
-
-    ecodrive train --method prl --signals uncoordinated --seed 0   # the recipe's episodes and config
-
-Every ``--checkpoint-every`` episodes the run folder (``$ECODRIVE_RUNS`` or
-``~/.cache/ecodrive-bench/runs/train``, then ``<method>-<signals>-s<seed>``)
-gets a checkpoint: networks, optimizers, epsilon, OU state, episode counter, every RNG state and
-the replay buffer, so a killed run that is started again with the same command continues
-exactly as if it had never stopped. Per-episode metrics go to ``metrics.parquet`` and a
-``/train`` MCAP channel (``train.mcap``). At every checkpoint the greedy policy is scored on
-validation cases (never the test cases); at the end the best one by ``--select`` (default: the
-least E_f + phi T_f, the cost part of eq. 11) is exported to ``models/<method>-<signals>/s<seed>/``
-with a manifest (command, seed, git SHA, sha256, wall time, selection, validation and final
-metrics) and the run's per-episode ``metrics.parquet``.
-
-A shipped reference agent is trained by its recipe (``bench.training.recipes``: the episode
-count and the agent-config fields that differ from the paper's Table 2). ``--set FIELD=VALUE``
-(repeatable) overrides a field on top of the recipe for an experiment (e.g. ``--set twin_q=true``
-for PRL); ``--paper`` starts from the paper's 1000 episodes and Table 2 instead of the recipe. A
-run whose episodes or config are not the recipe's gets its own folder
-(``<method>-<signals>-s<seed>+FIELD=VALUE``, ``+paper``, ``+e<episodes>``) and is never exported to the shipped ``models/``;
-give ``--models DIR`` to export it elsewhere, for example to evaluate it on the test cases with
-``ecodrive run --models DIR``. ``--braking-leaders RATE`` puts a scripted leader braking ahead of the
-ego into that share of the episodes (``bench.training.braking``), an experiment of the same kind
-(``+braking=RATE``).
-"""
+"""Training one learning method on one signal setting: the loop, its checkpoints, validation and
+export. What the command does and writes, its options and resuming, is the docstring of
+``bench.training.train_command`` (the command's ``--help``), which imports this module once its
+options are read."""
 from __future__ import annotations
 
 import copy
