@@ -61,3 +61,7 @@ def is_recipe(method: str, signals: str, agent_config: dict[str, Any], paper: bo
     return dict(agent_config) == recipe(method, signals, paper).overrides
 
 RATE_RANGE = (0.0, 1.0)  # [events per episode] accepted --braking-leaders RATE (a probability; 0: off; bench.training.braking)
+# Checkpoint selection on the validation cases: criterion -> sign (+1: higher is better).
+# "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
+# "return" is the greedy return under the training reward, shaping penalties included.
+SELECTION = {"objective": -1, "return": +1}

@@ -18,7 +18,7 @@ import pandas as pd
 import torch
 
 from ecodrive_bench.agents.device import parse as parse_device
-from ecodrive_bench.agents.registry import make_agent
+from ecodrive_bench.agents.registry import config_class, make_agent
 from ecodrive_bench.bench.cases import train_family
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.cases.setting import deep_merge
@@ -32,15 +32,7 @@ from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.bench.training import family as generalist
 from ecodrive_bench.bench.training.braking import NO_SCRIPT, BrakingLeaders
 from ecodrive_bench.bench.training.braking import spec as braking_spec
-from ecodrive_bench.bench.training.recipes import VALIDATION_CASES
-from ecodrive_bench.bench.training.train_command import (  # noqa: F401  (the command and its helpers, re-exported)
-    NOT_SET,
-    SELECTION,
-    agent_overrides,
-    config_class,
-    fields_help,
-    main,
-)
+from ecodrive_bench.bench.training.recipes import SELECTION, VALIDATION_CASES
 from ecodrive_bench.envs.config import ConfigError, added_values, backfill, flat
 
 # outside the work tree, so a session that gets a fresh checkout on the same machine can resume
@@ -313,6 +305,3 @@ def _checkpoint(out: Path, agent, rng, rows, episode: int, wall: float, identity
     write_train_log(out / "train.mcap", rows, {"method": identity["method"], "signals": identity["signals"],
                                                "seed": identity["seed"], "git_sha": git_sha()})
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -35,13 +35,9 @@ from ecodrive_bench.agents.registry import LEARNING
 from ecodrive_bench.bench.args import Parser, fail, float_in, int_in
 from ecodrive_bench.bench.cases import train_family
 from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError
-from ecodrive_bench.bench.training.recipes import RATE_RANGE, VALIDATION_CASES, is_recipe, recipe
+from ecodrive_bench.bench.training.recipes import RATE_RANGE, SELECTION, VALIDATION_CASES, is_recipe, recipe
 from ecodrive_bench.envs.config import SIGNALS
 
-# Checkpoint selection on the validation cases: criterion -> sign (+1: higher is better).
-# "objective" is the cost part of eq. 11, E_f + phi T_f [Wh + phi s], what Table 4 reports;
-# "return" is the greedy return under the training reward, shaping penalties included.
-SELECTION = {"objective": -1, "return": +1}
 TRAIN_SPLITS = ("train",)  # what --family accepts: the split a generalist trains on (never validation or test)
 NOT_SET = ("seed", "multipass")  # agent config fields --set may not change (--seed; the method itself)
 

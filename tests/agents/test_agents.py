@@ -93,7 +93,7 @@ def test_twin_q_target_is_the_smaller_critic_and_both_critics_learn():
 
 
 def test_agent_overrides_are_typed_and_checked():
-    from ecodrive_bench.bench.training.train import agent_overrides
+    from ecodrive_bench.bench.training.train_command import agent_overrides
 
     assert agent_overrides("prl", ["twin_q=true", "lr_q=0.001", "batch_size=64"]) == {
         "twin_q": True, "lr_q": 0.001, "batch_size": 64}
@@ -122,7 +122,7 @@ def test_train_help_lists_every_agent_field_with_its_meaning_and_range(capsys):
     from ecodrive_bench.agents.ddpg import DDPGConfig
     from ecodrive_bench.agents.dqn import DQNConfig
     from ecodrive_bench.agents.pdqn import PDQNConfig
-    from ecodrive_bench.bench.training.train import main
+    from ecodrive_bench.bench.training.train_command import main
 
     with pytest.raises(SystemExit):
         main(["--help"])

@@ -13,8 +13,8 @@ import torch
 from ecodrive_bench.bench.io import sha256
 from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, load_policy, policy_dir
 from ecodrive_bench.bench.training.qcheck import main as qcheck_main
-from ecodrive_bench.bench.training.train import main as train_main
 from ecodrive_bench.bench.training.train import train
+from ecodrive_bench.bench.training.train_command import main as train_main
 
 
 class Payload:

@@ -27,7 +27,8 @@ from ecodrive_bench.bench.training.braking import (
     BrakingLeaders,
     Draw,
 )
-from ecodrive_bench.bench.training.train import main, read_checkpoint, train
+from ecodrive_bench.bench.training.train import read_checkpoint, train
+from ecodrive_bench.bench.training.train_command import main
 
 DRAW = Draw(event=True, gap=22.0, decel=-3.0, steps=3, trigger=0.0)
 CASE = Case(index=0, sumo_seed=11, insert_time=150.0, group=0)  # the ego's lane ahead is clear early on A0

@@ -12,7 +12,8 @@ import torch
 from ecodrive_bench.bench.cases import train_family
 from ecodrive_bench.bench.methods.policies import CheckpointError
 from ecodrive_bench.bench.training import family as generalist
-from ecodrive_bench.bench.training.train import main, train
+from ecodrive_bench.bench.training.train import train
+from ecodrive_bench.bench.training.train_command import main
 
 FAST_AGENT = {"learning_starts": 16, "batch_size": 8}
 FAST_SCENARIO = {"max_episode_time": 40.0}

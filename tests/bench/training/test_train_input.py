@@ -12,7 +12,8 @@ import torch
 
 from ecodrive_bench.bench.methods.policies import CheckpointError, load_torch, policy_dir
 from ecodrive_bench.bench.training import train_all
-from ecodrive_bench.bench.training.train import main, read_checkpoint, train
+from ecodrive_bench.bench.training.train import read_checkpoint, train
+from ecodrive_bench.bench.training.train_command import main
 
 
 @pytest.fixture(autouse=True)
