@@ -353,6 +353,7 @@ def test_a_shipped_seed_is_finished_only_when_trained_by_its_recipe(tmp_path):
 def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path, monkeypatch, capsys):
     import ecodrive_bench.bench.training.train as tr
     from ecodrive_bench.bench.training.recipes import RECIPES
+    from ecodrive_bench.bench.training.train_command import main as train_main
 
     (method, signals), r = next(iter(RECIPES.items()))
     seen = {}
@@ -363,23 +364,23 @@ def test_train_cli_takes_the_recipe_and_calls_other_configs_experiments(tmp_path
 
     monkeypatch.setattr(tr, "train", fake_train)
     args = ["--method", method, "--signals", signals, "--out", str(tmp_path / "o")]
-    assert tr.main(args) == 0
+    assert train_main(args) == 0
     assert seen["episodes"] == r.episodes and seen["agent_config"] == r.overrides and seen["models"] == tr.MODELS
     assert "batch_size" not in r.overrides
-    assert tr.main([*args, "--set", "batch_size=64"]) == 0
+    assert train_main([*args, "--set", "batch_size=64"]) == 0
     assert seen["agent_config"] == {**r.overrides, "batch_size": 64} and seen["models"] is None  # an experiment
     assert "an experiment (batch_size=64)" in capsys.readouterr().err
     field, value = next(iter(r.overrides.items()))  # the recipe's own field, spelled out: still the recipe
-    assert tr.main([*args, "--set", f"{field}={value}"]) == 0
+    assert train_main([*args, "--set", f"{field}={value}"]) == 0
     assert seen["agent_config"] == r.overrides and seen["models"] == tr.MODELS
-    assert tr.main([*args, "--episodes", str(r.episodes + 1)]) == 0  # another schedule: an experiment too
+    assert train_main([*args, "--episodes", str(r.episodes + 1)]) == 0  # another schedule: an experiment too
     assert seen["models"] is None and f"an experiment (e{r.episodes + 1})" in capsys.readouterr().err
     del args[-2:]  # the default run folder, named after what departs from the recipe
-    assert tr.main([*args, "--paper"]) == 0  # the paper's schedule and Table 2, for comparison
+    assert train_main([*args, "--paper"]) == 0  # the paper's schedule and Table 2, for comparison
     assert (seen["episodes"], seen["agent_config"], seen["models"]) == (1000, None, None)
     assert seen["out"].name == f"{method}-{signals}-s0+paper"
     monkeypatch.delitem(RECIPES, (method, signals))  # a setting whose recipe is the paper's
-    assert tr.main([*args, "--paper"]) == 0
+    assert train_main([*args, "--paper"]) == 0
     assert seen["models"] == tr.MODELS and seen["out"].name == f"{method}-{signals}-s0"
 
 
