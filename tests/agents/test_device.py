@@ -76,7 +76,7 @@ def test_device_names_are_checked_against_what_torch_sees(monkeypatch):
 
 
 def test_train_with_an_unusable_device_is_one_line_and_writes_nothing(tmp_path, capsys, monkeypatch):
-    from ecodrive_bench.bench.training import train
+    from ecodrive_bench.bench.training import train_command as train
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     out = tmp_path / "run"
