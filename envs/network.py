@@ -208,19 +208,14 @@ def _links(edge: Any, to: Any) -> list[Any]:
             if c.getFromLane().allows(EGO_CLASS) and c.getToLane().allows(EGO_CLASS)]
 
 
-def shortest(net: Any, src: Any, dst: Any) -> list[Any] | None:
-    """The least-travel-time path of edges from ``src`` to ``dst`` for the ego's class (Dijkstra over
-    edges; an edge costs its length over its speed), or None."""
-    best = {src: 0.0}
-    prev: dict[Any, Any] = {}
+def tree(src: Any) -> dict[Any, Any]:
+    """The least-travel-time tree from edge ``src`` for the ego's class (Dijkstra over edges; an
+    edge costs its length over its speed; ties by edge id): each reached edge -> the one before it
+    (``src`` -> None)."""
+    best, prev = {src: 0.0}, {src: None}
     queue = [(0.0, src.getID(), src)]
     while queue:
         d, _, e = heapq.heappop(queue)
-        if e is dst:
-            path = [dst]
-            while path[-1] is not src:
-                path.append(prev[path[-1]])
-            return path[::-1]
         if d > best[e]:
             continue
         for to in e.getOutgoing():
@@ -230,7 +225,21 @@ def shortest(net: Any, src: Any, dst: Any) -> list[Any] | None:
             if nd < best.get(to, math.inf):
                 best[to], prev[to] = nd, e
                 heapq.heappush(queue, (nd, to.getID(), to))
-    return None
+    return prev
+
+
+def path_to(prev: dict[Any, Any], dst: Any) -> list[Any]:
+    """The edges from ``tree``'s root to ``dst``, in order."""
+    path = [dst]
+    while prev[path[-1]] is not None:
+        path.append(prev[path[-1]])
+    return path[::-1]
+
+
+def shortest(net: Any, src: Any, dst: Any) -> list[Any] | None:
+    """The least-travel-time path of edges from ``src`` to ``dst`` (``tree``), or None."""
+    prev = tree(src)
+    return path_to(prev, dst) if dst in prev else None
 
 
 def route_of(net: Any, edge_ids: Sequence[str]) -> Route:

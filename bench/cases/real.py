@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import re
 from pathlib import Path
 from typing import Any
@@ -37,8 +36,10 @@ from ecodrive_bench.envs.network import (
     RESCO,
     _links,
     _read_net,
+    path_to,
     resco_folder,
     route_of,
+    tree,
 )
 
 MASTER_SEED = 20261201  # documented master seed of the real case set
@@ -62,29 +63,13 @@ def _hour(cfg: Path) -> tuple[float, float]:
 
 def most_signals(net: Any) -> list[str]:
     """The edge ids of the least-travel-time path that crosses the most signals (module docstring)."""
-    import heapq  # noqa: PLC0415
-
     edges = sorted((e for e in net.getEdges() if e.allows(EGO_CLASS)), key=lambda e: e.getID())
-    succ = {e: {to: bool(_signals(e, to)) for to in e.getOutgoing()
-                if to.allows(EGO_CLASS) and _links(e, to)} for e in edges}
     best: tuple | None = None
     for src in edges:
-        dist, prev, queue = {src: 0.0}, {}, [(0.0, src.getID(), src)]
-        while queue:
-            d, _, e = heapq.heappop(queue)
-            if d > dist[e]:
-                continue
-            for to in succ.get(e, {}):
-                nd = d + to.getLength() / to.getSpeed()
-                if nd < dist.get(to, math.inf):
-                    dist[to], prev[to] = nd, e
-                    heapq.heappush(queue, (nd, to.getID(), to))
-        for dst in dist:
-            path = [dst]
-            while path[-1] is not src:
-                path.append(prev[path[-1]])
-            path.reverse()
-            crossings = [i for i, (a, b) in enumerate(zip(path, path[1:])) if succ[a][b]]
+        prev = tree(src)
+        for dst in prev:
+            path = path_to(prev, dst)
+            crossings = [i for i, (a, b) in enumerate(zip(path, path[1:])) if _signals(a, b)]
             if not crossings:
                 continue
             path = path[: crossings[-1] + 2]  # cut after the edge that follows the last signal
