@@ -22,30 +22,29 @@ def real_env():
     e.close()
 
 
+def _reset(env, case):
+    def setup():
+        env.reset(options=case.options())
+        return (), {}
+    return setup
+
+
 def test_real_raw_sumo_step(benchmark, real_env):
     """STEPS raw ``simulationStep`` calls on ingolstadt7 with the ego in the network (no queries)."""
     env, case = real_env
 
-    def setup():
-        env.reset(options=case.options())
-        return (), {}
-
     def run():
         for _ in range(STEPS):
             env.session.step()
-    benchmark.pedantic(run, setup=setup, rounds=ROUNDS, iterations=1)
+    benchmark.pedantic(run, setup=_reset(env, case), rounds=ROUNDS, iterations=1)
 
 
 def test_real_env_step(benchmark, real_env):
     """STEPS ``env.step`` calls on ingolstadt7 (route-frame observation, masks, reward)."""
     env, case = real_env
 
-    def setup():
-        env.reset(options=case.options())
-        return (), {}
-
     def run():
         for _ in range(STEPS):
             _, _, terminated, truncated, _ = env.step(KEEP)
             assert not (terminated or truncated)  # the ratio is over steps in traffic, not after the end
-    benchmark.pedantic(run, setup=setup, rounds=ROUNDS, iterations=1)
+    benchmark.pedantic(run, setup=_reset(env, case), rounds=ROUNDS, iterations=1)

@@ -67,3 +67,15 @@ def test_the_route_through_the_most_signals_is_chosen(tmp_path):
                (("ab", "bc", "cd"), ("ab", "bc", "cs"), ("nb", "bc", "cd"), ("nb", "bc", "cs"))}
     assert lengths[tuple(route)] == min(lengths.values())
     assert real.most_signals(net) == route  # deterministic
+
+
+def test_the_docs_table_is_the_case_sets():
+    """docs/networks.md's table of the real corridors states what real.json holds (signals, length)."""
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[3] / "docs" / "networks.md").read_text()
+    for name, c in real_corridors().items():
+        row = next(line for line in doc.splitlines() if line.startswith(f"| `{name}` |"))
+        cells = [x.strip() for x in row.strip("|").split("|")]
+        assert cells[3] == f"{len(c['route'])} edges" and cells[4] == str(c["junctions"])
+        assert cells[5] == f"{round(c['length'])} m"
