@@ -203,7 +203,7 @@ def _train_local(runs: list[Run], parallel: int) -> list[str]:
         while todo and len(running) < parallel:
             run = todo.pop(0)
             log = open(RUNS / f"{run.method}-{run.signals}-s{run.seed}.log", "a")
-            cmd = [sys.executable, "-m", "ecodrive_bench.bench.training.train", *run.argv()]
+            cmd = [sys.executable, "-m", "ecodrive_bench.bench.training.train_command", *run.argv()]
             running.append((subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), run.name))
             print(f"started {run.name}", flush=True)
         for p, name in list(running):
