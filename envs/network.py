@@ -23,7 +23,6 @@ the demand's span.
 from __future__ import annotations
 
 import hashlib
-import heapq
 import json
 import math
 import os
@@ -34,20 +33,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .config import ConfigError, ScenarioConfig
+from .config import ScenarioConfig
+from .route import EGO_CLASS, NetworkError, programs, read_net, route_of  # noqa: F401  (their home is envs.route)
 from .scenario import EGO_ROUTE, NOT_BUILT, ScenarioBuildError, ScenarioFiles, cached, write_vtypes, write_xml
 
 NET_CAP = 256 << 20  # [bytes] largest network file read (cologne8's is 0.35 MB)
 DEMAND_CAP = 256 << 20  # [bytes] largest demand file read (cologne3's is 0.76 MB)
-EGO_CLASS = "passenger"  # SUMO vClass of the ego's vType (the default class)
-NETWORK_VERSION = 1  # bump when the files written here change meaning
+NETWORK_VERSION = 2  # bump when the files written here change meaning
 EGO_ADD = "ego.add.xml"
 ROUTE_JSON = "route.json"
 SPEC_KEYS = ("name", "net", "demand", "route", "insert", "begin", "end")
-
-
-class NetworkError(ConfigError):
-    """A network spec that cannot be driven; one line naming the value and what is accepted."""
 
 
 @dataclass(frozen=True)
@@ -180,103 +175,6 @@ def signal_types(net: Path) -> dict[str, str]:
     return types
 
 
-# ---------------------------------------------------------------------------------- route
-@dataclass(frozen=True)
-class Route:
-    """The ego's route through a network, and what lies along it."""
-
-    edges: tuple[str, ...]
-    length: float  # [m] along the route, edge lengths summed
-    stop_lines: tuple[float, ...]  # [m] from the route's start, each signal crossing's stop line
-    tls: tuple[str, ...]  # the signal of each crossing, in order (a signal may be crossed twice)
-    lane_widths: tuple[float, ...]  # [m] the first edge's lanes, rightmost first
-
-
-def _read_net(path: Path) -> Any:
-    import sumolib  # noqa: PLC0415  (pure Python; only envs.sumo talks to SUMO)
-
-    try:
-        return sumolib.net.readNet(str(path), withInternal=False)
-    except Exception as e:  # noqa: BLE001  (sumolib's parser raises many kinds)
-        raise NetworkError(f"network file {str(path)!r:.80} cannot be read as a SUMO network "
-                           f"({type(e).__name__}: {str(e)[:60]})") from None
-
-
-def _links(edge: Any, to: Any) -> list[Any]:
-    """The connections from ``edge`` to ``to`` the ego's class may drive."""
-    return [c for c in edge.getOutgoing().get(to, [])
-            if c.getFromLane().allows(EGO_CLASS) and c.getToLane().allows(EGO_CLASS)]
-
-
-def tree(src: Any) -> dict[Any, Any]:
-    """The least-travel-time tree from edge ``src`` for the ego's class (Dijkstra over edges; an
-    edge costs its length over its speed; ties by edge id): each reached edge -> the one before it
-    (``src`` -> None)."""
-    best, prev = {src: 0.0}, {src: None}
-    queue = [(0.0, src.getID(), src)]
-    while queue:
-        d, _, e = heapq.heappop(queue)
-        if d > best[e]:
-            continue
-        for to in e.getOutgoing():
-            if not to.allows(EGO_CLASS) or not _links(e, to):
-                continue
-            nd = d + to.getLength() / to.getSpeed()
-            if nd < best.get(to, math.inf):
-                best[to], prev[to] = nd, e
-                heapq.heappush(queue, (nd, to.getID(), to))
-    return prev
-
-
-def path_to(prev: dict[Any, Any], dst: Any) -> list[Any]:
-    """The edges from ``tree``'s root to ``dst``, in order."""
-    path = [dst]
-    while prev[path[-1]] is not None:
-        path.append(prev[path[-1]])
-    return path[::-1]
-
-
-def shortest(net: Any, src: Any, dst: Any) -> list[Any] | None:
-    """The least-travel-time path of edges from ``src`` to ``dst`` (``tree``), or None."""
-    prev = tree(src)
-    return path_to(prev, dst) if dst in prev else None
-
-
-def route_of(net: Any, edge_ids: Sequence[str]) -> Route:
-    """The ``Route`` of ``edge_ids`` in ``net`` (sumolib's), each edge checked; a ``NetworkError``
-    names the first bad edge or gap."""
-    edges = []
-    for eid in edge_ids:
-        if not net.hasEdge(eid):
-            raise NetworkError(f"route edge {eid!r:.60} is not in the network")
-        e = net.getEdge(eid)
-        if not e.allows(EGO_CLASS):
-            raise NetworkError(f"route edge {eid!r:.60} does not allow the ego's class ({EGO_CLASS})")
-        edges.append(e)
-    if len(edges) == 2 and not _links(*edges):
-        path = shortest(net, *edges)
-        if path is None:
-            raise NetworkError(f"route {edge_ids[0]!r:.40} -> {edge_ids[1]!r:.40} is not connected: no path for "
-                               f"the ego's class ({EGO_CLASS})")
-        edges = path
-    stop_lines, tls, at = [], [], 0.0
-    for a, b in zip(edges, edges[1:]):
-        links = _links(a, b)
-        if not links:
-            raise NetworkError(f"route is not connected: no lane of edge {a.getID()!r:.40} leads to "
-                               f"{b.getID()!r:.40}")
-        at += a.getLength()
-        signal = next((c.getTLSID() for c in links if c.getTLSID()), "")
-        if signal:
-            stop_lines.append(at)
-            tls.append(signal)
-    if not tls:
-        raise NetworkError(f"route {edges[0].getID()!r:.40} .. {edges[-1].getID()!r:.40} crosses no signal; "
-                           f"accepted: a route through at least one signalised junction")
-    return Route(tuple(e.getID() for e in edges), at + edges[-1].getLength(), tuple(stop_lines), tuple(tls),
-                 tuple(lane.getWidth() for lane in edges[0].getLanes()))
-
-
 # ---------------------------------------------------------------------------------- build
 def build_network(spec: NetworkSpec, cfg: ScenarioConfig) -> ScenarioFiles:
     """Check ``spec`` and return the files the env drives: the network and demand in place, and the
@@ -291,7 +189,7 @@ def build_network(spec: NetworkSpec, cfg: ScenarioConfig) -> ScenarioFiles:
     if not begin <= lo <= hi <= end:
         raise NetworkError(f"network insert=[{lo:g}, {hi:g}] s is not accepted; accepted: inside the demand's "
                            f"span [{begin:g}, {end:g}] s")
-    route = route_of(_read_net(net), spec.route)
+    route = route_of(read_net(net), spec.route, programs(net))
     key = {k: v for k, v in cfg.to_dict().items() if k not in NOT_BUILT}
     key.update({"_network": NETWORK_VERSION, "_net": _sha256(net), "_demand": [_sha256(p) for p in demand],
                 "_route": list(route.edges), "_sumo": _sumo_version()})
@@ -301,9 +199,7 @@ def build_network(spec: NetworkSpec, cfg: ScenarioConfig) -> ScenarioFiles:
         write_vtypes(root, cfg)
         ET.SubElement(root, "route", id=EGO_ROUTE, edges=" ".join(route.edges))
         write_xml(root, out / EGO_ADD)
-        (out / ROUTE_JSON).write_text(json.dumps({
-            "edges": route.edges, "length": route.length, "stop_lines": route.stop_lines, "tls": route.tls,
-            "lane_widths": route.lane_widths}, indent=1) + "\n")
+        (out / ROUTE_JSON).write_text(json.dumps(route.to_dict(), indent=1) + "\n")
 
     try:
         folder = cached(key, write, (EGO_ADD, ROUTE_JSON), f"network {spec.name}")
@@ -319,6 +215,7 @@ def build_network(spec: NetworkSpec, cfg: ScenarioConfig) -> ScenarioFiles:
         tls_ids=tuple(dict.fromkeys(route.tls)), lane_y=tuple(centres), route_frame=True, demand=demand[1:],
         begin=begin, insert_window=(lo, hi), span=(begin, end),
         actuated=tuple(t for t in dict.fromkeys(route.tls) if types.get(t, "static") != "static"),
+        route=route,
     )
 
 

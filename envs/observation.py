@@ -238,6 +238,10 @@ class RouteGridLogicObservation(GridLogicObservation):
         super().__init__(cfg, files)
         self._edge: tuple[tuple[float, ...], int] = ((LANE_WIDTH,) * len(files.lane_y), 0)  # set at the first observe
         self._internal = False  # the ego is on a junction's internal lane
+        assert files.route is not None, "a route-frame observation needs the route (envs.route)"
+        self.route = files.route
+        self._index = {e: r for r, e in enumerate(self.route.edges)}  # route edge -> its index
+        self._exit: tuple[int, float] = (0, 0.0)  # (last route edge the ego was on, the odometer at its end [m])
 
     def _lanes_here(self, session: SumoSession, kin: Kinematics) -> tuple[tuple[float, ...], int]:
         """(lane widths of the ego's edge, the ego's lane index there), kept over internal lanes."""
@@ -247,7 +251,19 @@ class RouteGridLogicObservation(GridLogicObservation):
         return self._edge
 
     def along(self, session: SumoSession, vid: str, kin: Kinematics) -> float:
-        return session.odometer(vid)
+        """The front bumper's position in the route frame (``envs.route``): the edge's offset plus
+        the lane position on a route edge; on a junction's internal lane, the end of the edge it
+        came from plus the distance driven since, at most the next edge's offset."""
+        lane_id, pos = session.lane_place(vid)
+        odo = session.odometer(vid)
+        route = self.route
+        r = self._index.get(lane_id.rsplit("_", 1)[0])
+        if r is not None:
+            self._exit = (r, odo + route.lengths[r] - pos)
+            return route.offsets[r] + pos
+        r, odo_end = self._exit
+        x = route.offsets[r] + route.lengths[r] + max(0.0, odo - odo_end)
+        return min(x, route.offsets[r + 1]) if r + 1 < len(route.offsets) else x
 
     @staticmethod
     def same_road(edge0: str, edge1: str) -> bool:

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .config import OPTIONAL_FIELDS, ScenarioConfig
+from .route import Route
 
 EGO_TYPE = "ev"  # vType of the controlled / measured vehicle
 GLOSA_TYPE = "ev_glosa"  # the same EV with SUMO's GLOSA device (range = V2I range)
@@ -70,6 +71,7 @@ class ScenarioFiles:
     insert_window: tuple[float, float] | None = None  # [s] the ego's insertion times drawn from, if not the config's
     span: tuple[float, float] | None = None  # [s] the demand's time span: an insertion time must lie in it
     actuated: tuple[str, ...] = ()  # signals on the route whose plan is not fixed (no planner can know their future)
+    route: Route | None = None  # a network corridor's route frame (``envs.route``)
 
 
 class ScenarioBuildError(RuntimeError):

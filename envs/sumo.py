@@ -249,6 +249,20 @@ class SumoSession:
             rows.append((x, y, v.getLength(vid), v.getSpeed(vid)))
         return tuple(ids), np.array(rows, dtype=float).reshape(-1, 4)
 
+    def on_route(self, exclude: str, lanes: dict[str, tuple[float, int]], pitch: float) -> tuple[tuple[str, ...], np.ndarray]:
+        """``eastbound`` on a network corridor: every vehicle but ``exclude`` on a lane of the route
+        (``lanes``: lane id -> its start along the route frame [m], its lane index), one row each of
+        front bumper position along the route [m], lane index times ``pitch`` [m], length [m], speed [m/s]."""
+        v = self._api.vehicle
+        ids, rows = [], []
+        for vid in v.getIDList():
+            place = lanes.get(v.getLaneID(vid)) if vid != exclude else None
+            if place is None:
+                continue
+            ids.append(vid)
+            rows.append((place[0] + v.getLanePosition(vid), place[1] * pitch, v.getLength(vid), v.getSpeed(vid)))
+        return tuple(ids), np.array(rows, dtype=float).reshape(-1, 4)
+
     # ------------------------------------------------------------------ vehicles
     def add_vehicle(self, vid: str, controlled: bool, glosa: bool = False) -> None:
         """Insert a vehicle of the EV type at the arterial's start, now."""

@@ -30,17 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from ecodrive_bench.envs.network import (
-    EGO_CLASS,
-    REAL_FILE,
-    RESCO,
-    _links,
-    _read_net,
-    path_to,
-    resco_folder,
-    route_of,
-    tree,
-)
+from ecodrive_bench.envs.network import REAL_FILE, RESCO, resco_folder
+from ecodrive_bench.envs.route import EGO_CLASS, links, path_to, programs, read_net, route_of, tree
 
 MASTER_SEED = 20261201  # documented master seed of the real case set
 VERSION = 1
@@ -63,7 +54,7 @@ def _hour(cfg: Path) -> tuple[float, float]:
 
 def most_signals(net: Any) -> list[str]:
     """The edge ids of the least-travel-time path that crosses the most signals (module docstring)."""
-    edges = sorted((e for e in net.getEdges() if e.allows(EGO_CLASS)), key=lambda e: e.getID())
+    edges = sorted((e for e in net.getEdges() if e.allows(EGO_CLASS) and e.getFunction() != "internal"), key=lambda e: e.getID())
     best: tuple | None = None
     for src in edges:
         prev = tree(src)
@@ -84,7 +75,7 @@ def most_signals(net: Any) -> list[str]:
 
 def _signals(a: Any, b: Any) -> set[str]:
     """The signals that control the ego's links from edge ``a`` to edge ``b``."""
-    return {c.getTLSID() for c in _links(a, b) if c.getTLSID()}
+    return {c.getTLSID() for c in links(a, b) if c.getTLSID()}
 
 
 def _sha256(path: Path) -> str:
@@ -99,9 +90,9 @@ def generate() -> dict[str, Any]:
         folder = root / name
         net_file, demand = folder / f"{name}.net.xml", folder / f"{name}.rou.xml"
         begin, end = _hour(folder / f"{name}.sumocfg")
-        net = _read_net(net_file)
+        net = read_net(net_file)
         edges = most_signals(net)
-        route = route_of(net, edges)
+        route = route_of(net, edges, programs(net_file))
         rng = np.random.default_rng([MASTER_SEED, k])
         lo, hi = begin + INSERT_AFTER[0], begin + INSERT_AFTER[1]
         seeds = rng.integers(0, SEED_BOUND, size=CASES_PER_CORRIDOR)

@@ -154,8 +154,12 @@ def run_task(task: Task) -> dict[str, Any]:
         _AGENTS[key] = (agent, code_sha256(task.factory, agent))  # its code's, an --sb3 zip's
     if task.method in PLANNERS and key not in _AGENTS:
         planner = registry.load(registry.method(task.method).build)  # its agent class, built from the env's config
-        _ENVS[env_key] = env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
-        _AGENTS[key] = (planner(env.cfg), identity(task.method))
+        env = make_env(planner, task.signals, scenario)  # type: ignore[arg-type]
+        agent = planner(env.cfg)
+        if agent.action_interface != env.action_type.name:  # clairvoyant on a network corridor drives longitudinal
+            env.close()
+            env = make_env(agent, task.signals, scenario)
+        _ENVS[env_key], _AGENTS[key] = env, (agent, identity(task.method))
     if env_key not in _ENVS:
         _ENVS[env_key] = make_env(task.method, task.signals, scenario)
     env = _ENVS[env_key]

@@ -80,7 +80,7 @@ def resolve_methods(opts: RunOptions) -> tuple[list[tuple[str, str, int]], list[
     wanted = opts.train_seeds
     runs, skipped = [], []
     factories = opts.factories
-    default = [*METHODS, *PLANNERS] if opts.profile == "generalisation" else METHODS  # real: no planner yet
+    default = [*METHODS, *PLANNERS] if opts.profile in registry.FAMILY_PROFILES else METHODS
     named = [m for m in (opts.methods if explicit else default) if m not in factories]
     if opts.planners:
         named += [p for p in PLANNERS if p not in named]
@@ -130,10 +130,16 @@ def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
     scenario cache entry that cannot be rebuilt)."""
     runs, skipped = resolve_methods(opts)
     if opts.scenario.get("network") is not None:
-        planned = sorted({m for m, _, _ in runs if m in PLANNERS} | ({"--bounds"} if opts.bounds else set()))
-        if planned:
-            raise UsageError(f"{', '.join(planned)}: the planners and bounds do not plan on a network corridor "
-                             f"(--set network / --network / --profile real) yet; run the other methods there")
+        if opts.bounds:
+            raise UsageError("--bounds: the per-case bounds are not solved on a network corridor (--set network / "
+                             "--network / --profile real); the planners (--planners) run there")
+        if any(m in PLANNERS for m, _, _ in runs):  # a signal that is not fixed-time: the planners cannot know it
+            from ecodrive_bench.bench.oracle.corridor import Corridor, PlanError
+
+            try:
+                Corridor.from_config(setting(opts.signals[0], opts.scenario))
+            except PlanError as e:
+                raise UsageError(f"{', '.join(sorted({m for m, _, _ in runs if m in PLANNERS}))}: {e}") from None
     codes = {}
     for label, spec in opts.factories.items():  # a factory that cannot build its agent fails before any episode
         try:

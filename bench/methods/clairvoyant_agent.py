@@ -34,6 +34,16 @@ planned whole and their chosen drives shipped (``bench.cases.clairvoyant_drives`
 ``choose_set``): ``prepare`` reads the case's actions instead of planning, where they answer its
 problem. A case planned on its own, with no set, takes its cheapest drive (lambda 0).
 
+On a network corridor (``envs.route``) the same, in the route frame: positions along the route,
+the recorded vehicles those on the route's lanes, a lane their index on the edge they are on
+(``envs.env.EcoDriveEnv.traffic``); its plans start from the speed traffic let the ego insert at,
+and nothing is shipped (every case is planned on its own, lambda 0). There it drives the
+``longitudinal`` action, as ``mpc`` and ``oracle`` do: SUMO's LC2013 keeps the ego on lanes that
+continue its route (a network's lanes end and turn, which the route frame's lane index does not
+follow), and the drives of ``mpc`` and ``oracle`` on the case, which the same env drives exactly
+as their own episodes, are candidates beside its own, so that on every case it costs no more than
+the cheaper of them.
+
 It drives the ``parameterized`` action: the lane decision (the LC2013 mask may refuse it) and the
 acceleration that brings its speed to the plan's next one, through the same safety layer as
 every method.
@@ -56,10 +66,11 @@ from ecodrive_bench.bench.methods.not_learning import NotLearning
 from ecodrive_bench.bench.methods.planners import CLAIRVOYANT as NAME
 from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
-from ecodrive_bench.bench.oracle.dp import Corridor
+from ecodrive_bench.bench.oracle.dp import Corridor, Grid
 from ecodrive_bench.bench.oracle.mpc import HEADWAY, MIN_GAP
 from ecodrive_bench.bench.oracle.time_price import choices, pick, time_price
 from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.route import LANE_PITCH
 
 BASELINE = BaselineAgent.name  # SUMO's driver, whose travel time on the case bounds the drive's
 LOOKAHEAD = 40  # [steps] of known traffic in each re-plan
@@ -81,6 +92,8 @@ class ClairvoyantAgent(NotLearning):
 
     def __init__(self, cfg: ScenarioConfig, shipped: Path | None = drives.FILE) -> None:
         self.cfg = cfg
+        if cfg.network is not None:  # a network corridor: SUMO keeps the ego on its route's lanes (module docstring)
+            self.action_interface = "longitudinal"
         self.shipped = shipped  # the shipped drives of the fixed cases (bench.cases.clairvoyant_drives); None: plan
         self.cor = Corridor.from_config(cfg)
         self.env: Any = None
@@ -95,6 +108,7 @@ class ClairvoyantAgent(NotLearning):
         self.actions: list[tuple[int, float]] | None = None  # the chosen drive's, which the episode repeats
         self.step = 0  # actions taken in this episode
         self.cruise: tuple[float, float] | None = None  # a cruise drive's (target speed [m/s], acceleration cap [m/s^2])
+        self.other: Any = None  # a causal planner whose drive is a candidate (a network corridor's)
         self.expected: dict[str, Any] = {}  # the shipped row the episode replays: its travel time and cost (``verify``)
         self.case_label = ""
 
@@ -102,10 +116,10 @@ class ClairvoyantAgent(NotLearning):
     def prepare(self, env: Any, case: Case) -> None:
         """Pick the drive the episode repeats: the shipped one, else the cheapest of ``plan``'s."""
         started = time.perf_counter()
-        self.env, self.lane_y = env, env.files.lane_y
+        self.env, self.lane_y = env, traffic_lanes(env)
         self.tracks, self.rounds, self.actions, self.expected = None, [], None, {}
         self.case_label = f"case {case.index}"
-        if self.shipped is not None:
+        if self.shipped is not None and env.cfg.network is None:
             self.actions = drives.lookup(env.cfg, case, self.shipped)
             if self.actions is not None:
                 self.expected = drives.about(env.cfg, case, self.shipped)
@@ -120,7 +134,7 @@ class ClairvoyantAgent(NotLearning):
     def plan(self, env: Any, case: Case) -> list[tuple[float, float, list[tuple[int, float]]]]:
         """Every drive of ``case`` (module docstring): (cost, travel time [s], actions) each, in the
         order driven; ``rounds`` gets SUMO's driver's time and each drive's cost and time."""
-        self.env, self.lane_y = env, env.files.lane_y
+        self.env, self.lane_y = env, traffic_lanes(env)
         self.tracks, self.rounds, self.actions = None, [{"sumo_driver_time": sumo_driver_time(env, case)}], None
         tried = []
         for r in range(ROUNDS):  # the planned drives, each but the first on the previous one's recording
@@ -137,6 +151,19 @@ class ClairvoyantAgent(NotLearning):
                     self.cruise = None
                 self.rounds.append({"round": len(self.rounds) - 1, "cost": round(cost, 4), "time": took,
                                     "recorded": False, "cruise": [share, cap if cap is not None else "a_max"]})
+                tried.append((cost, took, self.taken))
+        if self.cfg.network is not None:  # the causal planners' drives are candidates too
+            from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
+            from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
+
+            for other in (MPCAgent(self.cfg), OracleAgent(self.cfg)):
+                self.other = other
+                try:
+                    _, cost, took = self._drive(env, case, record=False)
+                finally:
+                    self.other = None
+                self.rounds.append({"round": len(self.rounds) - 1, "cost": round(cost, 4), "time": took,
+                                    "recorded": False, "planner": other.name})
                 tried.append((cost, took, self.taken))
         return tried
 
@@ -172,10 +199,20 @@ class ClairvoyantAgent(NotLearning):
                                       f"{drives.REBUILD})")
             lateral, accel = self.actions[self.step]
             self.step += 1
-            return lateral, np.full(3, accel, dtype=np.float32)
-        out = self._cruise(obs) if self.cruise is not None else self._closed_loop(obs, info)
+            return self._action(lateral, accel)
+        if self.other is not None:  # a causal planner's drive (a network corridor's candidates)
+            out = (1, np.full(3, float(self.other.act(obs, info)[0]), dtype=np.float32))
+        else:
+            out = self._cruise(obs) if self.cruise is not None else self._closed_loop(obs, info)
         self.taken.append((int(out[0]), float(out[1][0])))
-        return out
+        return self._action(int(out[0]), float(out[1][0]))
+
+    def _action(self, lateral: int, accel: float) -> Any:
+        """The env's action: (lane decision, the acceleration's three copies), or on a network
+        corridor (the ``longitudinal`` interface) the acceleration alone."""
+        if self.action_interface == "longitudinal":
+            return np.array([accel], dtype=np.float32)
+        return lateral, np.full(3, accel, dtype=np.float32)
 
     def _cruise(self, obs: dict[str, np.ndarray]) -> tuple[int, np.ndarray]:
         """A cruise drive's action: stay in lane, towards the target speed at most at the cap."""
@@ -208,9 +245,13 @@ class ClairvoyantAgent(NotLearning):
             if self.env is None:
                 raise RuntimeError("clairvoyant: prepare(env, case) records each case before its episode")
             self.t0 = float(info["time"])
-            table = shipped_bounds.table() if self.shipped is not None else None
-            first = table.mpc_plan(cfg, self.t0) if table is not None else None
-            self.first, self.table = planner.start(self.cor, cfg, self.t0, first_plan=first)
+            cor, first = self.cor, None
+            if cfg.network is not None:  # a network corridor: from the speed traffic let the ego insert at
+                cor = cor.starting(float(obs["logic"][cfg.observed_lanes + 1]), Grid().spacing(cfg, fine=False)[0])
+            else:
+                table = shipped_bounds.table() if self.shipped is not None else None
+                first = table.mpc_plan(cfg, self.t0) if table is not None else None
+            self.first, self.table = planner.start(cor, cfg, self.t0, first_plan=first)
             self.want = None
         k = int(round((float(info["time"]) - self.t0) / dt))
         x, v = float(info["position"]), float(obs["logic"][cfg.observed_lanes + 1])
@@ -224,7 +265,8 @@ class ClairvoyantAgent(NotLearning):
         here = self._plan(k, x, v, lane, ids, rows)
         if self.want == lane:
             self.want = None
-        if self.want is None and k % LANE_EVERY == 0 and here is not None and here.leader == "kept":
+        if (self.want is None and k % LANE_EVERY == 0 and here is not None and here.leader == "kept"
+                and self.action_interface != "longitudinal"):
             mask = info["action_mask"]  # k index: 0 left (a higher lane), 1 stay, 2 right
             for index, other in ((0, lane + 1), (2, lane - 1)):
                 if mask[index] and 0 <= other < cfg.lanes:
@@ -263,6 +305,14 @@ class ClairvoyantAgent(NotLearning):
     def plan_trace(self) -> dict[str, Any] | None:
         """What planning the case found (step log metadata)."""
         return {"rounds": self.rounds} if self.rounds else None
+
+
+def traffic_lanes(env: Any) -> tuple[float, ...]:
+    """The lateral coordinate of each lane as ``env.traffic()`` gives it: the generated arterial's
+    lane centres; on a network corridor each lane index times ``envs.route.LANE_PITCH``."""
+    if env.files.route is None:
+        return tuple(env.files.lane_y)
+    return tuple(i * LANE_PITCH for i in range(env.cfg.observed_lanes))
 
 
 def sumo_driver_time(env: Any, case: Case) -> float:

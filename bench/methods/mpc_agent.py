@@ -47,7 +47,7 @@ from ecodrive_bench.bench.cases import shipped_bounds
 from ecodrive_bench.bench.methods.not_learning import NotLearning
 from ecodrive_bench.bench.methods.planners import MPC as NAME
 from ecodrive_bench.bench.oracle import mpc as planner
-from ecodrive_bench.bench.oracle.dp import MS, Corridor, Plan
+from ecodrive_bench.bench.oracle.dp import MS, Corridor, Grid, Plan
 from ecodrive_bench.envs.config import ScenarioConfig
 
 GREEN_MARGINS = (0.0, 0.0)  # [s] planned crossings keep off the first / last seconds of each green (variant)
@@ -96,11 +96,16 @@ class MPCAgent(NotLearning):
         self.first = True  # the plan in force is the departure's first plan (fine lattice)
         self.counts: dict[str, int] = {}
 
-    def start(self, depart_time: float) -> None:
-        """A new episode departing at ``depart_time`` [s]."""
-        table = shipped_bounds.table(self.shipped) if self.shipped is not None else None
-        first = table.mpc_plan(self.plan_cfg, depart_time) if table is not None else None
-        self.plan, self.table = planner.start(self.cor, self.plan_cfg, depart_time, first_plan=first)
+    def start(self, depart_time: float, speed: float) -> None:
+        """A new episode departing at ``depart_time`` [s] at ``speed`` [m/s]: on the generated
+        arterial always the speed limit; on a network corridor what traffic let the ego insert at."""
+        cor, first = self.cor, None
+        if self.cfg.network is not None:
+            cor = cor.starting(speed, Grid().spacing(self.cfg, fine=False)[0])
+        else:
+            table = shipped_bounds.table(self.shipped) if self.shipped is not None else None
+            first = table.mpc_plan(self.plan_cfg, depart_time) if table is not None else None
+        self.plan, self.table = planner.start(cor, self.plan_cfg, depart_time, first_plan=first)
         self.k0, self.x, self.v = 0, self.plan.x, self.plan.v
         self.gaps, self.events, self.first = [], [], True
         self.counts = {"drift": 0, "leader": 0, "end": 0, "step": 0, "relaxed": 0, "lost": 0}
@@ -142,11 +147,11 @@ class MPCAgent(NotLearning):
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any], explore: bool = False) -> np.ndarray:
         cfg, dt = self.cfg, self.cfg.step_length
+        speed = float(obs["logic"][cfg.observed_lanes + 1])
         if info["travel_time"] == 0.0 or self.plan is None:  # the reset's info: a new departure
-            self.start(float(info["time"]))
+            self.start(float(info["time"]), speed)
         assert self.plan is not None and self.table is not None
         k = int(round((float(info["time"]) - self.plan.t[0]) / dt))
-        speed = float(obs["logic"][cfg.observed_lanes + 1])
         x = float(info["position"])
         lead = self.leader(obs, speed) if self.follow else None
         event = self._event(k, x, speed, lead) if self.first else "step"

@@ -15,6 +15,10 @@ costs. (Where the plan reaches a stop line at speed just as green starts, SUMO's
 slows the ego before the line, so the replay is a little slower than the bound even alone:
 ``bench.oracle.dp``'s docstring.)
 
+On a network corridor (``envs.route``) the plan starts from the ego's speed at its insertion
+(traffic may slow it; rounded down to a speed cell), in the route frame, and is solved for each
+departure: nothing is shipped for those.
+
 The plan is kept as ``plan_trace`` (time, x, speed arrays) for the step log, where the viewer
 and the report draw it beside the driven trajectory.
 """
@@ -28,7 +32,7 @@ import numpy as np
 from ecodrive_bench.bench.cases import shipped_bounds
 from ecodrive_bench.bench.methods.not_learning import NotLearning
 from ecodrive_bench.bench.methods.planners import ORACLE as NAME
-from ecodrive_bench.bench.oracle.dp import Plan, bound
+from ecodrive_bench.bench.oracle.dp import Corridor, Grid, Plan, bound, solve
 from ecodrive_bench.envs.config import ScenarioConfig
 
 OBJECTIVE = "cost"  # the bound the oracle replays: least E + phi T
@@ -45,17 +49,23 @@ class OracleAgent(NotLearning):
         self.cfg = cfg
         self.plan: Plan | None = None
         self.shipped = shipped  # the shipped bounds' file; None: always solve
+        # a network corridor's route frame (a PlanError names a signal that is not fixed-time)
+        self.cor = Corridor.from_config(cfg) if cfg.network is not None else None
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any], explore: bool = False) -> np.ndarray:
         cfg, dt = self.cfg, self.cfg.step_length
+        speed = float(obs["logic"][cfg.observed_lanes + 1])
         if info["travel_time"] == 0.0 or self.plan is None:  # the reset's info: a new departure
-            table = shipped_bounds.table(self.shipped) if self.shipped is not None else None
-            plan = table.plan(cfg, float(info["time"])) if table is not None else None
-            self.plan = plan if plan is not None else bound(cfg, float(info["time"]), OBJECTIVE)
+            if self.cor is not None:  # a network corridor: from the speed traffic let the ego insert at
+                cor = self.cor.starting(speed, Grid().spacing(cfg, fine=False)[0])
+                self.plan = solve(cor, cfg, float(info["time"]), OBJECTIVE)
+            else:
+                table = shipped_bounds.table(self.shipped) if self.shipped is not None else None
+                plan = table.plan(cfg, float(info["time"])) if table is not None else None
+                self.plan = plan if plan is not None else bound(cfg, float(info["time"]), OBJECTIVE)
         plan = self.plan
         k = int(round((float(info["time"]) - plan.t[0]) / dt))
         target = float(plan.v[k + 1]) if k + 1 < len(plan.v) else cfg.speed_limit
-        speed = float(obs["logic"][cfg.lanes + 1])
         accel = min(max((target - speed) / dt, cfg.a_min), cfg.a_max)
         return np.array([accel], dtype=np.float32)
 

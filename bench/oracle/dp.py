@@ -254,7 +254,8 @@ class _Run:
                 if sol.value <= upper + _margin(upper):  # every plan costing <= upper arrives within it
                     return horizon, sol
         n_red = sum(math.ceil((c - g) / (dt * MS)) for c, g in zip(cor.cycles_ms, cor.greens_ms))
-        horizon = math.ceil((cor.x_end - cor.x0) / (cor.v0 * dt)) + n_red + HORIZON_MARGIN + slack
+        cruise = max(cor.v0, 0.5 * self.cfg.speed_limit)  # [m/s] the first guess's speed (an ego may start at rest)
+        horizon = math.ceil((cor.x_end - cor.x0) / (cruise * dt)) + n_red + HORIZON_MARGIN + slack
         while horizon * dt <= MAX_HORIZON:
             sol = self.backward(lat, lat.windows(horizon), keep=slack > 0)
             if not np.isfinite(sol.value):
@@ -271,11 +272,12 @@ class _Run:
         """E + phi T [Wh] of the optimal plan on the lattice with twice the speed cell (its
         states lie on ``lat``, so the plan is one of ``lat``'s), solved the same way in turn;
         None where ``lat`` has no such coarser lattice, the coarser one cannot both speed up and
-        slow down within a step, or it has no plan within its first horizon."""
+        slow down within a step or does not hold the start speed, or it has no plan within its first
+        horizon."""
         if lat.nv % 2 or lat.nv // 2 < COARSEST:
             return None
         coarse = Lattice(self.cor, self.cfg, lat.nv // 2, lat.krauss)
-        if coarse.d_max < 1 or coarse.d_min > -1:
+        if coarse.d_max < 1 or coarse.d_min > -1 or not coarse.on_grid:
             return None
         try:
             _, sol = self.certified(coarse, patient=False)

@@ -123,7 +123,7 @@ def start(cor: Corridor, cfg: ScenarioConfig, depart_time: float, grid: Grid | N
         if first_plan is not None:
             view.wall_s = time.perf_counter() - started
             return first_plan, view
-        first = _solve(view, 0, 0, view.lat.nv, 0, None, 0.0, 0.0, 0.0)  # the global-lattice optimum
+        first = _solve(view, 0, 0, Lattice(cor, cfg, view.lat.nv).j0, 0, None, 0.0, 0.0, 0.0)  # the global-lattice optimum
         if first is not None:
             run = _Run(cor, cfg, depart_time, cfg.reward.phi, "numba")
             plan = refine(run, view.lat, first[0], first[1], MAX_STEPS, grid or Grid(), True, "cost", started)
@@ -162,6 +162,7 @@ def periodic(cor: Corridor, cfg: ScenarioConfig, grid: Grid | None = None) -> Ta
     a whole cycle repeat bit for bit (or ``MAX_CYCLES``): from then on no later arrival is cheaper.
     Cached per process (some 60 MB per corridor and config)."""
     grid = grid or Grid()
+    cor = replace(cor, v0=cfg.speed_limit)  # one table serves every start speed (``start`` picks its row)
     key = (cor, cfg, grid)
     if key in _PERIODIC:
         return _PERIODIC[key]
@@ -178,7 +179,7 @@ def periodic(cor: Corridor, cfg: ScenarioConfig, grid: Grid | None = None) -> Ta
     cost = np.ascontiguousarray((lat.energy + cfg.reward.phi * dt).astype(np.float32))
     no_red = (np.zeros((0, nv + 1), dtype=np.int64), np.zeros(0, dtype=np.int64))
     nxt = np.full((nv + 1, i_end + nv + 1), np.inf, dtype=np.float32)
-    nxt[:, i_end:] = 0.0
+    lat.arrived(nxt)
     cur = nxt.copy()
     values: list[np.ndarray | None] = [None] * period
     choices: list[np.ndarray | None] = [None] * period
@@ -192,6 +193,7 @@ def periodic(cor: Corridor, cfg: ScenarioConfig, grid: Grid | None = None) -> Ta
                 red = (lat.cross_low[r], lat.cross_top[r])
             arg = np.empty((nv + 1, i_end), dtype=np.int8 if lat.n_d < 127 else np.int16)
             backward_step(nxt, cur, arg, 0, i_end - 1, 0, nv, lat.d_min, cost, *red)
+            lat.cap(cur, 0, i_end - 1, 0, nv)
             values[p], choices[p] = cur[:, :i_end].copy(), arg
             nxt, cur = cur, nxt
         if last is not None and np.array_equal(values[0], last):
@@ -210,7 +212,7 @@ def _buffers(tab: Table) -> tuple[np.ndarray, np.ndarray]:
     if tab.scratch is None:
         lat = tab.lat
         buf = np.full((lat.nv + 1, lat.i_end + lat.nv + 1), np.inf, dtype=np.float32)
-        buf[:, lat.i_end:] = 0.0
+        lat.arrived(buf)
         tab.scratch = (buf, buf.copy())
     return tab.scratch
 
@@ -235,10 +237,14 @@ def _travels(speed: float, steps: int, cfg: ScenarioConfig, accel: float) -> lis
 
 
 def snap(tab: Table, x: float, v: float) -> tuple[int, int]:
-    """(row, speed cell) of a real state: position rounded up, speed to the nearest cell."""
+    """(row, speed cell) of a real state: position rounded up, speed to the nearest cell, and
+    down to the first cell within the speed limits there (a network corridor's)."""
     lat = tab.lat
     i = max(0, math.ceil((x - tab.cor.x0) / lat.dx - GRID_EPS))
     j = min(lat.nv, max(0, int(round(v / lat.dv))))
+    if lat.over is not None and i < lat.over.shape[1]:
+        while j > 0 and lat.over[j, i]:
+            j -= 1
     return i, j
 
 
@@ -309,6 +315,7 @@ def _solve(tab: Table, k: int, i0: int, j0: int, lookahead: int, leader_rear: fl
 
     def keep_gap(buf: np.ndarray, m: int, win: Window) -> None:  # states at look-ahead step m that come too close
         lo, hi, jlo, jhi = win
+        lat.cap(buf, lo, hi, jlo, jhi)
         if caps is not None and lo <= hi and jlo <= jhi:
             mask_caps(buf, lo, hi, jlo, jhi, caps(lat, m))
         if leader_rear is None or lo > hi or jlo > jhi:

@@ -24,14 +24,15 @@ WINDOWED = ("numba",)  # the kernels that read only the next step's window and t
 Buffers = dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]  # (speeds, rows): a windowed kernel's pair
 
 
-def _pair(shape: tuple[int, int], i_end: int, windowed: bool, buffers: Buffers | None) -> tuple[np.ndarray, np.ndarray]:
+def _pair(lat: Lattice, windowed: bool, buffers: Buffers | None) -> tuple[np.ndarray, np.ndarray]:
     """The two value buffers: reused from ``buffers`` for a windowed kernel, else new and infinite."""
+    shape = (lat.nv + 1, lat.i_end + lat.nv + 1)  # [speed, row]: the kernel's layout
     if windowed and buffers is not None and shape in buffers:
         return buffers[shape]
     pair = []
     for _ in range(2):
         buf = np.empty(shape, dtype=np.float32) if windowed else np.full(shape, np.inf, dtype=np.float32)
-        buf[:, i_end:] = 0.0
+        lat.arrived(buf)
         pair.append(buf)
     if windowed and buffers is not None:
         buffers[shape] = (pair[0], pair[1])
@@ -45,7 +46,7 @@ def backward(lat: Lattice, green: np.ndarray | None, windows: list[Window], time
     reads, ``bench.oracle.mpc``); ``buffers``: the solve's buffers, for a windowed kernel."""
     step, windowed = KERNELS[kernel], kernel in WINDOWED
     nv, n_d, i_end = lat.nv, lat.n_d, lat.i_end
-    nxt, cur = _pair((nv + 1, i_end + nv + 1), i_end, windowed, buffers)  # [speed, row]: the kernel's layout
+    nxt, cur = _pair(lat, windowed, buffers)
     reg_nxt: Window | None = None  # region of each buffer written by the last step stored there
     reg_cur: Window | None = None
     step_cost = np.ascontiguousarray((lat.energy + time_cost).astype(np.float32))
@@ -68,12 +69,14 @@ def backward(lat: Lattice, green: np.ndarray | None, windows: list[Window], time
             arg = np.empty((jhi - jlo + 1, hi - lo + 1), dtype=arg_type)  # [speed, row]
             step(nxt, cur, arg, lo, hi, jlo, jhi, lat.d_min, step_cost, *red,
                  *(reg_nxt if reg_nxt is not None else (1, 0, 1, 0)), i_end)  # nxt's finite window, empty at the end
+            lat.cap(cur, lo, hi, jlo, jhi)
             reg_cur = (lo, hi, jlo, jhi)
             policy[k] = (lo, jlo, arg)
             if values is not None:
                 values[k] = cur[jlo:jhi + 1, lo:hi + 1].copy()
         nxt, cur, reg_nxt, reg_cur = cur, nxt, reg_cur, reg_nxt
-    # the start state (row 0, speed nv): a windowed kernel's buffer holds its value only if the first window does
-    start = reg_nxt is not None and reg_nxt[0] <= 0 <= reg_nxt[1] and reg_nxt[2] <= nv <= reg_nxt[3]
-    value = 0.0 if i_end <= 0 else float(nxt[nv, 0]) if start or not windowed else math.inf
+    # the start state (row 0, speed j0): a windowed kernel's buffer holds its value only if the first window does
+    j0 = lat.j0
+    start = reg_nxt is not None and reg_nxt[0] <= 0 <= reg_nxt[1] and reg_nxt[2] <= j0 <= reg_nxt[3]
+    value = 0.0 if i_end <= 0 else float(nxt[j0, 0]) if start or not windowed else math.inf
     return Solution(value=value, policy=policy, states=states, values=values)

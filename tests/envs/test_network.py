@@ -15,6 +15,7 @@ import sumolib
 import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
 from ecodrive_bench.envs import network as nw
 from ecodrive_bench.envs.config import ScenarioConfig
+from ecodrive_bench.envs.config import ConfigError
 from ecodrive_bench.envs.network import NetworkError, NetworkSpec, build_network
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "networks.md"
@@ -134,7 +135,7 @@ def test_an_oversized_file_names_the_cap(line, monkeypatch):
 
 
 def test_network_and_family_together_are_refused(line):
-    with pytest.raises(nw.ConfigError, match="not accepted together"):
+    with pytest.raises(ConfigError, match="not accepted together"):
         gym.make("EcoDrive-v0", network=_spec(line), family="train")
 
 

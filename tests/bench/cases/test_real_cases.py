@@ -8,7 +8,8 @@ import pytest
 import sumolib
 
 from ecodrive_bench.bench.cases import real
-from ecodrive_bench.envs.network import _read_net, real_corridors, real_spec
+from ecodrive_bench.envs.network import real_corridors, real_spec
+from ecodrive_bench.envs.route import read_net as _read_net
 
 
 def test_the_shipped_file_is_the_generators_output(capsys):
