@@ -80,6 +80,70 @@ def summary(results: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+TOP = "clairvoyant"  # the top of the scale
+CAUSAL_PLANNERS = ("mpc", "oracle")  # its cost is at most theirs
+TOP_MARGIN = 0.05  # [-] its mean cost is at least this much below every learned and rule-based method's
+
+
+def ratio_ci(num: np.ndarray, den: np.ndarray, seed: int = SEED) -> tuple[float, float, float]:
+    """(mean(num) / mean(den), 95% CI low, high) by a seeded percentile bootstrap over the paired cases."""
+    num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    value = float(num.mean() / den.mean()) if den.mean() != 0 else float("nan")
+    if len(num) < 2:
+        return value, float("nan"), float("nan")
+    idx = np.random.default_rng(seed).integers(0, len(num), size=(RESAMPLES, len(num)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        boots = num[idx].mean(axis=1) / den[idx].mean(axis=1)
+    lo, hi = np.nanpercentile(boots, [2.5, 97.5])
+    return value, float(lo), float(hi)
+
+
+def scale_rows(results: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
+    """Per (variant, signals, method) where Baseline0 and ``clairvoyant`` ran: the method's share of
+    the headroom from Baseline0 to ``clairvoyant``, (cost_b0 - cost) / (cost_b0 - cost_top) over the
+    cases all three share, with its 95% CI (bootstrap over cases; a learned method's seeds averaged
+    per case first), and the headroom itself [Wh]."""
+    rows = []
+    for (variant, signals), sub in results.groupby(["variant", "signals"]):
+        phi = phis.get(signals, 1.0)
+        per_case = sub.assign(cost=sub.energy + phi * sub.travel_time).groupby(["method", "case"]).cost.mean()
+        methods = set(per_case.index.get_level_values(0))
+        if not {REFERENCE, TOP} <= methods:
+            continue
+        b0, top = per_case.loc[REFERENCE], per_case.loc[TOP]
+        for method in sorted(methods):
+            m = per_case.loc[method]
+            common = b0.index.intersection(top.index).intersection(m.index)
+            if not len(common):
+                continue
+            head = (b0[common] - top[common]).to_numpy()
+            share, lo, hi = ratio_ci((b0[common] - m[common]).to_numpy(), head)
+            rows.append({"variant": variant, "signals": signals, "method": method, "cases": len(common),
+                         "headroom": float(head.mean()), "share": share, "share_ci_low": lo, "share_ci_high": hi})
+    return pd.DataFrame(rows)
+
+
+def scale_checks(summ: pd.DataFrame) -> list[str]:
+    """One line per (corridor, setting) with ``clairvoyant``: whether the top of the scale holds there
+    (its mean cost at least ``TOP_MARGIN`` below every learned and rule-based method's, no higher than
+    ``mpc``'s and ``oracle``'s, its mean travel time no longer than SUMO's driver's), naming each miss."""
+    out = []
+    for (variant, signals), sub in summ.groupby(["variant", "signals"], sort=False):
+        by = sub.set_index("method")
+        if TOP not in by.index:
+            continue
+        top = by.loc[TOP]
+        misses = [f"{name(m)} {by.loc[m].cost:.1f}" for m in by.index
+                  if m not in (TOP, *CAUSAL_PLANNERS) and top.cost > (1 - TOP_MARGIN) * by.loc[m].cost]
+        misses += [f"{name(m)} {by.loc[m].cost:.1f} (a planner)" for m in CAUSAL_PLANNERS
+                   if m in by.index and top.cost > by.loc[m].cost]
+        if DRIVER in by.index and top.travel_time > by.loc[DRIVER].travel_time:
+            misses.append(f"slower than SUMO's driver ({top.travel_time:.1f} s against {by.loc[DRIVER].travel_time:.1f} s)")
+        verdict = "holds" if not misses else "does not hold: " + "; ".join(misses)
+        out.append(f"- {variant}, {signals}: clairvoyant {top.cost:.1f}, {verdict}")
+    return out
+
+
 def edge_rows(real: pd.DataFrame, phis: dict[str, float], paper: pd.DataFrame | None,
               heldout: pd.DataFrame | None) -> pd.DataFrame:
     """Per (signals, learned method): the edge over ``baseline0`` (``reports.edge``) on the cost,
@@ -165,8 +229,26 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...], paper: pd.
                  "held-out family": _pct(r.heldout_cost, r.heldout_cost_ci_low, r.heldout_cost_ci_high)}
                 for r in edge.itertuples(index=False)]
         md += [tables.frame_markdown(pd.DataFrame(rows).set_index(["setting", "method"]))]
-    md += ["The top of the scale (`clairvoyant`, `mpc`, `oracle`, the DP bound) does not plan on a network corridor "
-           "yet, so this section has no headroom from Baseline0 to `clairvoyant`: that comparison is not made here.", ""]
+    scale = scale_rows(table, phis)
+    atomic_csv(scale, out / "real_headroom.csv")
+    if scale.empty:
+        md += ["No corridor of this run has both Baseline0 and `clairvoyant`, so the headroom from steady driving "
+               "to the top of the scale is not measured here (`ecodrive run --profile real` runs the planners by "
+               "default).", ""]
+        return md
+    md += ["### Headroom from steady driving to the top of the scale", "",
+           "Share = (Baseline0's cost - the method's) / (Baseline0's - `clairvoyant`'s), over the cases all three "
+           "share (100%: as cheap as `clairvoyant`; negative: dearer than steady driving), 95% CI by a bootstrap "
+           "over cases. `clairvoyant`, `mpc` and `oracle` plan on the route frame from the network's own static "
+           "programs (the green windows of the links the route uses) and its speed limits (docs/networks.md). The "
+           "top of the scale holds on a corridor when `clairvoyant`'s mean cost is at least "
+           f"{100 * TOP_MARGIN:g}% below every learned and rule-based method's, no higher than `mpc`'s and "
+           "`oracle`'s, and its mean travel time no longer than SUMO's driver's:", "", *scale_checks(summ), ""]
+    rows = [{"corridor": r.variant, "setting": r.signals, "method": name(r.method),
+             "headroom [Wh]": f"{r.headroom:.1f}", "share": _pct(r.share, r.share_ci_low, r.share_ci_high)}
+            for r in scale.sort_values(["variant", "signals", "method"],
+                                       key=lambda c: c.map(order) if c.name == "method" else c).itertuples(index=False)]
+    md += [tables.frame_markdown(pd.DataFrame(rows).set_index(["corridor", "setting", "method"]))]
     return md
 
 
@@ -196,6 +278,7 @@ def readme_table(real_dir: Path) -> str:
     table, manifest, _ = load(real_dir)
     phis = headline.phis(table, manifest)
     summ = summary(table, phis)
+    scale = scale_rows(table, phis)
     learned = summ[summ.method.isin(LEARNED)]
     rows = []
     for (variant, signals), sub in summ.groupby(["variant", "signals"]):
@@ -203,16 +286,21 @@ def readme_table(real_dir: Path) -> str:
         lrn = learned[(learned.variant == variant) & (learned.signals == signals)]
         best = lrn.loc[lrn.cost.idxmin()] if len(lrn) else None
         driver, steady = (f"{ref.loc[m].cost:.1f}" if m in ref.index else "" for m in (DRIVER, REFERENCE))
+        top = f"{ref.loc[TOP].cost:.1f}" if TOP in ref.index else ""
+        hit = scale[(scale.variant == variant) & (scale.signals == signals) & (scale.method == best.method)] \
+            if best is not None and not scale.empty else pd.DataFrame()
         rows.append({"corridor": variant, "specialists of": signals, "SUMO's driver": driver, "Baseline0": steady,
-                     "best learned (zero-shot)": "" if best is None else
+                     "Clairvoyant": top, "best learned (zero-shot)": "" if best is None else
                      f"{name(best.method)} {_ci_text(best.cost, best.cost_ci_low, best.cost_ci_high)}",
-                     "vs Baseline0": "" if best is None else _pct(best.cost_vs_baseline0)})
+                     "vs Baseline0": "" if best is None else _pct(best.cost_vs_baseline0),
+                     "its share of the headroom": "" if hit.empty else _pct(hit.share.iloc[0])})
     fam = manifest.get("family", {})
     shown = real_dir.as_posix() if not real_dir.is_absolute() else real_dir.name  # as typed; no machine's paths
     return "\n".join([REAL_START, f"<!-- generated by `ecodrive report {shown} --readme README.md` from run "
                       f"'{real_dir.name}' (real case set version {fam.get('version', '?')}, {len(table)} episodes); do "
                       "not edit by hand -->", "", "Mean cost E + phi T [Wh] per corridor (95% CI over cases and seeds; vs "
-                      "Baseline0: negative is cheaper than steady driving):",
+                      "Baseline0: negative is cheaper than steady driving; share of the headroom from Baseline0 to "
+                      "Clairvoyant, the top of the scale):",
                       "", tables.frame_markdown(pd.DataFrame(rows).set_index(["corridor", "specialists of"])).rstrip("\n"),
                       "", REAL_END])
 

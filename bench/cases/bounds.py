@@ -5,7 +5,9 @@ solved: ``cost_bound``, the least E + phi T through the signals (phi of the scen
 and ``energy_bound``, the least energy that arrives no later than SUMO's driver (``baseline``)
 did on that case, an equal-time comparison. Solutions are kept in ``<run>/bounds.parquet``,
 rewritten as each case finishes (a killed run loses only the cases in flight), and reused by a
-rerun (the DP takes a few seconds per case); its progress with an ETA is on stderr (``bench.progress``). A case
+rerun (the DP takes a few seconds per case); its progress with an ETA is on stderr (``bench.progress``). On a
+network corridor (``envs.route``) the problem also holds the ego's speed at its insertion, which
+traffic may slow: each case is reset once to read it, and the bounds start there. A case
 whose problem the bounds shipped with the fixed cases answer (``bench.cases.shipped_bounds``:
 same scenario, DP version and grid, departure and time limit) is read from there, not solved;
 its row says so in ``bound_source`` ("shipped", else "solved") and keeps in ``bound_wall_s`` the
@@ -39,6 +41,8 @@ class BoundTask:
     depart_time: float  # [s] the ego's entry step on this case
     time_limit: float  # [s] the baseline's travel time on this case (NO_LIMIT: no equal-time bound)
     scenario: str = ""  # JSON of the run's scenario overrides (bench.harness.scenarios), "" none
+    sumo_seed: int = -1  # the case's SUMO seed and insertion time: a network corridor's bound starts from the
+    insert_time: float = float("nan")  # ego's insertion state, which they fix (``start_speed``)
 
 
 def _solve(task: BoundTask) -> tuple[Any, Any, Any, float]:
@@ -48,9 +52,34 @@ def _solve(task: BoundTask) -> tuple[Any, Any, Any, float]:
 
     cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
     t0 = time.perf_counter()
+    if cfg.network is not None:  # a network corridor: from the ego's insertion state, in its route frame
+        from ecodrive_bench.bench.oracle.dp import Corridor, Grid, solve as plan
+
+        cor = Corridor.from_config(cfg).starting(start_speed(cfg, task), Grid().spacing(cfg, fine=False)[0])
+        cost = plan(cor, cfg, task.depart_time, "cost")
+        eq = (plan(cor, cfg, task.depart_time, "energy", time_limit=task.time_limit)
+              if task.time_limit != NO_LIMIT else None)
+        return cfg, cost, eq, time.perf_counter() - t0
     cost = bound(cfg, task.depart_time, "cost")
     eq = bound(cfg, task.depart_time, "energy", time_limit=task.time_limit) if task.time_limit != NO_LIMIT else None
     return cfg, cost, eq, time.perf_counter() - t0
+
+
+def start_speed(cfg: Any, task: BoundTask) -> float:
+    """[m/s] the ego's speed at its insertion on a network corridor's case, where traffic may slow it
+    (every method shares it: the traffic is the same until the ego is in): the case reset once.
+    A ValueError where the reset's departure is not the task's."""
+    from ecodrive_bench.envs.env import EcoDriveEnv
+
+    env = EcoDriveEnv(config=cfg, action="longitudinal")
+    try:
+        obs, info = env.reset(options={"sumo_seed": task.sumo_seed, "insert_time": task.insert_time})
+        if float(info["time"]) != task.depart_time:
+            raise ValueError(f"case {task.case}: its reset departs at {float(info['time']):g} s, the results say "
+                             f"{task.depart_time:g} s")
+        return float(obs["logic"][cfg.observed_lanes + 1])
+    finally:
+        env.close()
 
 
 def solve(task: BoundTask) -> dict[str, Any]:
@@ -98,7 +127,9 @@ def tasks_for(results: pd.DataFrame, scenario: str = "") -> list[BoundTask]:
     for (s, c), g in results.groupby(["signals", "case"]):
         base = g[g.method == "baseline"]
         limit = float(base.travel_time.iloc[0]) if len(base) and bool(base.terminated.iloc[0]) else NO_LIMIT
-        out.append(BoundTask(str(s), int(c), float(g.depart_time.iloc[0]), limit, scenario))
+        seed, insert = ((int(g.seed.iloc[0]), float(g.insert_time.iloc[0])) if {"seed", "insert_time"} <= set(g.columns)
+                        else (-1, float("nan")))
+        out.append(BoundTask(str(s), int(c), float(g.depart_time.iloc[0]), limit, scenario, seed, insert))
     return out
 
 
@@ -116,7 +147,8 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
     have = set(map(tuple, done[KEY].astype(object).values)) if len(done) else set()
     todo = [t for t in tasks_for(results, json.dumps(scenario, sort_keys=True) if scenario else "") if (t.signals, t.case, t.depart_time, t.time_limit) not in have]
     if todo:
-        table = shipped_bounds.table(shipped or shipped_bounds.FILE)
+        network = bool(scenario and scenario.get("network") is not None)  # nothing is shipped for those
+        table = shipped_bounds.table(shipped or shipped_bounds.FILE) if not network else None
         rows = [r for r in (shipped_row(table, t) for t in todo) if r is not None] if table is not None else []
         read = {(r["signals"], r["case"]) for r in rows}
         todo = [t for t in todo if (t.signals, t.case) not in read]

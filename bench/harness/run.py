@@ -130,16 +130,14 @@ def preflight(opts: RunOptions, checked: set[str] | None = None) -> Preflight:
     scenario cache entry that cannot be rebuilt)."""
     runs, skipped = resolve_methods(opts)
     if opts.scenario.get("network") is not None:
-        if opts.bounds:
-            raise UsageError("--bounds: the per-case bounds are not solved on a network corridor (--set network / "
-                             "--network / --profile real); the planners (--planners) run there")
-        if any(m in PLANNERS for m, _, _ in runs):  # a signal that is not fixed-time: the planners cannot know it
+        if opts.bounds or any(m in PLANNERS for m, _, _ in runs):  # a signal that is not fixed-time: the planners cannot know it
             from ecodrive_bench.bench.oracle.corridor import Corridor, PlanError
 
             try:
                 Corridor.from_config(setting(opts.signals[0], opts.scenario))
             except PlanError as e:
-                raise UsageError(f"{', '.join(sorted({m for m, _, _ in runs if m in PLANNERS}))}: {e}") from None
+                named = sorted({m for m, _, _ in runs if m in PLANNERS} | ({"--bounds"} if opts.bounds else set()))
+                raise UsageError(f"{', '.join(named)}: {e}") from None
     codes = {}
     for label, spec in opts.factories.items():  # a factory that cannot build its agent fails before any episode
         try:
