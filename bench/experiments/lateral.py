@@ -27,19 +27,19 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.args import Parser, fail, int_in, name
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
-from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.scripted import brake, place_ahead, release
 from ecodrive_bench.envs.config import ScenarioConfig
+
+if TYPE_CHECKING:  # pandas and the env load in the functions that need them: ``ecodrive lateral --help`` stays fast
+    import pandas as pd
 
 EMPTY = {"arterial_flow": 0.0, "side_flow": 0.0, "max_episode_time": 300.0}
 HDV1_BRAKE = -2.0  # [m/s^2] (paper)
@@ -118,6 +118,8 @@ def case_of(name: str) -> Case:
 
 def scenario_env(method: str):
     """The env of the lateral scenarios: empty corridor, uncoordinated signals."""
+    from ecodrive_bench.bench.methods.env import make_env
+
     return make_env(method, "uncoordinated", EMPTY)
 
 
@@ -135,6 +137,10 @@ def run_scenario(name: str, agent: Agent, method: str, log_path: Path | None = N
     """Trajectories (time, vehicle, x, lane, speed) of scenario ``name`` driven by ``agent``;
     with ``log_path`` the ego's steps (the scripted vehicles among its neighbours) go to MCAP.
     ``env`` (from ``scenario_env``) is used and closed; by default one is made."""
+    import pandas as pd
+
+    from ecodrive_bench.bench.harness.episode import run_episode
+
     env = env or scenario_env(method)
     script = Script(name)
     try:
@@ -303,6 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     """``ecodrive lateral``: bad input (an option, a missing or unloadable policy) is one error
     line and exit code 2, before any episode runs or any folder is written."""
     import sys
+
+    import pandas as pd
 
     from ecodrive_bench.bench.harness.executors import add_options, check_options, run_local, run_ray
     from ecodrive_bench.bench.harness.options import METHODS

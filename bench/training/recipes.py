@@ -10,10 +10,17 @@ manifest has the recipe's episodes and agent config.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from ecodrive_bench.bench.paper import TRAINING_EPISODES
+
+# where training runs keep their checkpoints and logs: outside the work tree, so a session that gets a
+# fresh checkout on the same machine can resume; an empty $ECODRIVE_RUNS counts as unset, as
+# $ECODRIVE_CACHE does (it would mean the current folder)
+RUNS = Path(os.environ.get("ECODRIVE_RUNS") or Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train")
 
 VALIDATION_CASES = 20  # validation cases scored at every checkpoint to select the exported one (all recipes)
 

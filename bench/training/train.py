@@ -32,13 +32,10 @@ from ecodrive_bench.bench.progress import bar as progress_bar
 from ecodrive_bench.bench.training import family as generalist
 from ecodrive_bench.bench.training.braking import NO_SCRIPT, BrakingLeaders
 from ecodrive_bench.bench.training.braking import spec as braking_spec
-from ecodrive_bench.bench.training.recipes import SELECTION, VALIDATION_CASES
+from ecodrive_bench.bench.training.recipes import RUNS, SELECTION, VALIDATION_CASES  # noqa: F401  (RUNS: read here by others)
 from ecodrive_bench.envs.config import ConfigError, added_values, backfill, flat
 
-# outside the work tree, so a session that gets a fresh checkout on the same machine can resume
 VALIDATION_SEED = 424242  # master seed of the validation cases (disjoint from bench/cases/cases.json's test cases)
-# an empty $ECODRIVE_RUNS counts as unset, as $ECODRIVE_CACHE does (it would mean the current folder)
-RUNS = Path(os.environ.get("ECODRIVE_RUNS") or Path.home() / ".cache" / "ecodrive-bench" / "runs" / "train")
 FINAL_WINDOW = 50  # episodes averaged for the manifest's final metrics
 # What ``_checkpoint`` writes: key -> type. ``best`` (a dict) is optional; so are the identity's
 # ``agent_config`` and ``scenario`` (dicts), which older checkpoints lack.

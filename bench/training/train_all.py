@@ -29,13 +29,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ecodrive_bench.agents.device import parse as parse_device
 from ecodrive_bench.agents.registry import LEARNING
 from ecodrive_bench.bench.args import Parser, fail, int_in
 from ecodrive_bench.bench.harness.executors import Files, add_options, check_options, collect, land, run_ray
 from ecodrive_bench.bench.methods.policies import MODELS, CheckpointError, policy_dir, read_manifest
-from ecodrive_bench.bench.training.recipes import is_recipe, recipe
-from ecodrive_bench.bench.training.train import RUNS
+from ecodrive_bench.bench.training.recipes import RUNS, is_recipe, recipe
 from ecodrive_bench.envs.config import SIGNALS
 
 
@@ -161,6 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.executor == "ray" and args.device != "cpu":  # whatever this machine has: the nodes train
         ap.error(f"--device {args.device} with --executor ray: a Ray run trains on the one CPU its task holds; "
                  f"accepted: --device cpu")
+    from ecodrive_bench.agents.device import parse as parse_device  # torch: not for --help
+
     try:
         parse_device(args.device)
     except ValueError as e:

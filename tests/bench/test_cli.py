@@ -103,13 +103,14 @@ def test_a_module_run_with_python_m_names_itself_so():
     assert out.stderr.startswith("python -m ecodrive_bench.bench.harness.run_command: error: ")
 
 
-# commands whose --help still imports torch: train-all builds its parser beside its runner
-HEAVY_HELP = ("train-all",)
+HEAVY_HELP: tuple[str, ...] = ()  # commands whose --help may import torch: none
 # what a help must not import: torch for every other command; for `ecodrive` and `ecodrive run`
 # also the runners' stack (SUMO, the compiled kernels, the tables)
 NOT_FOR_HELP = {"": ("torch", "numpy", "pandas", "libsumo", "numba", "scipy", "mcap"),
                 "run": ("torch", "pandas", "libsumo", "numba", "scipy", "mcap", "matplotlib"),
-                "report": ("torch", "pandas", "libsumo", "numba", "scipy", "matplotlib")}
+                "report": ("torch", "pandas", "libsumo", "numba", "scipy", "matplotlib"),
+                "train-all": ("torch", "libsumo", "numba", "matplotlib"),
+                "lateral": ("torch", "libsumo", "numba", "matplotlib")}
 HELP_IMPORTS = """
 import contextlib, io, json, sys
 from ecodrive_bench.bench.cli import main
