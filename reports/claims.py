@@ -1,4 +1,4 @@
-"""The paper's claims, checked: their one home in the report (pure functions on tables).
+"""The paper's claims, checked, in the report's words (pure functions on tables).
 
 Every claim is a row with a ``status`` from one vocabulary, ``STATUSES``, the one ``ecodrive
 regress`` prints: PASS; FAIL; KNOWN FAIL (a claim recorded as failing with the regression's
@@ -7,7 +7,8 @@ band from the paper's: reported, never failed); or NOT CHECKED (what the claim n
 the run, or the grid does not hold it yet; the detail says which), never a pass by default. The published numbers and tolerances come from
 ``bench.paper``; no tolerance is chosen here.
 
-- ``paper_claims``: single vehicle (section 5.3, Table 4), on a run's ``results.parquet``;
+- ``paper_claims``: single vehicle (section 5.3, Table 4), on a run's ``results.parquet``; the
+  claims themselves are ``bench.claims``', which ``ecodrive regress`` checks too;
 - ``mixed_claims``: mixed traffic (section 5.5), on an ``metrics.mpr_effect`` table;
 - ``reward_claims``, ``heatmap_claims``: section 5.2, on the sweeps' ``sweep.parquet`` (one row
   per finished job: its reward values and its mean energy [Wh] and travel time [s] over the test
@@ -20,8 +21,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ecodrive_bench.bench.paper import BASELINE_TOL, IMPROVEMENT_BAND, TIME_PENALTY_TOL, improvement
-from ecodrive_bench.bench.paper import TABLE4 as PAPER
+from ecodrive_bench.bench.claims import single_vehicle
 from ecodrive_bench.reports.metrics import heatmap_cells
 
 PASS, FAIL, NOT_CHECKED = "PASS", "FAIL", "NOT CHECKED"
@@ -66,109 +66,22 @@ def overrides_text(overrides: dict, limit: int = 160) -> str:
 
 
 def paper_claims(results: pd.DataFrame) -> pd.DataFrame:
-    """The paper's single-vehicle claims (section 5.3, Table 4) checked on a run's own episodes,
-    with the published numbers and tolerances of ``bench.paper``: one row per claim with columns
-    signals ('both' for a claim across the settings), claim, paper (what the paper reports), ours
-    (this run's number), status (PASS, FAIL or NOT CHECKED) and detail (the comparison, or what
-    is missing). Names follow ``ecodrive regress`` where it checks the same thing."""
-    means = results.groupby(["method", "signals"])[["energy", "travel_time"]].mean()
-    rows: list[dict] = []
+    """The paper's single-vehicle claims (``bench.claims``, their one home) on a run's own episodes:
+    one row per claim with columns signals ('both' for a claim across the settings), claim, paper
+    (what the paper reports), ours (this run's number), status (``STATUSES``) and detail. A band
+    claim that misses is OUTSIDE BAND; a failing claim recorded as failing with the regression's
+    reference is a KNOWN FAIL."""
     known = known_failures()
-
-    def m(method: str, signals: str, col: str) -> float:
-        return float(means.loc[(method, signals), col])
-
-    def add(signals: str, claim: str, needs: list[tuple[str, str]], paper: str, check) -> None:
-        """``check()`` -> (ok, ours, detail); run only when every (method, setting) needed is here."""
-        absent = [f"{a}/{s}" for a, s in needs if (a, s) not in means.index]
-        if absent:
-            rows.append({"signals": signals, "claim": claim, "paper": paper, "ours": "", "status": NOT_CHECKED,
-                         "detail": f"needs {', '.join(absent)}"})
-            return
-        ok, ours, detail = check()
-        verdict = status(ok)
-        if verdict == FAIL and "within" in claim and "points of the paper's" in claim:
+    rows = []
+    for c in single_vehicle(results):
+        verdict, detail = status(c.ok), c.detail
+        if verdict == FAIL and c.kind == "band":
             verdict = OUTSIDE_BAND  # a band around the paper's number: reported, never failed
-        elif verdict == FAIL and f"{claim} ({signals})" in known:
+        elif verdict == FAIL and c.name in known:
             verdict, detail = KNOWN_FAIL, f"{detail} (a known failure: {KNOWN_FAILURES})"
-        rows.append({"signals": signals, "claim": claim, "paper": paper, "ours": ours,
+        rows.append({"signals": c.signals, "claim": c.claim, "paper": c.paper, "ours": c.ours,
                      "status": verdict, "detail": detail})
-
-    sig = ("coordinated", "uncoordinated")
-    others = ("baseline", "prl", "ddpg")  # DQN slower than each of these
-    units = {"energy": "Wh", "travel_time": "s"}
-    for s in sig:
-        for col, idx, what in (("energy", 0, "energy"), ("travel_time", 1, "travel time")):
-            paper = PAPER[("baseline", s)][idx]
-
-            def base(col=col, s=s, paper=paper):
-                dev = m("baseline", s, col) / paper - 1
-                return (abs(dev) <= BASELINE_TOL, f"{m('baseline', s, col):.2f} {units[col]}",
-                        f"{m('baseline', s, col):.2f} vs {paper:.2f} {units[col]} ({100 * dev:+.1f}%, tolerance "
-                        f"\u00b1{100 * BASELINE_TOL:.0f}%)")
-            add(s, f"baseline {what} within \u00b1{100 * BASELINE_TOL:.0f}% of Table 4", [("baseline", s)],
-                f"{paper:.2f} {units[col]}", base)
-        saving = lambda s=s: improvement(m("prl", s, "energy"), m("baseline", s, "energy"))  # noqa: E731
-        paper_saving = improvement(PAPER[("prl", s)][0], PAPER[("baseline", s)][0])
-        need = [("prl", s), ("baseline", s)]
-        add(s, "PRL saves energy against the baseline", need, f"yes, {_saves(paper_saving)}",
-            lambda saving=saving, s=s: (saving() > 0, _saves(saving()),
-                                        f"PRL {m('prl', s, 'energy'):.2f} Wh, baseline {m('baseline', s, 'energy'):.2f} Wh"))
-        add(s, f"PRL's energy saving within \u00b1{100 * IMPROVEMENT_BAND:.0f} points of the paper's", need,
-            f"{100 * paper_saving:+.2f}%",
-            lambda saving=saving, p=paper_saving: (abs(saving() - p) <= IMPROVEMENT_BAND, f"{100 * saving():+.2f}%",
-                                                   f"{100 * (saving() - p):+.2f} points from the paper's (band "
-                                                   f"\u00b1{100 * IMPROVEMENT_BAND:.0f})"))
-        penalty = lambda s=s: -improvement(m("prl", s, "travel_time"), m("baseline", s, "travel_time"))  # noqa: E731
-        paper_penalty = -improvement(PAPER[("prl", s)][1], PAPER[("baseline", s)][1])
-        add(s, f"PRL travel-time penalty < {100 * TIME_PENALTY_TOL:.0f}%", need,
-            _longer(paper_penalty),
-            lambda penalty=penalty, s=s: (penalty() < TIME_PENALTY_TOL, _longer(penalty()),
-                                          f"PRL {m('prl', s, 'travel_time'):.2f} s, baseline "
-                                          f"{m('baseline', s, 'travel_time'):.2f} s"))
-        add(s, "PRL uses less energy than DDPG+LC2013", [("prl", s), ("ddpg", s)], "yes (fig:rwd_bar)",
-            lambda s=s: (m("prl", s, "energy") < m("ddpg", s, "energy"),
-                         f"{m('prl', s, 'energy'):.2f} vs {m('ddpg', s, 'energy'):.2f} Wh",
-                         f"PRL {m('prl', s, 'energy'):.2f} Wh, DDPG+LC2013 {m('ddpg', s, 'energy'):.2f} Wh"))
-        add(s, "DQN has the worst travel time", [("dqn", s)] + [(o, s) for o in others], "yes (fig:rwd_bar)",
-            lambda s=s: (m("dqn", s, "travel_time") > max(m(o, s, "travel_time") for o in others),
-                         f"{m('dqn', s, 'travel_time'):.2f} s",
-                         _slowest([(o, m(o, s, "travel_time")) for o in others])))
-    both = [("prl", s) for s in sig] + [("baseline", s) for s in sig]
-    savings = {s: (lambda s=s: improvement(m("prl", s, "energy"), m("baseline", s, "energy"))) for s in sig}
-    paper_savings = {s: improvement(PAPER[("prl", s)][0], PAPER[("baseline", s)][0]) for s in sig}
-    add("both", "PRL saves more energy uncoordinated than coordinated", both,
-        f"yes, {100 * paper_savings['uncoordinated']:+.2f}% vs {100 * paper_savings['coordinated']:+.2f}%",
-        lambda: (savings["uncoordinated"]() > savings["coordinated"](),
-                 f"{100 * savings['uncoordinated']():+.2f}% vs {100 * savings['coordinated']():+.2f}%",
-                 "energy saving against the baseline, uncoordinated vs coordinated"))
-    ddpg_pen = {s: (lambda s=s: -improvement(m("ddpg", s, "travel_time"), m("baseline", s, "travel_time")))
-                for s in sig}
-    add("both", "DDPG+LC2013 slower than the baseline uncoordinated, and more so than coordinated",
-        [("ddpg", s) for s in sig] + [("baseline", s) for s in sig], "yes (section 5.3)",
-        lambda: (0 < ddpg_pen["uncoordinated"]() and ddpg_pen["uncoordinated"]() > ddpg_pen["coordinated"](),
-                 f"{_longer(ddpg_pen['uncoordinated']())} vs {_longer(ddpg_pen['coordinated']())}",
-                 "travel time against the baseline, uncoordinated vs coordinated"))
-    if "collisions" in results.columns:
-        n = int(results.collisions.sum())
-        rows.append({"signals": "both", "claim": "no collisions", "paper": "no collisions", "ours": str(n),
-                     "status": status(n == 0), "detail": f"{n} in {len(results)} episodes"})
     return pd.DataFrame(rows, columns=CLAIM_COLUMNS)
-
-
-def _slowest(times: list[tuple[str, float]]) -> str:
-    method, t = max(times, key=lambda p: p[1])
-    return f"slowest of the others: {method} {t:.2f} s"
-
-
-def _saves(x: float) -> str:
-    """An energy improvement (a fraction, + = less than the baseline) in words."""
-    return f"saves {100 * x:.2f}%" if x >= 0 else f"uses {-100 * x:.2f}% more"
-
-
-def _longer(x: float) -> str:
-    """A travel-time penalty (a fraction, + = longer than the baseline) in words."""
-    return f"{100 * x:.2f}% longer" if x >= 0 else f"{-100 * x:.2f}% shorter"
 
 
 # ---------------------------------------------------------------- mixed traffic (section 5.5)

@@ -39,7 +39,7 @@ def test_a_policy_shipped_for_one_setting_runs_and_is_checked_there_only(tmp_pat
     status = {name: st for name, st, _ in claims(pd.DataFrame(rows))}
     assert status["PRL uses less energy than DDPG+LC2013 (coordinated)"] == "PASS"
     assert status["PRL uses less energy than DDPG+LC2013 (uncoordinated)"] == "NOT CHECKED"
-    assert status["PRL saves energy vs baseline (uncoordinated)"] == "PASS"
+    assert status["PRL saves energy against the baseline (uncoordinated)"] == "PASS"
 
 
 def test_ddpg_uncoordinated_travel_time_claim():
@@ -47,7 +47,7 @@ def test_ddpg_uncoordinated_travel_time_claim():
 
     from ecodrive_bench.bench.regression.check import claims
 
-    name = "DDPG+LC2013 slower than baseline uncoordinated, more than coordinated"
+    name = "DDPG+LC2013 slower than the baseline uncoordinated, and more so than coordinated"
 
     def status(ddpg_c: float, ddpg_u: float) -> str:
         rows = [{"method": m, "signals": s, "energy": 200.0, "travel_time": t, "collisions": 0}
