@@ -23,7 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sweep": ("ecodrive_bench.bench.experiments.sweep", "the reward study or the penalty heatmap (section 5.2)"),
     "stalls": ("ecodrive_bench.bench.experiments.stalls", "trace the CVs that stall in one mixed-traffic cell"),
     "calibrate": ("ecodrive_bench.bench.experiments.calibrate", "SUMO's driver over the fixed cases against Table 4's baseline row"),
-    "cases": ("ecodrive_bench.bench.harness.case_files", "write or check the fixed test cases (bench/cases/cases.json)"),
+    "cases": ("ecodrive_bench.bench.shipped.cases_command", "write or check the fixed test cases (bench/cases/cases.json)"),
     "perf": ("ecodrive_bench.bench.perf", "ratios from a pytest-benchmark JSON (env step vs raw SUMO, update vs FLOP floor)"),
 }
 

@@ -126,6 +126,10 @@ class Fleet:
         st.steps += 1
         return n
 
+    def sim_time(self) -> float:
+        """[s] the simulation's time."""
+        return self.session.time()
+
     def stall_run(self, vid: str) -> int:
         """Steps CV ``vid`` has been stalled in a row, this step included (0 when it is not)."""
         return self._stall.get(vid, 0)

@@ -17,7 +17,7 @@ import pandas as pd
 
 from ecodrive_bench.bench.io import atomic_csv
 
-from . import headline, tables
+from . import headline, metrics, tables
 from .edge import REFERENCE, edges
 from .headline import LEARNED
 from .load import RunError, load_family
@@ -85,42 +85,22 @@ CAUSAL_PLANNERS = ("mpc", "oracle")  # its cost is at most theirs
 TOP_MARGIN = 0.05  # [-] its mean cost is at least this much below every learned and rule-based method's
 
 
-def ratio_ci(num: np.ndarray, den: np.ndarray, seed: int = SEED) -> tuple[float, float, float]:
-    """(mean(num) / mean(den), 95% CI low, high) by a seeded percentile bootstrap over the paired cases."""
-    num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
-    value = float(num.mean() / den.mean()) if den.mean() != 0 else float("nan")
-    if len(num) < 2:
-        return value, float("nan"), float("nan")
-    idx = np.random.default_rng(seed).integers(0, len(num), size=(RESAMPLES, len(num)))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        boots = num[idx].mean(axis=1) / den[idx].mean(axis=1)
-    lo, hi = np.nanpercentile(boots, [2.5, 97.5])
-    return value, float(lo), float(hi)
-
-
 def scale_rows(results: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
-    """Per (variant, signals, method) where Baseline0 and ``clairvoyant`` ran: the method's share of
-    the headroom from Baseline0 to ``clairvoyant``, (cost_b0 - cost) / (cost_b0 - cost_top) over the
-    cases all three share, with its 95% CI (bootstrap over cases; a learned method's seeds averaged
-    per case first), and the headroom itself [Wh]."""
-    rows = []
+    """Per (variant, signals, method) where Baseline0 and ``clairvoyant`` ran: ``metrics.headroom``'s
+    share of the cost gap from Baseline0 to ``clairvoyant`` that the method closes (95% CI: a paired
+    bootstrap over cases and training seeds), with the gap itself, ``headroom`` [Wh]."""
+    frames = []
     for (variant, signals), sub in results.groupby(["variant", "signals"]):
-        phi = phis.get(signals, 1.0)
-        per_case = sub.assign(cost=sub.energy + phi * sub.travel_time).groupby(["method", "case"]).cost.mean()
-        methods = set(per_case.index.get_level_values(0))
-        if not {REFERENCE, TOP} <= methods:
-            continue
-        b0, top = per_case.loc[REFERENCE], per_case.loc[TOP]
-        for method in sorted(methods):
-            m = per_case.loc[method]
-            common = b0.index.intersection(top.index).intersection(m.index)
-            if not len(common):
-                continue
-            head = (b0[common] - top[common]).to_numpy()
-            share, lo, hi = ratio_ci((b0[common] - m[common]).to_numpy(), head)
-            rows.append({"variant": variant, "signals": signals, "method": method, "cases": len(common),
-                         "headroom": float(head.mean()), "share": share, "share_ci_low": lo, "share_ci_high": hi})
-    return pd.DataFrame(rows)
+        h = metrics.headroom(sub, phis.get(signals, 1.0), low=REFERENCE, high=TOP)
+        if not h.empty:
+            frames.append(h.assign(variant=variant, headroom=h[f"cost_{REFERENCE}"] - h[f"cost_{TOP}"]))
+    if not frames:
+        return pd.DataFrame(columns=["variant", "signals", "method", "cases", "headroom", "share", "share_ci_low",
+                                     "share_ci_high", "beaten"])
+    out = pd.concat(frames, ignore_index=True).rename(columns={"share_closed": "share", "ci_low": "share_ci_low",
+                                                               "ci_high": "share_ci_high"})
+    return out[["variant", "signals", "method", "seeds", "cases", "headroom", "share", "share_ci_low", "share_ci_high",
+                "beaten"]]
 
 
 def scale_checks(summ: pd.DataFrame) -> list[str]:
@@ -238,14 +218,16 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...], paper: pd.
         return md
     md += ["### Headroom from steady driving to the top of the scale", "",
            "Share = (Baseline0's cost - the method's) / (Baseline0's - `clairvoyant`'s), over the cases all three "
-           "share (100%: as cheap as `clairvoyant`; negative: dearer than steady driving), 95% CI by a bootstrap "
-           "over cases. `clairvoyant`, `mpc` and `oracle` plan on the route frame from the network's own static "
+           "share (100%: as cheap as `clairvoyant`; negative: dearer than steady driving), 95% CI by a paired "
+           "bootstrap over cases and training seeds (`reports.metrics.headroom`, as on the paper's corridor). "
+           "`clairvoyant`, `mpc` and `oracle` plan on the route frame from the network's own static "
            "programs (the green windows of the links the route uses) and its speed limits (docs/networks.md). The "
            "top of the scale holds on a corridor when `clairvoyant`'s mean cost is at least "
            f"{100 * TOP_MARGIN:g}% below every learned and rule-based method's, no higher than `mpc`'s and "
            "`oracle`'s, and its mean travel time no longer than SUMO's driver's:", "", *scale_checks(summ), ""]
     rows = [{"corridor": r.variant, "setting": r.signals, "method": name(r.method),
-             "headroom [Wh]": f"{r.headroom:.1f}", "share": _pct(r.share, r.share_ci_low, r.share_ci_high)}
+             "headroom [Wh]": f"{r.headroom:.1f}", "share": _pct(r.share, r.share_ci_low, r.share_ci_high),
+             "cases below clairvoyant": int(r.beaten)}
             for r in scale.sort_values(["variant", "signals", "method"],
                                        key=lambda c: c.map(order) if c.name == "method" else c).itertuples(index=False)]
     md += [tables.frame_markdown(pd.DataFrame(rows).set_index(["corridor", "setting", "method"]))]

@@ -56,7 +56,7 @@ def test_the_shipped_bounds_check_without_avx512():
     """The README's test command starts with this check: on an AVX2 host (or an AVX-512 one computing
     as AVX2 does) it passes, within ``DP_RTOL``."""
     env = {**os.environ, **hosts.CROSS_HOST_ENV}
-    done = subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.harness.case_files", "--check", "--bounds"],
+    done = subprocess.run([sys.executable, "-m", "ecodrive_bench.bench.shipped.cases_command", "--check", "--bounds"],
                           env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
 

@@ -2,7 +2,7 @@
 
 The list is generated from a documented master seed and stored in ``bench/cases/cases.json`` (a
 versioned file in the repo). ``ecodrive cases --write`` regenerates it; ``--check``
-verifies the stored file matches the generator (``bench.harness.case_files``).
+verifies the stored file matches the generator (``bench.shipped.cases_command``).
 """
 from __future__ import annotations
 

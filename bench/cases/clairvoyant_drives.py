@@ -18,9 +18,9 @@ content digest is checked on reading; an edited or damaged file is one line on s
 case is planned.
 
     ecodrive cases --write --clairvoyant [--workers N]   # every set; a set already current is kept
-    ecodrive cases --check                               # re-plans a sample (clairvoyant_agent.sample)
+    ecodrive cases --check                               # re-plans a sample (bench.shipped.drives.sample)
 
-(``bench.harness.case_files.write_clairvoyant``, ``bench.methods.clairvoyant_agent.check``). The
+(``bench.shipped.cases_command.write_clairvoyant``, ``bench.shipped.drives.check``). The
 check compares SUMO's driver's time, the lane decisions and the travel time exactly and the
 accelerations and the cost within the cross-host tolerances (``bench.hosts``).
 """
@@ -128,7 +128,7 @@ def case_sets() -> list[tuple[str, str, dict[str, Any] | None, tuple[Case, ...]]
 
 
 def entry(planned: dict[str, Any], price: float, chosen: int) -> dict[str, Any]:
-    """A row: drive ``chosen`` of a planned case (``bench.methods.clairvoyant_agent.solve``) at its set's ``price``."""
+    """A row: drive ``chosen`` of a planned case (``bench.shipped.drives.solve``) at its set's ``price``."""
     c: Case = planned["case"]
     lateral, accel = zip(*planned["actions"][chosen]) if planned["actions"][chosen] else ((), ())
     return {"corridor": planned["corridor"], "signals": planned["signals"], "case": c.index, "sumo_seed": c.sumo_seed,

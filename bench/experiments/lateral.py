@@ -35,7 +35,6 @@ from ecodrive_bench.agents.base import Agent
 from ecodrive_bench.bench.args import Parser, fail, int_in, name
 from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.io import Unwritable, atomic_parquet, writable_dir
-from ecodrive_bench.bench.methods.scripted import brake, place_ahead, release
 from ecodrive_bench.envs.config import ScenarioConfig
 
 if TYPE_CHECKING:  # pandas and the env load in the functions that need them: ``ecodrive lateral --help`` stays fast
@@ -80,34 +79,33 @@ class Script:
 
     def start(self, env) -> None:
         """Each vehicle enters ``gap`` m ahead of the ego after the next step
-        (``bench.methods.scripted.place_ahead``)."""
-        s, cfg = env.session, env.cfg
+        (``envs.scripting.Scripting.place_ahead``)."""
+        cfg = env.cfg
         lane, v = env.ego.kin.lane, env.ego.kin.speed
         for sv in self.vehicles:
             target = min(max(lane + sv.lane_offset, 0), cfg.lanes - 1)
-            place_ahead(env, sv.vid, target, sv.gap, v if sv.speed is None else sv.speed)
+            env.place_ahead(sv.vid, target, sv.gap, v if sv.speed is None else sv.speed)
             if not sv.hold:
-                s.release_speed(sv.vid)
+                env.release(sv.vid, pending=True)
 
     def before(self, env, step: int) -> None:
-        if self.name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in env.session.vehicle_ids():
-            brake(env, "hdv1", HDV1_BRAKE)
+        if self.name == "A" and BRAKE_AT <= step < BRAKE_AT + BRAKE_STEPS and "hdv1" in env.vehicle_ids():
+            env.brake("hdv1", HDV1_BRAKE)
         if step == BRAKE_AT + BRAKE_STEPS:  # the event is over: the HDVs drive by Krauss (and signals) again
-            release(env, [v.vid for v in self.vehicles if v.hold])
+            env.release(*(v.vid for v in self.vehicles if v.hold))
 
     def after(self, env, step: int) -> None:
         """Records the step; a vehicle SUMO did not insert in step 0 is an error (the scenario
         would not be the one judged)."""
-        s = env.session
-        t, ego = s.time(), env.ego.kin
+        t, ego = env.sim_time(), env.ego.kin
         self.rows.append({"time": t, "vehicle": "ego", "x": ego[0], "lane": ego[5], "speed": ego[3]})
-        present = set(s.vehicle_ids())
+        present = set(env.vehicle_ids())
         missing = [v.vid for v in self.vehicles if v.vid not in present]
         if step == 0 and missing:
             raise RuntimeError(f"scenario {self.name}: SUMO did not insert {', '.join(missing)} in the step after the reset")
         for v in self.vehicles:
             if v.vid in present:
-                k = s.kinematics(v.vid)
+                k = env.kinematics_of(v.vid)
                 self.rows.append({"time": t, "vehicle": v.vid, "x": k[0], "lane": k[5], "speed": k[3]})
 
 

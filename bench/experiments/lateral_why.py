@@ -43,8 +43,8 @@ class NoBrakeScript(L.Script):
     def before(self, env, step: int) -> None:
         if step == L.BRAKE_AT + L.BRAKE_STEPS:
             for v in self.vehicles:
-                if v.hold and v.vid in env.session.vehicle_ids():
-                    env.session.release_speed(v.vid)
+                if v.hold:
+                    env.release(v.vid)
 
 
 class FreeScript(L.Script):
@@ -228,14 +228,13 @@ def traffic_events(method: str, seed: int | None, episodes: int, rng_seed: int =
             obs, info = env.reset(seed=int(rng.integers(0, 2**31 - 1)))
             step = 0
             while True:
-                s = env.session
-                lead = s.leader(EGO_ID, LEADER_RANGE)
+                lead = env.leader_of(EGO_ID, LEADER_RANGE)
                 if lead is not None and lead[1] <= LEADER_RANGE:  # getLeader may look further
                     lane = env.ego.kin.lane
                     g = obs["grid"]
                     free = {n: free_ahead(g, lane + o, cfg.grid_behind, cfg.cell_length) for n, o in (("left", 1), ("right", -1))}
                     mask = np.asarray(info["action_mask"])
-                    row = {"episode": ep, "step": step, "gap": lead[1], "leader_accel": s.kinematics(lead[0]).accel,
+                    row = {"episode": ep, "step": step, "gap": lead[1], "leader_accel": env.kinematics_of(lead[0]).accel,
                            "free_left": free["left"], "free_right": free["right"], "mask_left": int(mask[0]),
                            "mask_right": int(mask[2]), "red": float(obs["logic"][-2]), "speed": env.ego.kin.speed}
                     if learning:

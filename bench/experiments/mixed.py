@@ -41,7 +41,7 @@ DEMANDS = (200, 300, 400, 500, 600, 700)  # [veh/h/lane], section 5.5
 REPS = 5
 DURATION = 1800.0  # [s]
 CV_LATERAL = ("policy", "stay")
-# the small grid the regression runs (bench.regression.mixed) and the stall trace defaults to
+# the small grid the regression runs (bench.regression.mixed_cells) and the stall trace defaults to
 CI_MPRS = (0.0, 0.5, 1.0)
 CI_DEMAND = 300.0  # [veh/h/lane]
 CI_DURATION = 900.0  # [s] simulated per cell

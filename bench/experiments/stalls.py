@@ -72,7 +72,7 @@ def trace(signals: str, mpr: float, demand: float, duration: float, at: tuple[in
             ahead, behind = lane_gaps(grids[i], front, cfg.cell_length)
             lane = int(logics[i, :lanes].argmax())
             distance, speed, red, ttg = (float(v) for v in logics[i, lanes:])
-            row = {"time": fleet.session.time(), "vehicle": vid, "stalled_s": run * cfg.step_length, "lane": lane,
+            row = {"time": fleet.sim_time(), "vehicle": vid, "stalled_s": run * cfg.step_length, "lane": lane,
                    "distance": distance, "speed": speed, "red": red, "time_to_green": ttg,
                    "mask": "".join(str(int(m)) for m in masks[i]), "k": LATERAL[k[i]],
                    "accel": float(accel[i, k[i]])}

@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     from ecodrive_bench.bench.args import Parser, int_in
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.executors import run_local
-    from ecodrive_bench.bench.methods.clairvoyant_agent import solve
+    from ecodrive_bench.bench.shipped.drives import solve
 
     sets = {f"{corridor}/{s}": (corridor, s, scenario, cases) for corridor, s, scenario, cases in drives.case_sets()}
     ap = Parser(description="What each case set's price of time costs clairvoyant (sets re-planned; nothing written).")

@@ -30,8 +30,8 @@ and signal setting): the reference is the least mean cost E + phi T whose mean t
 more than SUMO's driver's, and a set's price of time lambda (``bench.oracle.time_price``) makes
 each case take the drive of least E + (phi + lambda) T; lambda is 0 where the cheapest drives
 already meet SUMO's driver's mean time. The fixed cases' and the held-out corridors' sets are
-planned whole and their chosen drives shipped (``bench.cases.clairvoyant_drives``, ``solve`` and
-``choose_set``): ``prepare`` reads the case's actions instead of planning, where they answer its
+planned whole and their chosen drives shipped (``bench.cases.clairvoyant_drives``; planned by
+``bench.shipped.drives``): ``prepare`` reads the case's actions instead of planning, where they answer its
 problem. A case planned on its own, with no set, takes its cheapest drive (lambda 0).
 
 On a network corridor (``envs.route``) the same, in the route frame: positions along the route,
@@ -68,7 +68,7 @@ from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
 from ecodrive_bench.bench.oracle.dp import Corridor, Grid
 from ecodrive_bench.bench.oracle.mpc import HEADWAY, MIN_GAP
-from ecodrive_bench.bench.oracle.time_price import choices, pick, time_price
+from ecodrive_bench.bench.oracle.time_price import pick
 from ecodrive_bench.envs.config import ScenarioConfig
 from ecodrive_bench.envs.route import LANE_PITCH
 
@@ -329,81 +329,3 @@ def sumo_driver_time(env: Any, case: Case) -> float:
                 return float(info["travel_time"])
     finally:
         other.close()
-
-
-def solve(task: tuple[str, str, dict[str, Any] | None, Case]) -> dict[str, Any]:
-    """Every drive of one case of a set (corridor, signals, scenario overrides, case), planned from
-    scratch in a worker: their costs, times and actions, and SUMO's driver's time (``limit``)."""
-    from ecodrive_bench.bench.cases.setting import setting
-    from ecodrive_bench.bench.methods.env import make_env
-
-    corridor, signals, scenario, case = task
-    cfg = setting(signals, scenario)
-    agent = ClairvoyantAgent(cfg, shipped=None)
-    env = make_env(agent, signals, scenario)
-    try:
-        tried = agent.plan(env, case)
-    finally:
-        env.close()
-    return {"corridor": corridor, "signals": signals, "case": case, "digest": shipped_bounds.problem_digest(cfg),
-            "limit": agent.rounds[0]["sumo_driver_time"], "costs": np.array([d[0] for d in tried]),
-            "times": np.array([d[1] for d in tried]), "actions": [d[2] for d in tried]}
-
-
-def choose_set(planned: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The shipped rows of one case set's planned cases (``solve``): the set's price of time, at
-    which its mean travel time is at most SUMO's driver's (``bench.oracle.time_price``), and each
-    case's drive at that price."""
-    costs, times = [p["costs"] for p in planned], [p["times"] for p in planned]
-    price = time_price(costs, times, float(np.mean([p["limit"] for p in planned])))
-    return [drives.entry(p, price, k) for p, k in zip(planned, choices(costs, times, price))]
-
-
-def sample(frame, per_setting: int = drives.CHECK_PER_SETTING, seed: int = drives.CHECK_SEED) -> list[tuple[str, Any]]:
-    """The rows ``check`` re-plans: ``per_setting`` of each signal setting drawn over all its sets
-    (``seed``: ``ecodrive cases --check`` draws a new one each run and prints it), and one more of a
-    set with a positive price of time where the draw holds none, so that a choice the price moved
-    is checked too."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for s in sorted(set(frame.signals)):
-        rows = frame[frame.signals == s].sort_values(["corridor", "case"], ignore_index=True)
-        drawn = sorted(rng.choice(len(rows), size=min(per_setting, len(rows)), replace=False).tolist())
-        priced = rows.index[rows.time_price > 0].tolist()
-        if priced and not set(drawn) & set(priced):
-            drawn.append(int(rng.choice(priced)))
-        out += [(s, r) for r in rows.iloc[drawn].itertuples(index=False)]
-    return out
-
-
-def check(path: Path = drives.FILE, per_setting: int = drives.CHECK_PER_SETTING,
-          seed: int = drives.CHECK_SEED) -> list[str]:
-    """One line per drift ([]: none) on a sample of the shipped cases (``sample``), planned again
-    and chosen at their set's stored price: the lane decisions and the travel times exactly, SUMO's
-    driver's time exactly, the accelerations and the cost within the cross-host tolerances. The
-    stored price itself is not re-derived (that needs the whole set: ``ecodrive cases --write``)."""
-    try:
-        frame = drives.read(path)
-    except drives.DrivesError as e:
-        return [str(e)]
-    sets = {(corridor, s): (scenario, {c.index: c for c in cases}) for corridor, s, scenario, cases in drives.case_sets()}
-    lines = []
-    for s, r in sample(frame, per_setting, seed):
-        at = f"{path}: {r.corridor} {s} case {int(r.case)}"
-        if (r.corridor, s) not in sets or int(r.case) not in sets[(r.corridor, s)][1]:
-            lines.append(f"{at}: no such case in the sets of bench.cases (corridor {r.corridor!r}); rebuild: {drives.REBUILD}")
-            continue
-        scenario, cases = sets[(r.corridor, s)]
-        got = solve((r.corridor, s, scenario, cases[int(r.case)]))
-        k = pick(got["costs"], got["times"], float(r.time_price))
-        lateral, accel = [a for a, _ in got["actions"][k]], [b for _, b in got["actions"][k]]
-        if float(got["limit"]) != float(r.sumo_driver_time):
-            lines.append(f"{at}: SUMO's driver's time {float(r.sumo_driver_time)!r} s stored, {float(got['limit'])!r} s "
-                         f"driven; rebuild: {drives.REBUILD}")
-        elif lateral != [int(a) for a in r.lateral] or float(got["times"][k]) != float(r.travel_time):
-            lines.append(f"{at}: the lane decisions or travel time differ from a new plan's; rebuild: {drives.REBUILD}")
-        elif not np.allclose(accel, list(r.accel), rtol=drives.ACCEL_RTOL, atol=1e-9):
-            lines.append(f"{at}: the accelerations differ beyond a relative {drives.ACCEL_RTOL:g}; rebuild: {drives.REBUILD}")
-        elif not close(float(got["costs"][k]), float(r.cost), ENERGY_RTOL):
-            lines.append(f"{at}: cost {float(r.cost)!r} stored, {float(got['costs'][k])!r} planned; rebuild: {drives.REBUILD}")
-    return lines

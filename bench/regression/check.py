@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     import ecodrive_bench.bench.harness.options as br
     from ecodrive_bench.bench.experiments.mixed import CellMismatch
-    from ecodrive_bench.bench.regression import mixed as regression_mixed
+    from ecodrive_bench.bench.regression import mixed_cells as regression_mixed
 
     logs = str(args.logs) if args.logs is not None else tempfile.mkdtemp(prefix="ecodrive-regression-")
     made = os.stat(logs) if args.logs is None else None  # the folder this command made: removed after a pass

@@ -2,7 +2,7 @@
 
 With probability RATE per training episode, a scripted vehicle enters the ego's lane ahead of it
 and brakes, as HDV1 does in the lateral scenario A (section 5.4; ``bench.experiments.lateral``),
-with the same placement and braking rules (``bench.methods.scripted``). In the paper's training
+with the same placement and braking rules (``envs.scripting``). In the paper's training
 traffic a leader that brakes hard beside a lane the mask allows, not at a red light, is rare
 (docs/experiments.md, "Scenario A, step by step"); this puts such events into the training
 distribution. The MDP is the paper's: observation, action, reward and safety layer are untouched;
@@ -12,7 +12,7 @@ Per episode, before its reset, the run's braking generator draws (always all fiv
 advances by the same amount every episode): whether the episode has an event, the gap
 (``GAP``, ego front bumper to leader back bumper after the insertion step), the deceleration
 (``DECEL``), the braking steps (``BRAKE_STEPS``) and the trigger, a fraction of the latest spot the
-event fits on the arterial's first edge (``A0``, where ``SumoSession.add_scripted`` places
+event fits on the arterial's first edge (``A0``, where ``EcoDriveEnv.place`` places
 vehicles). From the first step at which the ego's front bumper has passed the trigger, the event
 starts at the first step at which:
 
@@ -42,7 +42,6 @@ from typing import Any
 import numpy as np
 
 from ecodrive_bench.bench.methods.policies import CheckpointError
-from ecodrive_bench.bench.methods.scripted import brake, place_ahead, release
 from ecodrive_bench.bench.training.recipes import (
     RATE_RANGE,  # accepted RATE (its home: the recipes, which the command reads too)
 )
@@ -130,26 +129,25 @@ class BrakingLeader:
         if self.step is None:
             if self.d.event and self.status == "no_spot" and self._ready(env):
                 kin = env.ego.kin
-                place_ahead(env, LEADER_ID, kin.lane, self.d.gap, kin.speed)
-                env.session.release_speed(LEADER_ID)  # held with Krauss's safety checks on: traffic
-                env.session.set_speed(LEADER_ID, kin.speed)  # ahead or a red light still brakes it
+                env.place_ahead(LEADER_ID, kin.lane, self.d.gap, kin.speed)
+                env.release(LEADER_ID, pending=True)  # held with Krauss's safety checks on: traffic
+                env.hold_speed(LEADER_ID, kin.speed)  # ahead or a red light still brakes it
                 self.step, self.status = step, "inserted"
             return
         k = step - self.step - BRAKE_AFTER
-        if self.status == "inserted" and 0 <= k < self.d.steps and LEADER_ID in env.session.vehicle_ids():
-            brake(env, LEADER_ID, self.d.decel)
+        if self.status == "inserted" and 0 <= k < self.d.steps and LEADER_ID in env.vehicle_ids():
+            env.brake(LEADER_ID, self.d.decel)
         elif k == self.d.steps:
-            release(env, [LEADER_ID])
+            env.release(LEADER_ID)
 
     def after(self, env: Any, step: int) -> None:
         if step != self.step:
             return
-        s = env.session
-        if LEADER_ID not in s.vehicle_ids():  # pending: it will drive as an ordinary vehicle when SUMO inserts it
-            s.release_speed(LEADER_ID)
+        if LEADER_ID not in env.vehicle_ids():  # pending: it will drive as an ordinary vehicle when SUMO inserts it
+            env.release(LEADER_ID, pending=True)
             self.status = "refused"
             return
-        self.entry_gap = s.kinematics(LEADER_ID).x - env.cfg.vehicle_length - env.ego.kin.x
+        self.entry_gap = env.kinematics_of(LEADER_ID).x - env.cfg.vehicle_length - env.ego.kin.x
 
     def _ready(self, env: Any) -> bool:
         """Whether the event starts in the coming step (module docstring)."""
@@ -159,7 +157,7 @@ class BrakingLeader:
         reach = self._reach(kin.speed, cfg)
         if kin.x + reach > self.stop_line - STOP_MARGIN:
             return False
-        if env.session.leader(env.ego.vid, reach + CLEAR_AHEAD) is not None or entering(env, reach + CLEAR_AHEAD):
+        if env.leader_of(env.ego.vid, reach + CLEAR_AHEAD) is not None or entering(env, reach + CLEAR_AHEAD):
             return False
         self.adjacent_free = free_adjacent(env)
         last = kin.x + kin.speed * cfg.step_length + reach > self.stop_line - STOP_MARGIN

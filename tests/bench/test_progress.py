@@ -48,9 +48,9 @@ def stderr(monkeypatch: pytest.MonkeyPatch, tty: bool) -> io.StringIO:
 
 
 def _fake_cells(monkeypatch: pytest.MonkeyPatch, finished: dict[str, dict]) -> list[str]:
-    """``bench.regression.mixed`` with an executor that returns rows at once and ``finished`` as the
+    """``bench.regression.mixed_cells`` with an executor that returns rows at once and ``finished`` as the
     cell files already in the log folder; returns the paths of the cells it ran."""
-    from ecodrive_bench.bench.regression import mixed as regression_mixed
+    from ecodrive_bench.bench.regression import mixed_cells as regression_mixed
 
     ran: list[str] = []
 
@@ -66,7 +66,7 @@ def _fake_cells(monkeypatch: pytest.MonkeyPatch, finished: dict[str, dict]) -> l
 
 def test_regression_mixed_cells_show_a_bar_and_keep_the_finished_cells(tmp_path, monkeypatch):
     terminal = stderr(monkeypatch, tty=True)
-    from ecodrive_bench.bench.regression.mixed import run_cells
+    from ecodrive_bench.bench.regression.mixed_cells import run_cells
 
     finished: dict[str, dict] = {}
     ran = _fake_cells(monkeypatch, finished)
@@ -87,7 +87,7 @@ def test_regression_mixed_cells_show_a_bar_and_keep_the_finished_cells(tmp_path,
 
 def test_regression_mixed_cells_write_lines_to_a_log(tmp_path, monkeypatch):
     log = stderr(monkeypatch, tty=False)
-    from ecodrive_bench.bench.regression.mixed import run_cells
+    from ecodrive_bench.bench.regression.mixed_cells import run_cells
 
     _fake_cells(monkeypatch, {})
     assert len(run_cells(logs=tmp_path)) == 6

@@ -89,3 +89,35 @@ def test_the_generalisation_folder_is_read_as_carefully_as_a_run(manifest, words
     with pytest.raises(RunError) as e:
         generalisation.load(tmp_path)
     assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def _with_planners(top: float, mpc: float) -> pd.DataFrame:
+    """``_table`` with clairvoyant (energy ``top``) and mpc (``mpc``) on every case of both corridors."""
+    t = _table()
+    extra = [{"variant": v, "method": m, "signals": "coordinated", "case": c, "train_seed": -1,
+              "energy": (1.0 if v == "a" else 2.0) * (e + c), "travel_time": 50.0}
+             for v in ("a", "b") for c in range(6) for m, e in (("clairvoyant", top), ("mpc", mpc))]
+    return pd.concat([t, pd.DataFrame(extra)], ignore_index=True)
+
+
+def test_headroom_shares_per_corridor():
+    s = real.scale_rows(_with_planners(40, 60), {"coordinated": 1.0}).set_index(["variant", "method"])
+    assert s.loc[("a", "baseline0")].share == pytest.approx(0.0)
+    assert s.loc[("a", "clairvoyant")].share == pytest.approx(1.0)
+    assert s.loc[("a", "mpc")].share == pytest.approx(0.5)  # baseline0 80, mpc 60, clairvoyant 40 (+ case)
+    assert s.loc[("b", "mpc")].headroom == pytest.approx(2 * 40)
+    a = s.loc[("a", "prl")]
+    assert a.share_ci_low <= a.share <= a.share_ci_high and a.seeds == 2
+
+
+def test_the_top_of_the_scale_is_judged_per_corridor():
+    holds = real.scale_checks(real.summary(_with_planners(40, 60), {"coordinated": 1.0}))
+    assert len(holds) == 2 and all(line.endswith("holds") for line in holds)
+    misses = real.scale_checks(real.summary(_with_planners(79, 60), {"coordinated": 1.0}))
+    assert all("does not hold" in line and "MPC" in line for line in misses)  # dearer than mpc
+    assert all("Baseline0" in line for line in misses)  # 79 + 50 is not 5% below 80 + 50
+
+
+def test_no_clairvoyant_no_headroom():
+    assert real.scale_rows(_table(), {"coordinated": 1.0}).empty
+    assert real.scale_checks(real.summary(_table(), {"coordinated": 1.0})) == []

@@ -67,7 +67,7 @@ def test_an_edited_file_is_one_line_and_every_case_is_planned(tmp_path, capsys):
 
 
 def test_a_write_keeps_exactly_the_current_sets():
-    from ecodrive_bench.bench.harness.case_files import current_sets
+    from ecodrive_bench.bench.shipped.cases_command import current_sets
 
     frame, sets = clairvoyant_drives.read(), clairvoyant_drives.case_sets()
     kept, todo = current_sets(frame, sets)
@@ -88,7 +88,7 @@ def test_a_write_keeps_exactly_the_current_sets():
 
 
 def test_the_check_samples_a_priced_set_in_each_setting():
-    from ecodrive_bench.bench.methods.clairvoyant_agent import sample
+    from ecodrive_bench.bench.shipped.drives import sample
 
     frame = clairvoyant_drives.read()
     drawn = sample(frame)

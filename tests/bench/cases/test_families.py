@@ -7,7 +7,7 @@ import json
 import pytest
 
 from ecodrive_bench.bench.cases import heldout, train_family
-from ecodrive_bench.bench.harness import case_files
+from ecodrive_bench.bench.shipped import cases_command as case_files
 
 
 def test_the_training_family_is_its_generators_and_disjoint_from_the_held_out_one(capsys):

@@ -63,7 +63,7 @@ def test_mixed_cell_with_a_policy_and_resume(tmp_path, monkeypatch):
 
 
 def test_mixed_claims_pass_fail_and_not_checked():
-    from ecodrive_bench.bench.regression.mixed import claims
+    from ecodrive_bench.bench.regression.mixed_cells import claims
 
     def cells(e1: float, hdv_v: float) -> pd.DataFrame:
         rows = []

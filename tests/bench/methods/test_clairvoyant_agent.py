@@ -81,7 +81,7 @@ def test_an_episode_needs_its_case_prepared():
 
 
 def test_a_set_is_chosen_at_its_price():
-    from ecodrive_bench.bench.methods.clairvoyant_agent import choose_set
+    from ecodrive_bench.bench.shipped.drives import choose_set
     from ecodrive_bench.bench.oracle.time_price import mean_time, time_price
 
     rng = np.random.default_rng(5)
@@ -104,7 +104,7 @@ def test_a_set_is_chosen_at_its_price():
 @pytest.mark.slow
 def test_the_check_replans_at_the_stored_price_and_finds_a_drift(tmp_path):
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
-    from ecodrive_bench.bench.methods.clairvoyant_agent import check, sample
+    from ecodrive_bench.bench.shipped.drives import check, sample
 
     if not drives.FILE.is_file():
         pytest.skip("no shipped clairvoyant drives")

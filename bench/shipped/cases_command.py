@@ -89,14 +89,14 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
 def clairvoyant(prog: str, write: bool, workers: int, seed: int | None = None) -> int:
     """Write or check the shipped clairvoyant drives: 0, or 2 after one line per problem."""
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
-    from ecodrive_bench.bench.methods import clairvoyant_agent
+    from ecodrive_bench.bench.shipped import drives as planned
 
     path = drives.FILE
     if not write and not path.exists():
         print(f"{path.name}: not shipped; every clairvoyant case is planned in the run")
         return 0
     lines = (write_clairvoyant(path, workers) if write
-             else clairvoyant_agent.check(path, seed=drives.CHECK_SEED if seed is None else seed))
+             else planned.check(path, seed=drives.CHECK_SEED if seed is None else seed))
     for line in lines:
         fail(prog, line)
     if not lines and not write:
@@ -136,7 +136,7 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
 
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.executors import run_local
-    from ecodrive_bench.bench.methods.clairvoyant_agent import choose_set, solve
+    from ecodrive_bench.bench.shipped.drives import choose_set, solve
     from ecodrive_bench.bench.methods.planners import CLAIRVOYANT
     from ecodrive_bench.bench.oracle.time_price import TIME_TOL
     from ecodrive_bench.bench.progress import bar
