@@ -13,6 +13,7 @@ from .config import ConfigError, ScenarioConfig
 from .family import check_caller, corridors
 from .network import NetworkSpec, config_value, corridor_files
 from .route import LANE_PITCH
+from .scripting import Scripting
 from .observation import GridLogicObservation, RouteGridLogicObservation
 from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
 from .sumo import SumoSession
@@ -24,7 +25,7 @@ INSERT_MAX = 86400.0  # [s] latest ego insertion time a reset accepts
 RESET_OPTIONS = ("sumo_seed", "insert_time")
 
 
-class EcoDriveEnv(gym.Env):
+class EcoDriveEnv(Scripting, gym.Env):
     """An electric connected vehicle crossing five signalized intersections (SUMO, libsumo).
 
     ## Arguments

@@ -83,7 +83,7 @@ def run_episode(
             lc_req += bool(info["requested"] and info["requested"][0])
             if terminated or truncated:
                 break
-        consumed, regenerated = (env.session.battery_totals(env.ego.vid)
+        consumed, regenerated = (env.battery_totals()
                                  if not info["ego_left_simulation"] else (float("nan"), float("nan")))
         summary = {
             "method": method, "signals": env.cfg.signals, "case_index": case.index, "sumo_seed": case.sumo_seed,
@@ -102,7 +102,7 @@ def run_episode(
             if plan is not None:
                 log.add_plan(plan)
             log.finish(summary)
-        return {**summary, "sumo_s": env.session.sumo_seconds}  # [s] inside SUMO: the episode's floor
+        return {**summary, "sumo_s": env.sumo_seconds}  # [s] inside SUMO: the episode's floor
     except BaseException:
         if os.getpid() != pid:  # the same, where the forked child raised: it writes nothing
             os._exit(0)
