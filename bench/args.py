@@ -24,6 +24,11 @@ MAX_JSON_BYTES = 1 << 20  # [bytes] largest JSON input file read (a --scenario f
 MAX_JSON_DEPTH = 32  # [-] deepest nesting of arrays and objects accepted in a JSON input (a scenario needs 3)
 
 
+class UsageError(Exception):
+    """Bad input to ``ecodrive run`` (and the commands built on it) found after parsing: printed as
+    one line, exit code 2, nothing touched."""
+
+
 class InputError(ValueError):
     """Bad input found after parsing (a file's content); one line naming the value and the accepted
     range. A command reports it as ``prog: error: <message>`` with exit code 2 (``fail``)."""

@@ -12,10 +12,10 @@ from .action import make_action
 from .config import ConfigError, ScenarioConfig
 from .family import check_caller, corridors
 from .network import NetworkSpec, config_value, corridor_files
-from .route import LANE_PITCH
-from .scripting import Scripting
 from .observation import GridLogicObservation, RouteGridLogicObservation
 from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
+from .route import LANE_PITCH
+from .scripting import Scripting
 from .sumo import SumoSession
 from .vehicle import ControlledVehicle, StepMeasure
 

@@ -4,7 +4,6 @@ corridors). The command (its options, ``--readme``, the exit codes) is ``reports
 which imports this module once its options are read, so that ``--help`` imports nothing heavy."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pandas as pd
@@ -341,8 +340,3 @@ def _return_parts(results: pd.DataFrame, run_dir: Path, warnings: list[str],
     keep = [c for c in parts.columns if c in ("method", "signals", "episodes") or (parts[c] != 0).any()]
     return parts[keep].reset_index(drop=True), partial, refused
 
-
-if __name__ == "__main__":
-    from .command import main
-
-    sys.exit(main())

@@ -1,5 +1,5 @@
 """The packages read bottom-up: no import runs back up a layer, and reports read from ``bench``
-only the logs, the paper's numbers and the shared helpers (io, args, runlock, hosts, progress). Modules are named by their
+only the logs, the paper's numbers and claims and the shared helpers (io, args, runlock, hosts, progress). Modules are named by their
 folders (``bench.harness.run``); their import names carry the distribution's prefix
 (``ecodrive_bench.bench.harness.run``)."""
 from __future__ import annotations
@@ -53,7 +53,7 @@ def test_no_import_runs_back_up():
 
 def test_reports_read_only_logs_and_the_paper_from_bench():
     bad = [f"{p.name}: {imp}" for p in sorted((ROOT / "reports").glob("*.py")) for imp in imports(p)
-           if imp.startswith("bench.") and layer_of(imp) not in ("bench.logs", "bench.paper", "bench.io", "bench.args", "bench.runlock", "bench.hosts",
+           if imp.startswith("bench.") and layer_of(imp) not in ("bench.logs", "bench.paper", "bench.claims", "bench.io", "bench.args", "bench.runlock", "bench.hosts",
                                                         "bench.progress", "bench.registry")]
     assert not bad, "\n".join(bad)
 

@@ -53,7 +53,8 @@ def _solve(task: BoundTask) -> tuple[Any, Any, Any, float]:
     cfg = setting(task.signals, json.loads(task.scenario) if task.scenario else None)
     t0 = time.perf_counter()
     if cfg.network is not None:  # a network corridor: from the ego's insertion state, in its route frame
-        from ecodrive_bench.bench.oracle.dp import Corridor, Grid, solve as plan
+        from ecodrive_bench.bench.oracle.dp import Corridor, Grid
+        from ecodrive_bench.bench.oracle.dp import solve as plan
 
         cor = Corridor.from_config(cfg).starting(start_speed(cfg, task), Grid().spacing(cfg, fine=False)[0])
         cost = plan(cor, cfg, task.depart_time, "cost")

@@ -23,8 +23,8 @@ from typing import Any
 import pandas as pd
 
 from ecodrive_bench.bench import registry, runlock
+from ecodrive_bench.bench.args import UsageError
 from ecodrive_bench.bench.cases.heldout import CASES_PER_VARIANT, FAMILY_FILE, MASTER_SEED, VERSION
-from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import RunOptions
 from ecodrive_bench.bench.harness.provenance import git_sha
 from ecodrive_bench.bench.harness.run import Preflight, check_writable, preflight, run

@@ -23,11 +23,11 @@ import numpy as np
 import pandas as pd
 
 from ecodrive_bench.bench import registry, runlock
+from ecodrive_bench.bench.args import UsageError
 from ecodrive_bench.bench.cases.bounds import attach
 from ecodrive_bench.bench.cases.case import Case, load
 from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.harness import failures, scenarios
-from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.executors import Task, episode_limit, run_local, run_ray
 from ecodrive_bench.bench.harness.options import METHODS, PROFILES, RunOptions
 from ecodrive_bench.bench.harness.pool import PoolBroken

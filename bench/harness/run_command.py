@@ -10,8 +10,7 @@ from __future__ import annotations
 import sys
 
 from ecodrive_bench.bench import runlock
-from ecodrive_bench.bench.args import INTERRUPTED, TERMINATED, InputError, Terminated, fail, sigterm_raises
-from ecodrive_bench.bench.harness.errors import UsageError
+from ecodrive_bench.bench.args import INTERRUPTED, TERMINATED, InputError, Terminated, UsageError, fail, sigterm_raises
 from ecodrive_bench.bench.harness.options import parse, parser
 from ecodrive_bench.bench.methods.errors import AgentError
 from ecodrive_bench.bench.methods.policies import CheckpointError

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from ecodrive_bench.bench.args import UsageError
 from ecodrive_bench.bench.harness import scenarios
-from ecodrive_bench.bench.harness.errors import UsageError
 
 KEEP = ("method", "signals", "train_seed", "case", "seed", "insert_time", "depart_time", "energy", "travel_time", "steps",
         "terminated", "truncated", "return", "stops", "time_stopped", "lane_changes_requested",

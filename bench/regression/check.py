@@ -24,9 +24,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ecodrive_bench.bench.args import Parser, fail
+from ecodrive_bench.bench.args import Parser, UsageError, fail
 from ecodrive_bench.bench.claims import single_vehicle
-from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import preflight, run
 from ecodrive_bench.bench.hosts import ENERGY_RTOL

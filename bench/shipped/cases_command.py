@@ -136,10 +136,10 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
 
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.executors import run_local
-    from ecodrive_bench.bench.shipped.drives import choose_set, solve
     from ecodrive_bench.bench.methods.planners import CLAIRVOYANT
     from ecodrive_bench.bench.oracle.time_price import TIME_TOL
     from ecodrive_bench.bench.progress import bar
+    from ecodrive_bench.bench.shipped.drives import choose_set, solve
 
     try:
         frame = drives.read(path) if path.exists() else None
@@ -169,8 +169,8 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
 
 def bounds(prog: str, write: bool, workers: int, path: Path | None, seed: int | None = None) -> int:
     """Write or check the shipped bounds: 0, or 2 after one line per problem."""
+    from ecodrive_bench.bench.args import UsageError
     from ecodrive_bench.bench.cases import shipped_bounds
-    from ecodrive_bench.bench.harness.errors import UsageError
 
     path = path or shipped_bounds.FILE
     try:

@@ -14,8 +14,7 @@ import sumolib
 
 import ecodrive_bench.envs  # noqa: F401  (registers EcoDrive-v0)
 from ecodrive_bench.envs import network as nw
-from ecodrive_bench.envs.config import ScenarioConfig
-from ecodrive_bench.envs.config import ConfigError
+from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
 from ecodrive_bench.envs.network import NetworkError, NetworkSpec, build_network
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "networks.md"

@@ -11,10 +11,10 @@ import sys
 import pandas as pd
 import pytest
 
+from ecodrive_bench.bench.args import UsageError
 from ecodrive_bench.bench.cases import heldout
 from ecodrive_bench.bench.cases.case import load as load_cases
 from ecodrive_bench.bench.cases.heldout import FamilyError, load, select
-from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.generalisation_run import run_family
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import resolve_methods

@@ -11,10 +11,10 @@ import pytest
 from ecodrive_bench.bench.cases import case, shipped_bounds
 from ecodrive_bench.bench.cases.bounds import NO_LIMIT, SHIPPED, SOLVED, attach
 from ecodrive_bench.bench.cases.setting import setting
-from ecodrive_bench.bench.shipped import cases_command as case_files
 from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
 from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 from ecodrive_bench.bench.oracle import dp, mpc
+from ecodrive_bench.bench.shipped import cases_command as case_files
 
 SIGNALS = "coordinated"
 DEPART = 247.0  # [s] case 0's departure on the paper's coordinated corridor

@@ -10,12 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from ecodrive_bench.bench.args import MAX_JSON_BYTES, InputError
+from ecodrive_bench.bench.args import MAX_JSON_BYTES, InputError, UsageError
 from ecodrive_bench.bench.cases import case as cases_mod
 from ecodrive_bench.bench.cases import heldout
 from ecodrive_bench.bench.cases.case import CaseError, check_cases, load
 from ecodrive_bench.bench.cases.heldout import FamilyError
-from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.scenarios import parse_overrides
 

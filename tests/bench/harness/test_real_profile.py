@@ -7,9 +7,8 @@ import json
 import pandas as pd
 import pytest
 
-from ecodrive_bench.envs.config import ScenarioConfig
-
 from ecodrive_bench.bench.harness.run_command import main as run_main
+from ecodrive_bench.envs.config import ScenarioConfig
 from ecodrive_bench.reports.command import main as report_main
 
 

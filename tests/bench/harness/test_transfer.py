@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from ecodrive_bench.bench.args import UsageError
 from ecodrive_bench.bench.cases.bounds import BoundTask
-from ecodrive_bench.bench.harness.errors import UsageError
 from ecodrive_bench.bench.harness.options import parse
 from ecodrive_bench.bench.harness.run import run
 from ecodrive_bench.bench.harness.run_command import main

@@ -81,8 +81,8 @@ def test_an_episode_needs_its_case_prepared():
 
 
 def test_a_set_is_chosen_at_its_price():
-    from ecodrive_bench.bench.shipped.drives import choose_set
     from ecodrive_bench.bench.oracle.time_price import mean_time, time_price
+    from ecodrive_bench.bench.shipped.drives import choose_set
 
     rng = np.random.default_rng(5)
     planned = []
