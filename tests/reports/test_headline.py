@@ -60,3 +60,14 @@ def test_the_block_names_the_readme_as_typed_but_no_absolute_path(tmp_path, monk
         rewrite(type(readme)(path), results(), "paper", {})
         expected = "results.md`" if str(path).startswith("/") else "docs/results.md`"
         assert f"--readme {expected}" in readme.read_text()
+
+
+def test_the_physics_sentence_comes_from_the_bound():
+    from ecodrive_bench.reports.headline import block, physics_line
+
+    assert physics_line(results(), {}) == ""  # no bound in the run: no sentence
+    df = results().assign(cost_bound=300.0, energy_bound=100.0)  # baseline 450, PRL 415 (phi 1)
+    line = physics_line(df, {})
+    assert line.startswith("How close to physics") and "coordinated, PRL" in line
+    assert "closes 23% of the gap" in line and "stays 38% above it" in line  # 35 / 150, 115 / 300
+    assert line in block(df, "paper", {})
