@@ -77,7 +77,7 @@ def benchmark(session: nox.Session) -> None:
         # zero-shot on the real city corridors (docs/networks.md), beside both
         real = [*pool, "--logs", str(logs), "--run-id", f"{run_id}-real"]
         real += ["--signals", *opts.signals] if opts.signals else []
-        session.run("ecodrive", "run", "--profile", "real", *real)
+        session.run("ecodrive", "run", "--profile", "real", "--bounds", *real)
         session.run("ecodrive", "report", str(logs / run_id), "--generalisation", str(logs / f"{run_id}-generalisation"),
                     "--real", str(logs / f"{run_id}-real"))
         return
@@ -86,10 +86,11 @@ def benchmark(session: nox.Session) -> None:
 
 @nox.session
 def real(session: nox.Session) -> None:
-    """Every method with a shipped policy, zero-shot, over the real city corridors (``ecodrive run
-    --profile real``, docs/networks.md), then the report of that run; options go to ``ecodrive run``."""
+    """Every method with a shipped policy, zero-shot, and the planners with each case's DP bound, over
+    the real city corridors (``ecodrive run --profile real --bounds``, docs/networks.md), then the
+    report of that run; options go to ``ecodrive run``."""
     opts = _given(list(session.posargs))
-    session.run("ecodrive", "run", "--profile", "real", *session.posargs)
+    session.run("ecodrive", "run", "--profile", "real", "--bounds", *session.posargs)
     assert opts is not None  # ecodrive run has refused options it could not read
     run_id, logs = opts.run_id or "real", Path(opts.logs or "logs")
     session.run("ecodrive", "report", str(logs / run_id))

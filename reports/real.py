@@ -103,6 +103,18 @@ def scale_rows(results: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
                 "beaten"]]
 
 
+def bound_line(results: pd.DataFrame) -> str:
+    """The corridor's DP bound in words, where the run has it (``ecodrive run --bounds``): its mean
+    cost over the cases with a 95% CI; "" without it."""
+    if "cost_bound" not in results.columns:
+        return ""
+    per_case = results.dropna(subset=["cost_bound"]).groupby("case").cost_bound.first()
+    if per_case.empty:
+        return ""
+    return (f"DP bound (the ego alone through the route's signal programs, from its insertion state; "
+            f"`ecodrive run --bounds`): cost {_ci_text(*mean_ci(per_case.to_numpy()))} over {len(per_case)} cases.")
+
+
 def scale_checks(summ: pd.DataFrame) -> list[str]:
     """One line per (corridor, setting) with ``clairvoyant``: whether the top of the scale holds there
     (its mean cost at least ``TOP_MARGIN`` below every learned and rule-based method's, no higher than
@@ -196,6 +208,8 @@ def section(run_dir: Path, out: Path, methods_order: tuple[str, ...], paper: pd.
                 for r in sub.itertuples(index=False)]
         md += [f"### {variant}, {signals} (phi = {phis.get(signals, 1.0):g} Wh/s)", "",
                tables.frame_markdown(pd.DataFrame(rows).set_index("method"))]
+        bound = bound_line(table[(table.variant == variant) & (table.signals == signals)])
+        md += [bound, ""] if bound else []
     if not edge.empty:
         md += ["### Zero-shot edge over steady driving", "",
                "Edge = 1 - mean cost / Baseline0's on the same cases and corridor (positive: cheaper than steady "
