@@ -1,10 +1,16 @@
-"""The further experiments' markdown (``reports.experiments``) as HTML for the report page: headings,
-paragraphs, lists, tables (change columns as signed percents, claim statuses as badges) and
-images as captioned figures."""
+"""The further experiments' markdown (``reports.experiments``) as HTML for the report page, by
+Python-Markdown (a well-kept parser: tables, escaped pipes, code and emphasis as CommonMark-like
+markdown renders them; the project no longer converts markdown by hand): headings as anchored
+sections, paragraphs, lists, tables (change columns as signed percents, claim statuses as badges)
+and images as captioned figures."""
 from __future__ import annotations
 
 import re
+import xml.etree.ElementTree as etree
 from pathlib import Path
+
+import markdown
+from markdown.treeprocessors import Treeprocessor
 
 from .html_parts import DASH, MINUS, STATUS_CLASS, Figure, badge, esc, figure, missing, pct
 
@@ -43,21 +49,14 @@ def experiment_caption(title: str) -> str:
     return esc(title)
 
 
-_ROW = re.compile(r"^\|\s.*\|\s*$|^\|(-+\|)+\s*$")
-_IMG = re.compile(r"^!\[([^\]]*)\]\(([^)]+)\)\s*$")
 _NUM = re.compile(r"^[+\-\u2212]?\d[\d,]*(\.\d+)?(e[+\-]?\d+)?%?$")
-
-
-def inline(text: str) -> str:
-    """Escaped text with the markdown the report writes: `code` and **bold**."""
-    s = esc(text)
-    s = re.sub(r"`([^`]+)`", r"<code>\1</code>", s)
-    return re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
+_CHANGE = re.compile(r"(^|_)change(_|$)")  # a column of changes (fractions): all_energy_change, ..._change_mean
 
 
 def md_cell(text: str, column: str) -> tuple[str, str]:
-    """(html, class) of one markdown table cell; a column of changes (a ``change`` word in its name:
-    ``all_energy_change``, ``..._change_mean``; fractions) as signed percents."""
+    """(html, class) of one markdown table cell's plain text; a column of changes (a ``change``
+    word in its name: ``all_energy_change``, ``..._change_mean``; fractions) as signed percents;
+    ("", "") for text the markdown renders as it is."""
     t = text.strip()
     if missing(t):
         return DASH, "num"
@@ -70,85 +69,71 @@ def md_cell(text: str, column: str) -> tuple[str, str]:
             except ValueError:
                 pass
         return esc(t.replace("-", MINUS)), "num"
-    return inline(t), ""
+    return "", ""
 
 
-_CELL_SEP = re.compile(r"(?<!\\)\|")  # a "|" not escaped as "\|"
-_CHANGE = re.compile(r"(^|_)change(_|$)")  # a column of changes (fractions): all_energy_change, ..._change_mean
+class _Page(Treeprocessor):
+    """After Python-Markdown's inline pass: each table wrapped to scroll, its plain cells formatted
+    (``md_cell``), each image alone in a paragraph a captioned figure (``figs`` by file name), each
+    ``##`` heading a section with an anchor (``toc``)."""
 
+    def __init__(self, md: markdown.Markdown, figs: list[Figure], toc: list[tuple[str, str]]) -> None:
+        super().__init__(md)
+        self.by_name, self.toc = {f.path.name: f for f in figs}, toc
 
-def md_cells(line: str) -> list[str]:
-    r"""The cells of one markdown table row; an escaped ``\|`` is a "|" inside a cell."""
-    inner = line.strip()
-    inner = inner[1:] if inner.startswith("|") else inner
-    inner = inner[:-1] if inner.endswith("|") and not inner.endswith("\\|") else inner
-    return [c.strip().replace("\\|", "|") for c in _CELL_SEP.split(inner)]
+    def _raw(self, html_text: str) -> str:
+        return self.md.htmlStash.store(html_text)
 
-
-def md_table(lines: list[str]) -> str:
-    split = [md_cells(ln) for ln in lines]
-    head, body = split[0], [r for r in split[1:] if not all(set(c) <= set("-: ") for c in r)]
-    cols = "".join(f"<th>{esc(c.replace('_', ' '))}</th>" for c in head)
-    rows = []
-    for r in body:
-        cells = []
-        for i, c in enumerate(r):
-            h, cls = md_cell(c, head[i] if i < len(head) else "")
-            cells.append(f"<td class='{cls}'>{h}</td>" if cls else f"<td>{h}</td>")
-        rows.append("<tr>" + "".join(cells) + "</tr>")
-    return f"<div class='scroll'><table class='md'><thead><tr>{cols}</tr></thead><tbody>{''.join(rows)}</tbody></table></div>"
+    def run(self, root: etree.Element) -> None:
+        for table in root.iter("table"):
+            table.set("class", "md")
+            head = [(th.text or "") for th in table.iter("th")]
+            for row in table.iter("tr"):
+                for i, cell in enumerate(c for c in row if c.tag == "td"):
+                    if len(cell):
+                        continue  # code or bold inside: as the markdown renders it
+                    out, cls = md_cell(cell.text or "", head[i] if i < len(head) else "")
+                    if out:
+                        cell.text = self._raw(out)
+                    if cls:
+                        cell.set("class", cls)
+            for th in table.iter("th"):
+                th.text = (th.text or "").replace("_", " ")
+        out, section = [], None
+        for child in list(root):
+            root.remove(child)
+            img = child[0] if child.tag == "p" and len(child) == 1 and child[0].tag == "img" else None
+            if img is not None and not (child.text or "").strip() and not (img.tail or "").strip():
+                name = Path(img.get("src", "")).name
+                fig = self.by_name.get(name, Figure(Path(name), esc(img.get("alt", "")), img.get("alt", "")))
+                child = etree.Element("p")
+                child.text = self._raw(figure(fig, f"fig-{Path(name).stem}"))
+            if child.tag == "table":
+                wrap = etree.Element("div", {"class": "scroll"})
+                wrap.append(child)
+                child = wrap
+            if child.tag == "h1":
+                continue
+            if child.tag == "h2":
+                title = "".join(child.itertext()).strip()
+                short = re.sub(r"\s*\(.*\)$", "", title)  # "Mixed traffic (fig:dd, fig:avg)" -> "Mixed traffic"
+                anchor = "x-" + re.sub(r"[^a-z0-9]+", "-", short.lower()).strip("-")
+                section = etree.Element("section", {"id": anchor})
+                out.append(section)
+                self.toc.append((anchor, short))
+            if section is not None:
+                section.append(child)
+            else:
+                out.append(child)
+        for el in out:
+            root.append(el)
 
 
 def experiments_html(lines: list[str], figs: list[Figure]) -> tuple[str, list[tuple[str, str]]]:
-    """The experiments' markdown (headings, paragraphs, tables, images, lists) as HTML, each image
-    a captioned figure; and the (anchor, title) of each section for the navigation."""
-    by_name = {f.path.name: f for f in figs}
-    out, toc, para, table, items = [], [], [], [], []
-    open_section = False
-
-    def flush() -> None:
-        if para:
-            out.append(f"<p>{inline(' '.join(para))}</p>")
-            para.clear()
-        if table:
-            out.append(md_table(table))
-            table.clear()
-        if items:
-            out.append("<ul>" + "".join(f"<li>{inline(i)}</li>" for i in items) + "</ul>")
-            items.clear()
-
-    for ln in "\n".join(lines).split("\n"):  # an element may hold a whole table
-        if _ROW.match(ln):
-            if para or items:
-                flush()
-            table.append(ln)
-            continue
-        if table:
-            flush()
-        if ln.startswith("## "):
-            flush()
-            title = ln[3:].strip()
-            short = re.sub(r"\s*\(.*\)$", "", title)  # "Mixed traffic (fig:dd, fig:avg)" -> "Mixed traffic"
-            anchor = "x-" + re.sub(r"[^a-z0-9]+", "-", short.lower()).strip("-")
-            out.append(("</section>" if open_section else "") + f"<section id='{anchor}'><h2>{inline(title)}</h2>")
-            open_section = True
-            toc.append((anchor, short))
-        elif ln.startswith("# "):
-            flush()
-        elif (m := _IMG.match(ln.strip())):
-            flush()
-            name = Path(m.group(2)).name
-            f = by_name.get(name, Figure(Path(name), esc(m.group(1)), m.group(1)))
-            out.append(figure(f, f"fig-{Path(name).stem}"))
-        elif ln.startswith("- "):
-            if para:
-                flush()
-            items.append(ln[2:])
-        elif not ln.strip():
-            flush()
-        else:
-            para.append(ln.strip())
-    flush()
-    if open_section:
-        out.append("</section>")
-    return "".join(out), toc
+    """The experiments' markdown (headings, paragraphs, tables, images, lists) as HTML by
+    Python-Markdown (its ``tables`` extension), each image a captioned figure, each ``##`` section
+    anchored; and the (anchor, title) of each section for the navigation."""
+    toc: list[tuple[str, str]] = []
+    md = markdown.Markdown(extensions=["tables"])
+    md.treeprocessors.register(_Page(md, figs, toc), "ecodrive-page", 5)  # after the inline pass (20)
+    return md.convert("\n".join(lines)), toc

@@ -264,7 +264,7 @@ def test_a_pipe_inside_a_cell_stays_in_its_cell():
     df = pd.DataFrame({"claim": ["a larger |r_p^s| shortens trips"], "status": ["PASS"]}).set_index("claim")
     md = frame_markdown(df)
     assert "a larger \\|r_p^s\\| shortens trips" in md
-    doc = Doc(html_markdown.md_table(md.strip().splitlines()))
+    doc = Doc(html_markdown.experiments_html(md.strip().splitlines(), [])[0])
     assert [c["text"] for c in doc.cells if c["tag"] == "td"] == ["a larger |r_p^s| shortens trips", "PASS"]
 
 
