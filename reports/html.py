@@ -303,5 +303,5 @@ def render(page: Page) -> str:
         toc.append(("warnings", f"Warnings ({len(page.warnings)})"))
     body.append(provenance_section(page))
     toc.append(("provenance", "Provenance"))
-    return TEMPLATE.substitute(title=esc(f"Report: {page.run_name}"), css=CSS, header=header(page), nav=nav(toc),
+    return TEMPLATE.render(title=esc(f"Report: {page.run_name}"), css=CSS, header=header(page), nav=nav(toc),
                                body="\n".join(body))

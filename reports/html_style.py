@@ -1,7 +1,7 @@
 """The report page's inline stylesheet and its HTML skeleton (no script, nothing fetched)."""
 from __future__ import annotations
 
-from string import Template
+import jinja2
 
 CSS = """
 :root { --fg:#1d2327; --muted:#5f6b73; --line:#d9dee2; --bg:#ffffff; --band:#f5f7f9; --accent:#1f5f99;
@@ -75,19 +75,20 @@ footer { margin-top:48px; color:var(--muted); font-size:12px; border-top:1px sol
 @media print { nav { display:none; } figure { break-inside:avoid; } main { max-width:none; padding:0; } }
 """
 
-TEMPLATE = Template("""<!DOCTYPE html>
+# the page skeleton: a Jinja2 template (the sections are HTML already escaped where they hold data)
+TEMPLATE = jinja2.Environment(autoescape=False, keep_trailing_newline=True).from_string("""<!DOCTYPE html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
-<title>$title</title>
-<style>$css</style>
+<title>{{ title }}</title>
+<style>{{ css }}</style>
 </head>
 <body>
 <main>
-$header
-$nav
-$body
+{{ header }}
+{{ nav }}
+{{ body }}
 <footer>Written by <code>ecodrive report</code> from the run folder's <code>results.parquet</code>,
 <code>manifest.json</code> and step logs; <code>index.md</code> has the same sections as text, without the
 provenance table (<code>manifest.json</code> holds it), with the tables and figures beside it (<code>table4.csv</code>, <code>statistics.csv</code>, <code>seeds.csv</code>, <code>figures/*.pdf</code>).
