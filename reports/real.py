@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.io import atomic_csv
 
 from . import headline, metrics, tables
@@ -22,6 +23,7 @@ from .edge import REFERENCE, edges
 from .headline import LEARNED
 from .load import RunError, load_family
 from .names import name
+from .top import TOP  # the top of the scale (clairvoyant)
 
 TABLE = "real.parquet"
 DRIVER = "baseline"  # SUMO's driver
@@ -80,8 +82,7 @@ def summary(results: pd.DataFrame, phis: dict[str, float]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-TOP = "clairvoyant"  # the top of the scale
-CAUSAL_PLANNERS = ("mpc", "oracle")  # its cost is at most theirs
+CAUSAL_PLANNERS = tuple(m for m in registry.names("planner", installed=False) if m != TOP)  # its cost is at most theirs
 TOP_MARGIN = 0.05  # [-] its mean cost is at least this much below every learned and rule-based method's
 
 
