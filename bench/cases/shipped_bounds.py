@@ -89,7 +89,9 @@ def problem_digest(cfg: ScenarioConfig) -> str:
     fields) and the ``Corridor`` read from its built network. 16 hex digits."""
     have = _DIGESTS.get(cfg.digest())
     if have is None:
-        text = json.dumps({"scenario": cfg.to_dict(), "corridor": asdict(dp.Corridor.from_config(cfg))}, sort_keys=True)
+        corridor = {k: v for k, v in asdict(dp.Corridor.from_config(cfg)).items()
+                    if not (k in dp.Corridor.NETWORK_FIELDS and not v)}  # a network's fields, where it has them
+        text = json.dumps({"scenario": cfg.to_dict(), "corridor": corridor}, sort_keys=True)
         have = _DIGESTS[cfg.digest()] = hashlib.sha256(text.encode()).hexdigest()[:16]
     return have
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -35,6 +36,8 @@ class Corridor:
     # is then their total); () : the one window (0, green] of each
     windows_ms: tuple[tuple[tuple[int, int], ...], ...] = ()
     limits: tuple[tuple[float, float, float], ...] = ()  # (start, end [m], speed [m/s]) below the speed limit
+    # the fields a network corridor fills and the generated arterial leaves empty (digests omit them when empty)
+    NETWORK_FIELDS: ClassVar[tuple[str, ...]] = ("windows_ms", "limits")
 
     @classmethod
     def from_config(cls, cfg: ScenarioConfig) -> Corridor:
