@@ -96,12 +96,13 @@ class MPCAgent(NotLearning):
         self.first = True  # the plan in force is the departure's first plan (fine lattice)
         self.counts: dict[str, int] = {}
 
-    def start(self, depart_time: float, speed: float) -> None:
+    def start(self, depart_time: float, speed: float | None = None) -> None:
         """A new episode departing at ``depart_time`` [s] at ``speed`` [m/s]: on the generated
-        arterial always the speed limit; on a network corridor what traffic let the ego insert at."""
+        arterial always the speed limit; on a network corridor what traffic let the ego insert at
+        (None: the first lane's limit)."""
         cor, first = self.cor, None
         if self.cfg.network is not None:
-            cor = cor.starting(speed, Grid().spacing(self.cfg, fine=False)[0])
+            cor = cor.starting(cor.v0 if speed is None else speed, Grid().spacing(self.cfg, fine=False)[0])
         else:
             table = shipped_bounds.table(self.shipped) if self.shipped is not None else None
             first = table.mpc_plan(self.plan_cfg, depart_time) if table is not None else None
