@@ -41,10 +41,10 @@ and nothing is shipped (every case is planned on its own, lambda 0). There it dr
 ``longitudinal`` action, as ``mpc`` and ``oracle`` do: SUMO's LC2013 keeps the ego on lanes that
 continue its route (a network's lanes end and turn, which the route frame's lane index does not
 follow), and the drives of ``mpc`` and ``oracle`` on the case, which the same env drives exactly
-as their own episodes, are candidates beside its own. With no set planned whole, each case takes
-its cheapest drive that is no slower than SUMO's driver on that case (the fastest where none is,
-``bench.oracle.time_price.pick_within``): the top of the scale keeps to the driver's time case by
-case, as a set's price of time keeps it on the mean.
+as their own episodes, are candidates beside its own: with no set planned whole, a case takes its
+cheapest drive (lambda 0), so it never costs more than the cheaper of them on a case, and its
+travel time is not held to SUMO's driver's (a set's price of time would need the set's drives
+planned whole, as the shipped sets are).
 
 It drives the ``parameterized`` action: the lane decision (the LC2013 mask may refuse it) and the
 acceleration that brings its speed to the plan's next one, through the same safety layer as
@@ -70,7 +70,7 @@ from ecodrive_bench.bench.oracle import mpc as planner
 from ecodrive_bench.bench.oracle.clairvoyant import MARGIN, Recording, Tracks, ahead_future, gap_caps
 from ecodrive_bench.bench.oracle.dp import Corridor, Grid
 from ecodrive_bench.bench.oracle.mpc import HEADWAY, MIN_GAP
-from ecodrive_bench.bench.oracle.time_price import pick, pick_within
+from ecodrive_bench.bench.oracle.time_price import pick
 from ecodrive_bench.envs.config import ScenarioConfig
 from ecodrive_bench.envs.route import LANE_PITCH
 
@@ -128,11 +128,7 @@ class ClairvoyantAgent(NotLearning):
                 self.rounds = [{"shipped": str(self.shipped.name), **self.expected}]
                 return
         tried = self.plan(env, case)
-        costs, times = np.array([d[0] for d in tried]), np.array([d[1] for d in tried])
-        if env.cfg.network is not None:  # no set: the cheapest drive within SUMO's driver's time on the case
-            best = tried[pick_within(costs, times, float(self.rounds[0]["sumo_driver_time"]))]
-        else:
-            best = tried[pick(costs, times, 0.0)]
+        best = tried[pick(np.array([d[0] for d in tried]), np.array([d[1] for d in tried]), 0.0)]
         self.actions = best[2]
         self.rounds.append({"chosen_cost": round(best[0], 4), "chosen_time": best[1], "time_price": 0.0,
                             "wall_s": round(time.perf_counter() - started, 3)})

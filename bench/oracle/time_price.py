@@ -39,17 +39,6 @@ def pick(costs: np.ndarray, times: np.ndarray, price: float) -> int:
     return int(np.lexsort((np.arange(len(value)), np.asarray(times, dtype=float), value))[0])
 
 
-def pick_within(costs: np.ndarray, times: np.ndarray, limit: float) -> int:
-    """The cheapest drive that takes at most ``limit`` [s] (of equal costs the faster, then the
-    first); the fastest where none does: a case planned on its own keeps within its own time limit."""
-    costs, times = np.asarray(costs, dtype=float), np.asarray(times, dtype=float)
-    ok = times <= limit
-    if not ok.any():
-        return int(np.lexsort((np.arange(len(times)), costs, times))[0])
-    value = np.where(ok, costs, np.inf)
-    return int(np.lexsort((np.arange(len(value)), times, value))[0])
-
-
 def choices(costs: Sequence[np.ndarray], times: Sequence[np.ndarray], price: float) -> list[int]:
     """The drive that ``pick`` chooses at ``price`` in each case."""
     return [pick(c, t, price) for c, t in zip(costs, times)]

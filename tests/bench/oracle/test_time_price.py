@@ -74,11 +74,3 @@ def test_zero_where_the_cheapest_meet_it_and_the_fastest_where_nothing_does():
     with pytest.raises(ValueError, match="at least one case"):
         time_price([], [], 100.0)
 
-
-def test_pick_within_keeps_the_case_time_limit():
-    from ecodrive_bench.bench.oracle.time_price import pick_within
-
-    costs, times = np.array([100.0, 90.0, 95.0, 95.0]), np.array([50.0, 60.0, 49.0, 48.0])
-    assert pick_within(costs, times, 55.0) == 3  # 90 is too slow; of the two at 95 the faster
-    assert pick_within(costs, times, 60.0) == 1  # the cheapest is within the limit
-    assert pick_within(costs, times, 40.0) == 3  # none within: the fastest
