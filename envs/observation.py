@@ -242,6 +242,7 @@ class RouteGridLogicObservation(GridLogicObservation):
         self.route = files.route
         self._index = {e: r for r, e in enumerate(self.route.edges)}  # route edge -> its index
         self._exit: tuple[int, float] = (0, 0.0)  # (last route edge the ego was on, the odometer at its end [m])
+        self._place: tuple[str, float] | None = None  # ``along``'s lane place, which the next ``observe`` reuses
 
     def _lanes_here(self, session: SumoSession, kin: Kinematics) -> tuple[tuple[float, ...], int]:
         """(lane widths of the ego's edge, the ego's lane index there), kept over internal lanes."""
@@ -254,7 +255,7 @@ class RouteGridLogicObservation(GridLogicObservation):
         """The front bumper's position in the route frame (``envs.route``): the edge's offset plus
         the lane position on a route edge; on a junction's internal lane, the end of the edge it
         came from plus the distance driven since, at most the next edge's offset."""
-        lane_id, pos = session.lane_place(vid)
+        lane_id, pos = self._place = session.lane_place(vid)
         odo = session.odometer(vid)
         route = self.route
         r = self._index.get(lane_id.rsplit("_", 1)[0])
@@ -284,7 +285,9 @@ class RouteGridLogicObservation(GridLogicObservation):
         x, y, _, speed, _, _, edge = kin
         self._internal = edge.startswith(":")
         widths, lane = self._lanes_here(session, kin)
-        lane_id, pos = session.lane_place(vid)
+        # the vehicle reads ``along`` just before (the same state): its lane place is not read again
+        lane_id, pos = self._place if self._place is not None else session.lane_place(vid)
+        self._place = None
         shape, _ = session.lane_geometry(lane_id)
         cx, cy, dx, dy = lane_frame(shape, pos)
         others = [(*v[VAR_POSITION], v[VAR_ANGLE], v[VAR_LENGTH]) for k, v in neighbours.items() if k != vid]
