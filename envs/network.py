@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from .config import ScenarioConfig
-from .route import EGO_CLASS, NetworkError, programs, read_net, route_of  # noqa: F401  (their home is envs.route)
+from .route import NetworkError, programs, read_net, route_of
 from .scenario import EGO_ROUTE, NOT_BUILT, ScenarioBuildError, ScenarioFiles, cached, write_vtypes, write_xml
 
 NET_CAP = 256 << 20  # [bytes] largest network file read (cologne8's is 0.35 MB)
