@@ -11,6 +11,9 @@ from ecodrive_bench.envs.validation import param
 from .base import check_config
 
 
+PDQN_NAMES = {False: "prl", True: "mpdqn"}  # the algorithm name of each PDQNConfig.multipass
+
+
 @dataclass
 class PDQNConfig:
     gamma: float = param(0.99, 0.0, 1.0, unit="-",

@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from torch.func import functional_call
 
-from .configs import PDQNConfig  # its config lives in agents.configs, read without torch
+from .configs import PDQN_NAMES, PDQNConfig  # its config lives in agents.configs, read without torch
 from .device import CPU, OnDevice, host
 from .inference import NumpyNets, pdqn_greedy
 from .nets import (
@@ -61,7 +61,7 @@ class PDQNAgent(OnDevice):
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Tuple, cfg: PDQNConfig | None = None):
         self.cfg = cfg = cfg or PDQNConfig()
-        self.name = "mpdqn" if cfg.multipass else "prl"
+        self.name = PDQN_NAMES[cfg.multipass]
         grid_shape = observation_space["grid"].shape
         logic = observation_space["logic"]
         box = action_space[1]

@@ -7,8 +7,9 @@ from __future__ import annotations
 from typing import Any
 
 from . import RULE_BASED as _RULE_CLASSES
+from .configs import PDQN_NAMES
 
-LEARNING = ("prl", "mpdqn", "dqn", "ddpg")  # the algorithms ``ecodrive train --method`` trains
+LEARNING = (*PDQN_NAMES.values(), "dqn", "ddpg")  # the algorithms ``ecodrive train --method`` trains
 
 
 def config_class(algorithm: str) -> type:
@@ -29,8 +30,9 @@ def make_agent(algorithm: str, observation_space, action_space, seed: int = 0, *
     from .dqn import DQNAgent, DQNConfig
     from .pdqn import PDQNAgent, PDQNConfig
 
-    if algorithm in ("prl", "mpdqn"):
-        return PDQNAgent(observation_space, action_space, PDQNConfig(seed=seed, multipass=algorithm == "mpdqn", **config))
+    if algorithm in PDQN_NAMES.values():
+        multipass = algorithm == PDQN_NAMES[True]
+        return PDQNAgent(observation_space, action_space, PDQNConfig(seed=seed, multipass=multipass, **config))
     if algorithm == "dqn":
         return DQNAgent(observation_space, action_space, DQNConfig(seed=seed, **config))
     if algorithm == "ddpg":

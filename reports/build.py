@@ -31,7 +31,7 @@ from .load import (
     unfinished_warnings,
 )
 from .names import seeded
-from .outdir import staged
+from ecodrive_bench.bench.io.outdir import staged
 from .top import TOP
 
 METHOD_ORDER = headline.ORDER  # the registry's order of methods (bench.registry)
@@ -47,7 +47,7 @@ def build(run_dir: Path, out: Path, gen_dir: Path | None = None, progress: bool 
           force_into: bool = False, real_dir: Path | None = None) -> tuple[Path, list[str]]:
     """Write the report of ``run_dir`` into ``out``: the path of ``index.md`` (in ``out`` resolved)
     and the warnings. ``out`` must be new, empty or an earlier report's folder unless
-    ``force_into`` (``reports.outdir``). The parts whose time grows with the run, reading every
+    ``force_into`` (``bench.io.outdir``). The parts whose time grows with the run, reading every
     step log for the return split and drawing the figures, show bars with an ETA on stderr where it
     is a terminal (``progress=False``: never; a CI log gets none either way)."""
     if not run_dir.is_dir():

@@ -71,9 +71,9 @@ def main(argv: list[str] | None = None) -> int:
         with sigterm_raises():
             index, warnings = build(args.run_dir, out, args.generalisation, force_into=args.force_into,
                                     real_dir=args.real)
-    except (RunError, LogError, OSError, InUse) as e:  # nothing is left behind (reports.outdir)
+    except (RunError, LogError, OSError, InUse) as e:  # nothing is left behind (bench.io.outdir)
         return fail(ap.prog, str(e))
-    except KeyboardInterrupt:  # the scratch folder is removed on the way out (reports.outdir)
+    except KeyboardInterrupt:  # the scratch folder is removed on the way out (bench.io.outdir)
         print(f"interrupted: no report written; {out} is as it was", file=sys.stderr)
         return INTERRUPTED
     except Terminated:

@@ -116,3 +116,42 @@ def test_an_entry_point_that_names_no_method_is_refused(tmp_path, monkeypatch):
             registry.methods()
     finally:
         registry._installed.cache_clear()
+
+
+def _config_field_uses(tree) -> set[int]:
+    """The ids of string constants that name a scenario config field, not a method: a dict key or a
+    pair's first item with a bool beside it (``{"glosa": True}``, ``("glosa", True)``), or an item
+    of a list of field names (a tuple or set that also holds ``"reward"``)."""
+    import ast
+
+    out = set()
+    for n in ast.walk(tree):
+        if isinstance(n, ast.Dict):
+            out |= {id(k) for k, v in zip(n.keys, n.values) if k is not None and isinstance(v, ast.Constant)
+                    and isinstance(v.value, bool)}
+        elif isinstance(n, (ast.Tuple, ast.Set)):
+            values = [e.value for e in n.elts if isinstance(e, ast.Constant)]
+            if len(n.elts) == 2 and isinstance(n.elts[1], ast.Constant) and isinstance(n.elts[1].value, bool):
+                out.add(id(n.elts[0]))
+            elif "reward" in values:
+                out |= {id(e) for e in n.elts}
+    return out
+
+
+@pytest.mark.parametrize("name", ["mpdqn", "clairvoyant", "glosa", "baseline0"])
+def test_a_method_is_named_in_at_most_three_modules(name):
+    """A method's name is a string literal in at most 3 non-test modules (its agent, the registry
+    and at most one more). The env's ``glosa`` config field, a flag of the same spelling, is not
+    the method's name and is not counted (``_config_field_uses``)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(registry.__file__).resolve().parents[2]
+    found = set()
+    for folder in ("envs", "agents", "bench", "reports"):
+        for path in (root / folder).rglob("*.py"):
+            tree = ast.parse(path.read_text())
+            fields = _config_field_uses(tree)
+            if any(isinstance(n, ast.Constant) and n.value == name and id(n) not in fields for n in ast.walk(tree)):
+                found.add(str(path.relative_to(root)))
+    assert len(found) <= 3, f"{name!r} is named in {len(found)} modules: {sorted(found)}"

@@ -1,4 +1,4 @@
-"""The report's folder (``reports.outdir``): ``--out`` is resolved before anything is decided, a
+"""The report's folder (``bench.io.outdir``): ``--out`` is resolved before anything is decided, a
 build that fails leaves every file as it was, only folders the command created are removed, the
 report appears in its folder whole, and a folder of the user's own files is refused."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from ecodrive_bench.reports import build as report_build
-from ecodrive_bench.reports import outdir
+from ecodrive_bench.bench.io import outdir
 from ecodrive_bench.reports.build import build
 from ecodrive_bench.reports.command import main
 

@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 
-from ecodrive_bench.reports import outdir
+from ecodrive_bench.bench.io import outdir
 
 SCRIPT = """
 import sys, time
 from pathlib import Path
-from ecodrive_bench.reports import outdir
+from ecodrive_bench.bench.io import outdir
 with outdir.staged(Path(sys.argv[1]), ".report-files.json") as stage:
     (stage.scratch / "index.md").write_text("half a report")
     print("building", flush=True)

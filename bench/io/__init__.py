@@ -11,6 +11,8 @@
 - ``refuse_links`` refuses a run or output folder that is, or holds, a symbolic link.
 - ``written_files`` and ``prune_unwritten`` let a command that rebuilds a folder (a report)
   remove the files its previous run wrote there and this one did not, and nothing else.
+- ``outdir`` (``bench.io.outdir``): a command's output folder (the report's ``--out``), resolved
+  and checked before anything is written, built in a scratch folder and published whole.
 """
 from __future__ import annotations
 

@@ -54,7 +54,7 @@ from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 
-from ecodrive_bench.bench.io import Unwritable, prune_unwritten, refuse_links
+from . import Unwritable, prune_unwritten, refuse_links
 from ecodrive_bench.bench.runlock import hold_folder
 
 DIR_FLAGS = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW
