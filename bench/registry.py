@@ -157,7 +157,7 @@ CASE_SETS: tuple[CaseSet, ...] = (
             "the paper's corridor: 100 fixed cases per signal setting"),
     CaseSet("generalisation", "ecodrive_bench.bench.cases.heldout:variants", "ecodrive_bench.bench.cases.heldout:main",
             "envs/families/heldout.json", "test", "the held-out family of generated corridors, 10 cases per corridor and setting"),
-    CaseSet("real", "ecodrive_bench.bench.cases.real:variants", "ecodrive_bench.bench.cases.real:main",
+    CaseSet("real", "ecodrive_bench.bench.cases.real:variants", "ecodrive_bench.bench.shipped.real_cases:main",
             "envs/families/real.json", "real", "real city corridors (RESCO's networks in the installed sumo-rl), 30 cases each"),
 )
 FAMILY_PROFILES = tuple(c.name for c in CASE_SETS if c.family)  # run profiles over a family of corridors

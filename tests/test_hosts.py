@@ -13,6 +13,7 @@ import pytest
 
 from ecodrive_bench.bench import hosts
 from ecodrive_bench.bench.cases import shipped_bounds
+from ecodrive_bench.bench.shipped import dp_bounds as shipped_writer
 
 ENERGIES = """
 import numpy as np, sys
@@ -65,12 +66,12 @@ def _nudged(path, dst, case: int, edit) -> None:
     frame = shipped_bounds.read(path).frame.copy()
     i = int(np.flatnonzero((frame.case == case) & (frame.signals == "coordinated"))[0])
     edit(frame, i)
-    shipped_bounds.save(frame, dst)
+    shipped_writer.save(frame, dst)
 
 
 def _sampled_case() -> int:
     rows = shipped_bounds.read(shipped_bounds.FILE).frame
-    return int(shipped_bounds.sample(rows[rows.signals == "coordinated"], 1).case.iloc[0])
+    return int(shipped_writer.sample(rows[rows.signals == "coordinated"], 1).case.iloc[0])
 
 
 @pytest.mark.skipif(not shipped_bounds.FILE.is_file(), reason="no shipped bounds in this checkout")
@@ -81,7 +82,7 @@ def test_a_last_digit_of_a_stored_float_is_within_the_tolerance(tmp_path):
         for col in ("cost_bound", "bound_energy", "energy_bound"):
             frame.loc[i, col] = np.nextafter(frame.loc[i, col], np.inf)
     _nudged(shipped_bounds.FILE, bad, case, edit)
-    assert shipped_bounds.check(bad, per_setting=1, signals=("coordinated",), progress=False) == []
+    assert shipped_writer.check(bad, per_setting=1, signals=("coordinated",), progress=False) == []
 
 
 @pytest.mark.skipif(not shipped_bounds.FILE.is_file(), reason="no shipped bounds in this checkout")
@@ -96,5 +97,5 @@ def test_a_changed_decision_is_caught_though_its_cost_is_kept(tmp_path):
         v[k] = v[k] - 0.5
         frame.at[i, "speed"] = v
     _nudged(shipped_bounds.FILE, bad, case, edit)
-    lines = shipped_bounds.check(bad, per_setting=1, signals=("coordinated",), progress=False)
+    lines = shipped_writer.check(bad, per_setting=1, signals=("coordinated",), progress=False)
     assert len(lines) == 1 and "cost plan is not the DP's" in lines[0] and "stored speeds cost" in lines[0]

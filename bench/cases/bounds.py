@@ -45,7 +45,7 @@ class BoundTask:
     insert_time: float = float("nan")  # ego's insertion state, which they fix (``start_speed``)
 
 
-def _solve(task: BoundTask) -> tuple[Any, Any, Any, float]:
+def solve_plans(task: BoundTask) -> tuple[Any, Any, Any, float]:
     """(scenario config, "cost" plan, "energy" plan or None, seconds) of one case."""
     from ecodrive_bench.bench.cases.setting import setting
     from ecodrive_bench.bench.oracle.dp import bound
@@ -85,24 +85,12 @@ def start_speed(cfg: Any, task: BoundTask) -> float:
 
 def solve(task: BoundTask) -> dict[str, Any]:
     """Both bounds of one case (runs in a worker)."""
-    _, cost, eq, wall = _solve(task)
+    _, cost, eq, wall = solve_plans(task)
     return {"signals": task.signals, "case": task.case, "depart_time": task.depart_time, "time_limit": task.time_limit,
             "cost_bound": cost.cost, "bound_energy": cost.energy, "bound_travel_time": cost.travel_time,
             "energy_bound": eq.energy if eq is not None else np.nan,
             "energy_bound_travel_time": eq.travel_time if eq is not None else np.nan,
             "bound_wall_s": wall, "bound_source": SOLVED}
-
-
-def solve_entry(task: BoundTask) -> dict[str, Any]:
-    """Both bounds of one case as a row of the shipped bounds, with the cost plan and mpc's first
-    plan (runs in a worker; ``ecodrive cases --write --bounds``)."""
-    from ecodrive_bench.bench.cases.shipped_bounds import entry
-    from ecodrive_bench.bench.oracle import mpc
-    from ecodrive_bench.bench.oracle.dp import Corridor
-
-    cfg, cost, eq, wall = _solve(task)
-    first = mpc.shippable_first(Corridor.from_config(cfg), cfg, task.depart_time)  # the mpc method's first plan
-    return entry(task.signals, task.case, cfg, task.depart_time, task.time_limit, cost, eq, wall, first)
 
 
 def shipped_row(table: Any, task: BoundTask) -> dict[str, Any] | None:

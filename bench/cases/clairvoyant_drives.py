@@ -1,5 +1,5 @@
-"""The clairvoyant drives of the fixed cases and the held-out corridors' cases, shipped beside them:
-``bench/cases/clairvoyant_drives.parquet``.
+"""The clairvoyant drives of the fixed cases, the held-out corridors' and the real corridors'
+cases, shipped beside them: ``bench/cases/clairvoyant_drives.parquet``.
 
 Planning a case costs ``clairvoyant`` a drive of SUMO's driver, ``ROUNDS`` planned drives and a
 cruise per speed and acceleration cap (a median of 11 s on a loaded core, docs/clairvoyant.md),
@@ -20,7 +20,7 @@ case is planned.
     ecodrive cases --write --clairvoyant [--workers N]   # every set; a set already current is kept
     ecodrive cases --check                               # re-plans a sample (bench.shipped.drives.sample)
 
-(``bench.shipped.cases_command.write_clairvoyant``, ``bench.shipped.drives.check``). The
+(``bench.shipped.drives.write_clairvoyant`` and ``check``). The
 check compares SUMO's driver's time, the lane decisions and the travel time exactly and the
 accelerations and the cost within the cross-host tolerances (``bench.hosts``).
 """
@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 from ecodrive_bench.bench.cases.case import Case
-from ecodrive_bench.bench.io import atomic_file, read_parquet_meta
+from ecodrive_bench.bench.io import read_parquet_meta
 
 FILE = Path(__file__).with_name("clairvoyant_drives.parquet")
 VERSION = 5  # [-] of the planner's drives and their choice: bump with any change that moves one
@@ -59,17 +59,6 @@ def content_sha256(frame: pd.DataFrame) -> str:
     rows = [[[float(x) for x in v] if isinstance(v, (list, np.ndarray)) else (v.item() if isinstance(v, np.generic) else v)
              for v in r] for r in frame[list(COLUMNS)].itertuples(index=False)]
     return hashlib.sha256(json.dumps(rows).encode()).hexdigest()
-
-
-def save(frame: pd.DataFrame, path: Path = FILE) -> None:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    frame = frame[list(COLUMNS)].sort_values(["corridor", "signals", "case"], ignore_index=True)
-    meta = {"version": VERSION, "sha256": content_sha256(frame), "rows": len(frame)}
-    tab = pa.Table.from_pandas(frame, preserve_index=False).replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
-    with atomic_file(path) as f:
-        pq.write_table(tab, f, compression="zstd", compression_level=19)
 
 
 def read(path: Path = FILE) -> pd.DataFrame:
@@ -114,25 +103,3 @@ def about(cfg: Any, case: Case, path: Path = FILE) -> dict[str, Any]:
     driver's time and the set's price of time); {} if not shipped."""
     hit = _row(cfg, case, path)
     return {} if hit is None else {k: (v.item() if hasattr(v, "item") else v) for k, v in hit[2].items()}
-
-
-def case_sets() -> list[tuple[str, str, dict[str, Any] | None, tuple[Case, ...]]]:
-    """Every shipped set: (corridor, signals, scenario overrides or None, cases), the fixed cases'
-    per setting, then each held-out variant's per setting (``bench.cases.heldout``)."""
-    from ecodrive_bench.bench.cases import case, heldout
-    from ecodrive_bench.envs.config import SIGNALS
-
-    fixed = tuple(case.load())
-    sets = [(PAPER, s, None, fixed) for s in SIGNALS]
-    return sets + [(v.name, s, v.scenario, v.cases) for v in heldout.load() for s in SIGNALS]
-
-
-def entry(planned: dict[str, Any], price: float, chosen: int) -> dict[str, Any]:
-    """A row: drive ``chosen`` of a planned case (``bench.shipped.drives.solve``) at its set's ``price``."""
-    c: Case = planned["case"]
-    lateral, accel = zip(*planned["actions"][chosen]) if planned["actions"][chosen] else ((), ())
-    return {"corridor": planned["corridor"], "signals": planned["signals"], "case": c.index, "sumo_seed": c.sumo_seed,
-            "insert_time": float(c.insert_time), "scenario_digest": planned["digest"], "version": VERSION,
-            "cost": float(planned["costs"][chosen]), "travel_time": float(planned["times"][chosen]),
-            "sumo_driver_time": float(planned["limit"]), "time_price": float(price), "rounds": len(planned["costs"]),
-            "lateral": [int(a) for a in lateral], "accel": [float(b) for b in accel]}

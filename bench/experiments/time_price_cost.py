@@ -46,9 +46,9 @@ def main(argv: list[str] | None = None) -> int:
     from ecodrive_bench.bench.args import Parser, int_in
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
     from ecodrive_bench.bench.harness.executors import run_local
-    from ecodrive_bench.bench.shipped.drives import solve
+    from ecodrive_bench.bench.shipped.drives import case_sets, solve
 
-    sets = {f"{corridor}/{s}": (corridor, s, scenario, cases) for corridor, s, scenario, cases in drives.case_sets()}
+    sets = {f"{corridor}/{s}": (corridor, s, scenario, cases) for corridor, s, scenario, cases in case_sets()}
     ap = Parser(description="What each case set's price of time costs clairvoyant (sets re-planned; nothing written).")
     ap.add_argument("--sets", nargs="+", choices=sorted(sets), metavar="CORRIDOR/SIGNALS",
                     help="the sets to re-plan (default: every shipped set with a price above 0); accepted: "

@@ -54,8 +54,9 @@ from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import Unwritable, prune_unwritten, refuse_links
 from ecodrive_bench.bench.runlock import hold_folder
+
+from . import Unwritable, prune_unwritten, refuse_links
 
 DIR_FLAGS = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW
 SCRATCH_MARKER = ".ecodrive-report-scratch"  # in a scratch folder: {"pid", "host"} of the build that made it

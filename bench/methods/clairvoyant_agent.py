@@ -36,15 +36,19 @@ problem. A case planned on its own, with no set, takes its cheapest drive (lambd
 
 On a network corridor (``envs.route``) the same, in the route frame: positions along the route,
 the recorded vehicles those on the route's lanes, a lane their index on the edge they are on
-(``envs.env.EcoDriveEnv.traffic``); its plans start from the speed traffic let the ego insert at,
-and nothing is shipped (every case is planned on its own, lambda 0). There it drives the
-``longitudinal`` action, as ``mpc`` and ``oracle`` do: SUMO's LC2013 keeps the ego on lanes that
-continue its route (a network's lanes end and turn, which the route frame's lane index does not
-follow), and the drives of ``mpc`` and ``oracle`` on the case, which the same env drives exactly
-as their own episodes, are candidates beside its own: with no set planned whole, a case takes its
-cheapest drive (lambda 0), so it never costs more than the cheaper of them on a case, and its
-travel time is not held to SUMO's driver's (a set's price of time would need the set's drives
-planned whole, as the shipped sets are).
+(``envs.env.EcoDriveEnv.traffic``); its plans start from the speed traffic let the ego insert at.
+There it drives the ``longitudinal`` action, as ``mpc`` and ``oracle`` do: SUMO's LC2013 keeps the
+ego on lanes that continue its route (a network's lanes end and turn, which the route frame's lane
+index does not follow). The drives of ``mpc`` and ``oracle`` on the case, planned for the cost
+E + (phi + p) T at each extra price of time p of ``TIME_PRICES`` and driven on the same env
+exactly as their own episodes, are candidates beside its own. At p = 0 they are those methods'
+episodes, so that a case's cheapest drive never costs more than the cheaper of them; the dearer
+prices give faster drives at little more energy (a real network's queues make the free-flow plan
+of least cost lose a green that a slightly quicker one catches), from which a set's price of time
+chooses where its mean time must come down to SUMO's driver's. The real case set's drives are
+shipped like the others (``bench.shipped.drives.case_sets``); both signal settings of a
+network are one problem (``bench.cases.shipped_bounds.problem_digest``), so one set is planned
+per real corridor.
 
 It drives the ``parameterized`` action: the lane decision (the LC2013 mask may refuse it) and the
 acceleration that brings its speed to the plan's next one, through the same safety layer as
@@ -53,6 +57,7 @@ every method.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -83,6 +88,7 @@ CRUISE_SPEEDS = (1.0, 0.95, 0.9, 0.85, 0.8, 0.75, 0.7)  # [-] target speeds of t
 CRUISE_ACCELS = (None, 1.5, 0.75)  # [m/s^2] their acceleration caps (None: a_max, full throttle)
 TOL_V = 0.05  # [m/s] speed drift that leaves the first plan for re-plans (as mpc)
 TOL_X = 0.6  # [m] position drift that does the same (beyond about a row of the global lattice)
+TIME_PRICES = (0.0, 0.5, 1.0, 2.0, 4.0)  # [Wh/s] extra prices of time of the causal planners' candidate drives (networks)
 
 
 class ClairvoyantAgent(NotLearning):
@@ -121,7 +127,7 @@ class ClairvoyantAgent(NotLearning):
         self.env, self.lane_y = env, traffic_lanes(env)
         self.tracks, self.rounds, self.actions, self.expected = None, [], None, {}
         self.case_label = f"case {case.index}"
-        if self.shipped is not None and env.cfg.network is None:
+        if self.shipped is not None:
             self.actions = drives.lookup(env.cfg, case, self.shipped)
             if self.actions is not None:
                 self.expected = drives.about(env.cfg, case, self.shipped)
@@ -154,19 +160,21 @@ class ClairvoyantAgent(NotLearning):
                 self.rounds.append({"round": len(self.rounds) - 1, "cost": round(cost, 4), "time": took,
                                     "recorded": False, "cruise": [share, cap if cap is not None else "a_max"]})
                 tried.append((cost, took, self.taken))
-        if self.cfg.network is not None:  # the causal planners' drives are candidates too
+        if self.cfg.network is not None:  # the causal planners' drives are candidates too, at each price of time
             from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
             from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 
-            for other in (MPCAgent(self.cfg), OracleAgent(self.cfg)):
-                self.other = other
-                try:
-                    _, cost, took = self._drive(env, case, record=False)
-                finally:
-                    self.other = None
-                self.rounds.append({"round": len(self.rounds) - 1, "cost": round(cost, 4), "time": took,
-                                    "recorded": False, "planner": other.name})
-                tried.append((cost, took, self.taken))
+            for price in TIME_PRICES:
+                priced = replace(self.cfg, reward=replace(self.cfg.reward, phi=self.cfg.reward.phi + price))
+                for other in (MPCAgent(priced), OracleAgent(priced)):
+                    self.other = other
+                    try:
+                        _, cost, took = self._drive(env, case, record=False)
+                    finally:
+                        self.other = None
+                    self.rounds.append({"round": len(self.rounds) - 1, "cost": round(cost, 4), "time": took,
+                                        "recorded": False, "planner": other.name, "time_price": price})
+                    tried.append((cost, took, self.taken))
         return tried
 
     def _drive(self, env: Any, case: Case, record: bool = True) -> tuple[Recording | None, float, float]:

@@ -12,8 +12,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from ecodrive_bench.reports import build as report_build
 from ecodrive_bench.bench.io import outdir
+from ecodrive_bench.reports import build as report_build
 from ecodrive_bench.reports.build import build
 from ecodrive_bench.reports.command import main
 

@@ -67,9 +67,9 @@ def test_an_edited_file_is_one_line_and_every_case_is_planned(tmp_path, capsys):
 
 
 def test_a_write_keeps_exactly_the_current_sets():
-    from ecodrive_bench.bench.shipped.cases_command import current_sets
+    from ecodrive_bench.bench.shipped.drives import case_sets, current_sets
 
-    frame, sets = clairvoyant_drives.read(), clairvoyant_drives.case_sets()
+    frame, sets = clairvoyant_drives.read(), case_sets()
     kept, todo = current_sets(frame, sets)
     assert not todo and sum(map(len, kept)) == len(frame)  # the shipped file is current
     g = (frame.corridor != clairvoyant_drives.PAPER) & (frame.signals == "coordinated")

@@ -8,12 +8,13 @@ import pytest
 import sumolib
 
 from ecodrive_bench.bench.cases import real
+from ecodrive_bench.bench.shipped import real_cases
 from ecodrive_bench.envs.network import real_corridors, real_spec
 from ecodrive_bench.envs.route import read_net as _read_net
 
 
 def test_the_shipped_file_is_the_generators_output(capsys):
-    assert real.main(write=False) == 0
+    assert real_cases.main(write=False) == 0
     assert "matches the generator" in capsys.readouterr().out
 
 
@@ -61,13 +62,13 @@ def test_the_route_through_the_most_signals_is_chosen(tmp_path):
                     "--tls.default-type", "static", "--no-turnarounds", "true", "--no-warnings", "true"],
                    cwd=tmp_path, check=True, capture_output=True)
     net = _read_net(tmp_path / "n.net.xml")
-    route = real.most_signals(net)
+    route = real_cases.most_signals(net)
     # both signals crossed, cut after the edge past c (de never taken), the shorter of the ties
     assert route in (["ab", "bc", "cd"], ["ab", "bc", "cs"], ["nb", "bc", "cd"], ["nb", "bc", "cs"])
     lengths = {r: sum(net.getEdge(e).getLength() for e in r) for r in
                (("ab", "bc", "cd"), ("ab", "bc", "cs"), ("nb", "bc", "cd"), ("nb", "bc", "cs"))}
     assert lengths[tuple(route)] == min(lengths.values())
-    assert real.most_signals(net) == route  # deterministic
+    assert real_cases.most_signals(net) == route  # deterministic
 
 
 def test_the_docs_table_is_the_case_sets():

@@ -14,6 +14,7 @@ from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
 from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 from ecodrive_bench.bench.oracle import dp, mpc
+from ecodrive_bench.bench.shipped import dp_bounds as shipped_writer
 from ecodrive_bench.bench.shipped import cases_command as case_files
 
 SIGNALS = "coordinated"
@@ -31,7 +32,7 @@ def solved(tmp_path_factory):
     eq = dp.bound(cfg, DEPART, "energy", time_limit=LIMIT)
     first = mpc.shippable_first(dp.Corridor.from_config(cfg), cfg, DEPART)
     path = tmp_path_factory.mktemp("shipped") / "shipped_bounds.parquet"
-    shipped_bounds.save(pd.DataFrame([shipped_bounds.entry(SIGNALS, 0, cfg, DEPART, LIMIT, plan, eq, 1.5, first)]),
+    shipped_writer.save(pd.DataFrame([shipped_writer.entry(SIGNALS, 0, cfg, DEPART, LIMIT, plan, eq, 1.5, first)]),
                         path)
     return cfg, plan, eq, path, first
 
@@ -128,7 +129,7 @@ def test_mpc_first_plans_of_another_planner_version_miss_and_the_check_says_so(s
     agent = MPCAgent(cfg, shipped=path)
     agent.start(DEPART)
     assert agent.plan.grid.get("source") != "shipped"  # solved
-    lines = shipped_bounds.check(path, signals=(SIGNALS,), progress=False)
+    lines = shipped_writer.check(path, signals=(SIGNALS,), progress=False)
     assert any(f"mpc first plans of planner version {mpc.VERSION - 1}, not {mpc.VERSION}" in line for line in lines)
 
 
@@ -140,7 +141,7 @@ def tampered(src, dst, sha_of_edit: bool, case: int | None = None, column: str =
     i = 0 if case is None else int(np.flatnonzero((frame.case == case) & (frame.signals == SIGNALS))[0])
     frame.loc[i, column] += 1e-6
     if sha_of_edit:
-        shipped_bounds.save(frame, dst)
+        shipped_writer.save(frame, dst)
     else:
         table = pq.read_table(src)
         pq.write_table(table.set_column(table.schema.get_field_index(column), column, [frame[column].to_numpy()]), dst)
@@ -164,10 +165,10 @@ def test_an_edit_is_one_line_and_exit_2(solved, tmp_path, capsys):
 def test_a_value_edited_with_its_digest_is_caught_by_the_check(tmp_path, column, what):
     """An edit that passes the digest is still caught: the DP solves the sampled case again."""
     rows = shipped_bounds.read(shipped_bounds.FILE).frame
-    case = int(shipped_bounds.sample(rows[rows.signals == SIGNALS], 1).case.iloc[0])
+    case = int(shipped_writer.sample(rows[rows.signals == SIGNALS], 1).case.iloc[0])
     bad = tmp_path / "edited.parquet"
     assert tampered(shipped_bounds.FILE, bad, sha_of_edit=True, case=case, column=column) == case
-    lines = shipped_bounds.check(bad, per_setting=1, signals=(SIGNALS,), progress=False)
+    lines = shipped_writer.check(bad, per_setting=1, signals=(SIGNALS,), progress=False)
     assert len(lines) == 1 and f"{SIGNALS} case {case} " in lines[0] and what in lines[0] and "cost " in lines[0]
 
 
@@ -230,7 +231,7 @@ def test_an_edited_row_with_its_digest_recomputed_is_refused_on_lookup(spoil, wo
     for k, v in row.items():
         frame.at[frame.index[i], k] = v
     path = tmp_path / "bounds.parquet"
-    shipped_bounds.save(frame, path)  # its content digest recomputed
+    shipped_writer.save(frame, path)  # its content digest recomputed
     bad = shipped_bounds.read(path)  # the digest holds: the file reads
     cfg = setting(SIGNALS, None)
     assert bad.plan(cfg, float(row["depart_time"])) is None

@@ -104,7 +104,7 @@ def test_a_set_is_chosen_at_its_price():
 @pytest.mark.slow
 def test_the_check_replans_at_the_stored_price_and_finds_a_drift(tmp_path):
     from ecodrive_bench.bench.cases import clairvoyant_drives as drives
-    from ecodrive_bench.bench.shipped.drives import check, sample
+    from ecodrive_bench.bench.shipped.drives import check, sample, save
 
     if not drives.FILE.is_file():
         pytest.skip("no shipped clairvoyant drives")
@@ -115,6 +115,6 @@ def test_the_check_replans_at_the_stored_price_and_finds_a_drift(tmp_path):
     edited = frame.copy()
     at = edited.index[(edited.corridor == r.corridor) & (edited.signals == "uncoordinated") & (edited.case == r.case)]
     edited.loc[at, "sumo_driver_time"] += 1.0
-    drives.save(edited, tmp_path / "drives.parquet")
+    save(edited, tmp_path / "drives.parquet")
     lines = check(tmp_path / "drives.parquet", 0)
     assert len(lines) == 1 and f"{r.corridor} uncoordinated case {int(r.case)}: SUMO's driver's time" in lines[0]

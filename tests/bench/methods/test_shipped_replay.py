@@ -11,6 +11,7 @@ from ecodrive_bench.bench.harness.episode import run_episode
 from ecodrive_bench.bench.methods.clairvoyant_agent import ClairvoyantAgent
 from ecodrive_bench.bench.methods.env import make_env
 from ecodrive_bench.bench.methods.errors import ShippedMismatch
+from ecodrive_bench.bench.shipped import drives as shipped_drives
 
 pytestmark = pytest.mark.skipif(not clairvoyant_drives.FILE.is_file(), reason="no shipped clairvoyant drives")
 SIGNALS = "uncoordinated"
@@ -23,7 +24,7 @@ def _tampered(tmp_path, change):
                      & (frame.case == first.index)][0]
     frame.at[at, "lateral"], frame.at[at, "accel"] = change(list(frame.at[at, "lateral"]), list(frame.at[at, "accel"]))
     path = tmp_path / "drives.parquet"
-    clairvoyant_drives.save(frame, path)  # a valid file: its content digest recomputed
+    shipped_drives.save(frame, path)  # a valid file: its content digest recomputed
     return path, first
 
 
