@@ -10,7 +10,6 @@ from ecodrive_bench.envs.validation import param
 
 from .base import check_config
 
-
 PDQN_NAMES = {False: "prl", True: "mpdqn"}  # the algorithm name of each PDQNConfig.multipass
 
 

@@ -11,6 +11,7 @@ from tqdm import tqdm
 
 from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.io import atomic_csv, atomic_text
+from ecodrive_bench.bench.io.outdir import staged
 from ecodrive_bench.bench.logs.mcaplog import LogError, resolve_log
 from ecodrive_bench.bench.paper import FLEET_SAVING, HDV_TOL, SPEED_LOSS_TOL
 
@@ -31,7 +32,6 @@ from .load import (
     unfinished_warnings,
 )
 from .names import seeded
-from ecodrive_bench.bench.io.outdir import staged
 from .top import TOP
 
 METHOD_ORDER = headline.ORDER  # the registry's order of methods (bench.registry)
