@@ -1,4 +1,4 @@
-"""The clairvoyant drives shipped with the fixed and held-out cases: the file is checked on reading,
+"""The clairvoyant drives shipped with the fixed, held-out and real cases: the file is checked on reading,
 covers every case of every set, each set is no slower than SUMO's driver on average at the least
 price of time that makes it so, and on the CI cases it is the top of the scale against the own
 reference's learned and rule-based methods (``bench/regression/reference/ci.csv``)."""
@@ -7,7 +7,8 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from ecodrive_bench.bench.cases import case, clairvoyant_drives, heldout
+from ecodrive_bench.bench.cases import case, clairvoyant_drives, heldout, real
+from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
 from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.regression.check import CI_CASES, REFERENCE
 
@@ -33,6 +34,22 @@ def test_the_file_covers_every_case_of_every_set_and_answers_its_lookups():
     row = frame[(frame.corridor == clairvoyant_drives.PAPER) & (frame.signals == "uncoordinated") & (frame.case == first.index)]
     assert about["corridor"] == "paper" and about["time_price"] == row.time_price.item() and about["cost"] == row.cost.item()
     assert clairvoyant_drives.about(setting("uncoordinated", {"spacing": 500.0}), first) == {}
+
+
+def test_each_real_corridor_is_one_set_that_answers_both_settings():
+    """A network's own signal programs make both settings one problem: one set per real corridor,
+    whose rows answer a lookup from either setting, and on the paper's corridor the settings differ."""
+    frame = clairvoyant_drives.read()
+    for v in real.variants():
+        rows = frame[frame.corridor == v.name]
+        assert set(rows.signals) == {"coordinated"} and set(rows.case) == {c.index for c in v.cases}
+        digests = {problem_digest(setting(s, v.scenario)) for s in ("coordinated", "uncoordinated")}
+        assert digests == set(rows.scenario_digest)
+        first = v.cases[0]
+        for s in ("coordinated", "uncoordinated"):
+            assert clairvoyant_drives.lookup(setting(s, v.scenario), first) == clairvoyant_drives.lookup(
+                setting("coordinated", v.scenario), first) is not None
+    assert problem_digest(setting("coordinated", None)) != problem_digest(setting("uncoordinated", None))
 
 
 @pytest.mark.parametrize("signals", ["coordinated", "uncoordinated"])
