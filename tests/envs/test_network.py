@@ -156,3 +156,12 @@ def test_lane_frame_and_route_frame_arithmetic():
     # a vehicle 20 m ahead of the origin on that northbound lane, heading north, one lane (3.2 m) to its left
     rows = to_route_frame(np.array([[1.8, 20.0, 0.0, 5.0]]), 5.0, 0.0, 0.0, 1.0)
     np.testing.assert_allclose(rows, [[20.0, 3.2, 90.0, 5.0]], atol=1e-12)
+    # the compiled transform is numpy's arithmetic, bit for bit, on rows in every direction
+    rng = np.random.default_rng(7)
+    others = np.column_stack([rng.uniform(-500, 500, (64, 2)), rng.uniform(0, 360, 64), rng.uniform(4, 12, 64)])
+    cx, cy, dx, dy = 12.5, -40.25, 0.6, -0.8
+    axis = np.degrees(np.arctan2(dx, dy))
+    rx, ry = others[:, 0] - cx, others[:, 1] - cy
+    want = np.column_stack([rx * dx + ry * dy, ry * dx - rx * dy, (others[:, 2] - axis + 90.0) % 360.0, others[:, 3]])
+    assert np.array_equal(to_route_frame(others, cx, cy, dx, dy), want)
+    assert to_route_frame(np.zeros((0, 4)), cx, cy, dx, dy).shape == (0, 4)
