@@ -30,10 +30,12 @@ nox.options.sessions = ["tests", "regression", "crosshost", "lint", "docs", "whe
 
 @nox.session
 def tests(session: nox.Session) -> None:
-    """The test suite (CI runs this)."""
+    """The test suite (CI runs this), on one pytest-xdist worker per core, a test module per worker at
+    a time (``--dist loadscope``: a module's fixtures are built once); ``nox -s tests -- -n 0`` runs
+    it in one process."""
     session.run("ecodrive", "cases", "--check")
     session.run("ecodrive", "cases", "--check", "--family", "real")  # the real corridors against the installed sumo-rl
-    session.run("python", "-m", "pytest", "-q", *session.posargs)
+    session.run("python", "-m", "pytest", "-q", "-n", "auto", "--dist", "loadscope", *session.posargs)
 
 
 def _given(posargs: list[str]) -> argparse.Namespace | None:
