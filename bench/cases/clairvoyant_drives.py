@@ -4,14 +4,16 @@ cases, shipped beside them: ``bench/cases/clairvoyant_drives.parquet``.
 Planning a case costs ``clairvoyant`` a drive of SUMO's driver, ``ROUNDS`` planned drives and a
 cruise per speed and acceleration cap (a median of 11 s on a loaded core, docs/clairvoyant.md),
 against a fraction of a second for every other method's episode. Its choice among them couples
-the cases of a set (a corridor and signal setting: ``case_sets``): the set's price of time
+the cases of a set (a generated corridor and signal setting, or a real corridor: the sets of
+``bench.shipped.drives.case_sets``): the set's price of time
 (``bench.oracle.time_price``) makes its mean travel time no more than SUMO's driver's. So every
 case of every set is planned once and shipped as the chosen drive's actions (lane decision and
 acceleration per step), with the set's price: a run reads them and drives the episode with them,
 the same episode step for step, at the cost of any episode.
 
 A row answers a case only if its key is the case's: ``scenario_digest``
-(``bench.cases.shipped_bounds.problem_digest``: the scenario and the built corridor), the
+(``bench.cases.shipped_bounds.problem_digest``: the scenario and the built corridor; on a network
+the signal setting is not part of it, so a real corridor's row answers both settings), the
 planner's ``VERSION``, and the case's SUMO seed and insertion time. Anything else (another corridor
 or case) is planned in the run, on its own, at a price of 0: the cheapest drive. The table's
 content digest is checked on reading; an edited or damaged file is one line on stderr and every

@@ -7,7 +7,7 @@ of that city's trips; the scenario's own ``.sumocfg`` gives the hour.
 
 For each, the generator chooses **the route that crosses the most signals**: among the
 least-travel-time paths between every pair of edges the passenger class may drive (Dijkstra over
-edges, ``envs.network.shortest``), the one that passes the most distinct signals (a signal that
+edges, ``envs.route.shortest``), the one that passes the most distinct signals (a signal that
 controls a cluster of junctions counts once, however often the path meets it); ties go to the
 shorter path, then to the smaller first and last edge ids. The route is cut
 after the edge that follows its last signal, so the episode ends where the last signal is behind

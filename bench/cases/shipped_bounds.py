@@ -177,7 +177,8 @@ def consistency(plan: dp.Plan, cfg: ScenarioConfig) -> str:
     model's over its speeds, its travel time its steps, its cost E + phi T (``DP_RTOL``). Else what
     is wrong, in a few words. Costs about 0.3 ms a plan: every lookup runs it, so an
     edited row whose digest was recomputed is never a result unless it is still a plan the DP
-    could have made (which ``check``'s re-solve of a sample then compares with the DP's own)."""
+    could have made (which ``bench.shipped.dp_bounds.check``'s re-solve of a sample then compares
+    with the DP's own)."""
 
     dt, v, x = cfg.step_length, plan.v, plan.x
     if len(v) < 2 or len(x) != len(v) or not (np.isfinite(v).all() and np.isfinite(x).all()):

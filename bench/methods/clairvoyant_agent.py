@@ -29,8 +29,8 @@ again, since a case is deterministic. Which drive is chosen couples the cases of
 and signal setting): the reference is the least mean cost E + phi T whose mean travel time is no
 more than SUMO's driver's, and a set's price of time lambda (``bench.oracle.time_price``) makes
 each case take the drive of least E + (phi + lambda) T; lambda is 0 where the cheapest drives
-already meet SUMO's driver's mean time. The fixed cases' and the held-out corridors' sets are
-planned whole and their chosen drives shipped (``bench.cases.clairvoyant_drives``; planned by
+already meet SUMO's driver's mean time. The fixed cases', the held-out corridors' and the real
+corridors' sets are planned whole and their chosen drives shipped (``bench.cases.clairvoyant_drives``; planned by
 ``bench.shipped.drives``): ``prepare`` reads the case's actions instead of planning, where they answer its
 problem. A case planned on its own, with no set, takes its cheapest drive (lambda 0).
 
@@ -102,7 +102,7 @@ class ClairvoyantAgent(NotLearning):
         self.cfg = cfg
         if cfg.network is not None:  # a network corridor: SUMO keeps the ego on its route's lanes (module docstring)
             self.action_interface = "longitudinal"
-        self.shipped = shipped  # the shipped drives of the fixed cases (bench.cases.clairvoyant_drives); None: plan
+        self.shipped = shipped  # the shipped drives of the case sets (bench.cases.clairvoyant_drives); None: plan
         self.cor = Corridor.from_config(cfg)
         self.env: Any = None
         self.tracks: Tracks | None = None  # the recorded future the next drive uses

@@ -150,19 +150,26 @@ def write_clairvoyant(path: Path, workers: int, progress: bool = True) -> list[s
 
 
 def sample(frame, per_setting: int = drives.CHECK_PER_SETTING, seed: int = drives.CHECK_SEED) -> list[tuple[str, Any]]:
-    """The rows ``check`` re-plans: ``per_setting`` of each signal setting drawn over all its sets
-    (``seed``: ``ecodrive cases --check`` draws a new one each run and prints it), and one more of a
-    set with a positive price of time where the draw holds none, so that a choice the price moved
-    is checked too."""
+    """The rows ``check`` re-plans: ``per_setting`` of each signal setting drawn over its generated
+    corridors' sets (``seed``: ``ecodrive cases --check`` draws a new one each run and prints it),
+    and one more of a set with a positive price of time where the draw holds none, so that a choice
+    the price moved is checked too; then ``per_setting`` drawn over the real corridors' sets (a
+    real case costs 2-6 generated ones to plan, so no priced one is added there)."""
+    from ecodrive_bench.bench.cases.real import SCENARIOS
+
     rng = np.random.default_rng(seed)
     out = []
-    for s in sorted(set(frame.signals)):
-        rows = frame[frame.signals == s].sort_values(["corridor", "case"], ignore_index=True)
-        drawn = sorted(rng.choice(len(rows), size=min(per_setting, len(rows)), replace=False).tolist())
-        priced = rows.index[rows.time_price > 0].tolist()
-        if priced and not set(drawn) & set(priced):
-            drawn.append(int(rng.choice(priced)))
-        out += [(s, r) for r in rows.iloc[drawn].itertuples(index=False)]
+    for is_real in (False, True):
+        for s in sorted(set(frame.signals)):
+            rows = frame[(frame.signals == s) & (frame.corridor.isin(SCENARIOS) == is_real)]
+            if not len(rows):
+                continue
+            rows = rows.sort_values(["corridor", "case"], ignore_index=True)
+            drawn = sorted(rng.choice(len(rows), size=min(per_setting, len(rows)), replace=False).tolist())
+            priced = rows.index[rows.time_price > 0].tolist()
+            if priced and not is_real and not set(drawn) & set(priced):
+                drawn.append(int(rng.choice(priced)))
+            out += [(s, r) for r in rows.iloc[drawn].itertuples(index=False)]
     return out
 
 

@@ -2,6 +2,7 @@
 route drives end to end in the route frame, and every bad spec is one line naming the value."""
 from __future__ import annotations
 
+import math
 import os
 import re
 import subprocess
@@ -160,7 +161,7 @@ def test_lane_frame_and_route_frame_arithmetic():
     rng = np.random.default_rng(7)
     others = np.column_stack([rng.uniform(-500, 500, (64, 2)), rng.uniform(0, 360, 64), rng.uniform(4, 12, 64)])
     cx, cy, dx, dy = 12.5, -40.25, 0.6, -0.8
-    axis = np.degrees(np.arctan2(dx, dy))
+    axis = math.degrees(math.atan2(dx, dy))
     rx, ry = others[:, 0] - cx, others[:, 1] - cy
     want = np.column_stack([rx * dx + ry * dy, ry * dx - rx * dy, (others[:, 2] - axis + 90.0) % 360.0, others[:, 3]])
     assert np.array_equal(to_route_frame(others, cx, cy, dx, dy), want)
