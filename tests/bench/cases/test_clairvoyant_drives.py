@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 
 from ecodrive_bench.bench.cases import case, clairvoyant_drives, heldout, real
-from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
 from ecodrive_bench.bench.cases.setting import setting
+from ecodrive_bench.bench.cases.shipped_bounds import problem_digest
 from ecodrive_bench.bench.regression.check import CI_CASES, REFERENCE
 
 pytestmark = pytest.mark.skipif(not clairvoyant_drives.FILE.is_file(), reason="no shipped clairvoyant drives")

@@ -14,8 +14,8 @@ from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.methods.mpc_agent import MPCAgent
 from ecodrive_bench.bench.methods.oracle_agent import OracleAgent
 from ecodrive_bench.bench.oracle import dp, mpc
-from ecodrive_bench.bench.shipped import dp_bounds as shipped_writer
 from ecodrive_bench.bench.shipped import cases_command as case_files
+from ecodrive_bench.bench.shipped import dp_bounds as shipped_writer
 
 SIGNALS = "coordinated"
 DEPART = 247.0  # [s] case 0's departure on the paper's coordinated corridor
