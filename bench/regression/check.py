@@ -108,9 +108,13 @@ def against_record(rows: list[tuple[str, str, str]], record: dict[str, str]) -> 
 
 
 def record_rows(now: list[tuple[str, str, str]], earlier: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
-    """The claims record to write: this run's checked claims, then the earlier record's rows for
-    the claims this run did not check (``--no-mixed`` keeps the recorded mixed-traffic claims)."""
+    """The claims record to write: this run's checked claims, then, where it left some unchecked,
+    the earlier record's rows for the claims it did not check (``--no-mixed`` keeps the recorded
+    mixed-traffic claims). A run that checked every claim writes its own rows alone, so a claim
+    that was renamed or dropped leaves no stale row."""
     checked = [r for r in now if r[1] != "NOT CHECKED"]
+    if len(checked) == len(now):
+        return checked
     names = {r[0] for r in checked}
     return checked + [r for r in earlier if r[0] not in names and r[1] != "NOT CHECKED"]
 

@@ -70,6 +70,7 @@ def test_a_reference_written_without_the_mixed_cells_keeps_their_recorded_claims
     now = [("a", "FAIL", "new"), ("mixed-traffic claims", "NOT CHECKED", "--no-mixed given")]
     assert record_rows(now, earlier) == [("a", "FAIL", "new"), ("mixed x", "FAIL", "stalls")]
     assert record_rows(now + [("mixed x", "PASS", "fixed")], earlier)[-1] == ("mixed x", "PASS", "fixed")
+    assert record_rows([("a", "PASS", "new")], earlier) == [("a", "PASS", "new")]  # all checked: no stale row kept
 
 
 def test_a_shipped_policy_that_cannot_drive_is_one_error_line(tmp_path, monkeypatch, capsys):
