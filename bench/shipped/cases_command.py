@@ -98,8 +98,8 @@ def clairvoyant(prog: str, write: bool, workers: int, seed: int | None = None) -
     for line in lines:
         fail(prog, line)
     if not lines and not write:
-        print(f"{path.name} matches the planner on the sample ({drives.CHECK_PER_SETTING} case per setting, "
-              "and one of a set with a price of time)")
+        print(f"{path.name} matches the planner on the sample ({drives.CHECK_PER_SETTING} case per setting and one "
+              f"of a set with a price of time on the generated corridors, {drives.CHECK_PER_SETTING} on the real ones)")
     return 2 if lines else 0
 
 
