@@ -40,6 +40,7 @@ import numpy as np
 
 from ecodrive_bench.bench.args import InputError, read_json
 from ecodrive_bench.bench.cases.case import INSERT_RANGE, SEED_BOUND, Case, CaseError, check_cases
+from ecodrive_bench.bench.io import write_or_check
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, ScenarioConfig
 from ecodrive_bench.envs.family import HELDOUT_FILE
 
@@ -177,12 +178,9 @@ def main(write: bool, path: Path | None = None) -> int:
     """``ecodrive cases --generalisation --write|--check``."""
     path = FAMILY_FILE if path is None else path
     data = generate()
-    if write:
-        path.write_text(text(data))
-        print(f"wrote {len(data['variants'])} variants x {data['cases_per_variant']} cases to {path}")
-        return 0
-    ok = path.is_file() and path.read_text() == text(data)
-    print(f"{path.name} matches the generator" if ok else f"{path.name} differs from the generator")
+    ok = write_or_check(path, text(data), write,
+                        f"wrote {len(data['variants'])} variants x {data['cases_per_variant']} cases to {path}",
+                        f"{path.name} matches the generator", f"{path.name} differs from the generator")
     return 0 if ok else 1
 
 

@@ -25,6 +25,7 @@ from ecodrive_bench.bench.args import InputError
 from ecodrive_bench.bench.cases import heldout
 from ecodrive_bench.bench.cases.case import INSERT_RANGE, Case, CaseError, check_cases
 from ecodrive_bench.bench.cases.heldout import CYCLES, FLOW_RANGE, JUNCTIONS, LANES, draw_family
+from ecodrive_bench.bench.io import write_or_check
 from ecodrive_bench.envs.config import SIGNALS, ConfigError, ScenarioConfig, diff
 from ecodrive_bench.envs.family import TRAIN_FILE, Corridor, read
 
@@ -109,11 +110,7 @@ def main(write: bool, path: Path | None = None) -> int:
         print(f"the training family overlaps the held-out family: {line}")
     if bad:
         return 1
-    if write:
-        path.write_text(text(data))
-        print(f"wrote {N_TRAIN} training and {N_VALIDATION} validation corridors to {path}")
-        return 0
-    ok = path.is_file() and path.read_text() == text(data)
-    print(f"{path.name} matches the generator and shares no corridor with the held-out family" if ok
-          else f"{path.name} differs from the generator")
+    ok = write_or_check(path, text(data), write, f"wrote {N_TRAIN} training and {N_VALIDATION} validation corridors to {path}",
+                        f"{path.name} matches the generator and shares no corridor with the held-out family",
+                        f"{path.name} differs from the generator")
     return 0 if ok else 1

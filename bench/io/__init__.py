@@ -130,6 +130,18 @@ def atomic_text(text: str, path: Path) -> None:
     atomic_bytes(text.encode(), path)
 
 
+def write_or_check(path: Path, text: str, write: bool, wrote: str, matches: str, differs: str) -> bool:
+    """A generated file's ``text`` written to ``path`` (atomically; prints ``wrote``), or checked
+    against it (prints ``matches`` or ``differs``): whether it is, or now is, the generator's."""
+    if write:
+        atomic_text(text, path)
+        print(wrote)
+        return True
+    ok = path.is_file() and path.read_text() == text
+    print(matches if ok else differs)
+    return ok
+
+
 def atomic_json(obj: Any, path: Path, **kw: Any) -> None:
     atomic_text(json.dumps(obj, indent=1, **kw) + "\n", path)
 

@@ -28,6 +28,7 @@ from ecodrive_bench.bench import registry
 from ecodrive_bench.bench.args import InputError, Parser, fail, int_in
 from ecodrive_bench.bench.cases import case, train_family
 from ecodrive_bench.bench.hosts import DP_RTOL
+from ecodrive_bench.bench.io import write_or_check
 
 
 def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
@@ -73,13 +74,11 @@ def main(argv: list[str] | None = None, bounds_file: Path | None = None) -> int:
     if args.clairvoyant:
         return clairvoyant(ap.prog, args.write, args.workers, seed)
     data = case.generate()
-    text = json.dumps(data, indent=1) + "\n"
+    ok = write_or_check(case.CASES_FILE, json.dumps(data, indent=1) + "\n", args.write,
+                        f"wrote {len(data['cases'])} cases to {case.CASES_FILE}", "cases.json matches the generator",
+                        "cases.json differs from the generator")
     if args.write:
-        case.CASES_FILE.write_text(text)
-        print(f"wrote {len(data['cases'])} cases to {case.CASES_FILE}")
         return 0
-    ok = case.CASES_FILE.exists() and case.CASES_FILE.read_text() == text
-    print("cases.json matches the generator" if ok else "cases.json differs from the generator")
     return (bounds(ap.prog, False, args.workers, bounds_file, seed) or clairvoyant(ap.prog, False, 1, seed)
             or (0 if ok else 1))
 

@@ -21,6 +21,7 @@ from ecodrive_bench.bench.cases.real import (
     SOURCE,
     VERSION,
 )
+from ecodrive_bench.bench.io import write_or_check
 from ecodrive_bench.envs.network import REAL_FILE, resco_folder
 from ecodrive_bench.envs.route import EGO_CLASS, links, path_to, programs, read_net, route_of, tree
 
@@ -97,12 +98,8 @@ def main(write: bool, path: Path | None = None) -> int:
     """``ecodrive cases --family real --write|--check``: 0 as generated; 1 it differs."""
     path = REAL_FILE if path is None else path
     data = generate()
-    if write:
-        path.write_text(text(data))
-        n = sum(len(c["cases"]) for c in data["corridors"])
-        print(f"wrote {len(data['corridors'])} real corridors, {n} cases, to {path}")
-        return 0
-    ok = path.is_file() and path.read_text() == text(data)
-    print(f"{path.name} matches the generator and the installed sumo-rl's files" if ok
-          else f"{path.name} differs from the generator (or the installed sumo-rl's files differ)")
+    n = sum(len(c["cases"]) for c in data["corridors"])
+    ok = write_or_check(path, text(data), write, f"wrote {len(data['corridors'])} real corridors, {n} cases, to {path}",
+                        f"{path.name} matches the generator and the installed sumo-rl's files",
+                        f"{path.name} differs from the generator (or the installed sumo-rl's files differ)")
     return 0 if ok else 1
