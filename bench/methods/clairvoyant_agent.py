@@ -30,9 +30,10 @@ and signal setting): the reference is the least mean cost E + phi T whose mean t
 more than SUMO's driver's, and a set's price of time lambda (``bench.oracle.time_price``) makes
 each case take the drive of least E + (phi + lambda) T; lambda is 0 where the cheapest drives
 already meet SUMO's driver's mean time. The fixed cases', the held-out corridors' and the real
-corridors' sets are planned whole and their chosen drives shipped (``bench.cases.clairvoyant_drives``; planned by
-``bench.shipped.drives``): ``prepare`` reads the case's actions instead of planning, where they answer its
-problem. A case planned on its own, with no set, takes its cheapest drive (lambda 0).
+corridors' sets are planned whole and their chosen drives shipped
+(``bench.cases.clairvoyant_drives``; planned by ``bench.shipped.drives``): ``prepare`` reads the
+case's actions instead of planning, where they answer its problem. A case planned on its own,
+with no set, takes its cheapest drive (lambda 0).
 
 On a network corridor (``envs.route``) the same, in the route frame: positions along the route,
 the recorded vehicles those on the route's lanes, a lane their index on the edge they are on
