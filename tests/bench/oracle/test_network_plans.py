@@ -59,3 +59,28 @@ def test_one_green_window_reads_as_the_generated_form():
     windows = replace(cor, windows_ms=(((0, 30000),), ((0, 45000),)))
     t = np.arange(0.0, 400.0, 0.5)
     assert np.array_equal(cor.green(t, 1.0), windows.green(t, 1.0))
+
+
+@pytest.mark.parametrize("overrides", [{"signals": "coordinated"}, {"signals": "uncoordinated"},
+                                       {"signals": "coordinated", "lanes": 3, "n_intersections": 4,
+                                        "spacings": [300.0, 610.0, 450.0], "junction_offsets": [0.0, 17.0, 55.0, 3.0],
+                                        "junction_cycles": [75.0] * 4, "junction_greens": [30.0, 41.0, 27.0, 44.0]}])
+def test_the_generated_arterial_read_as_a_route_is_its_corridor(overrides):
+    """The generated arterial's own net and programs read through ``envs.route`` give the corridor the
+    DP reads of it (``Corridor.from_config``): the same start, stop lines and end within float
+    summation (1e-9 m), the same offsets and cycles, and one green window (0, green] per cycle: the
+    route frame holds the generated corridors as one kind of network corridor."""
+    from ecodrive_bench.envs.route import programs, read_net, route_of
+    from ecodrive_bench.envs.scenario import build
+
+    cfg = ScenarioConfig.from_dict(overrides)
+    files = build(cfg)
+    cor = Corridor.from_config(cfg)
+    route = route_of(read_net(files.net), list(dict.fromkeys([*files.arterial_edges, files.exit_edge])),
+                     programs(files.additional))
+    c = route.crossings
+    assert len(c) == len(cor.stop_lines) == cfg.n_intersections
+    np.testing.assert_allclose([x.stop_line for x in c], cor.stop_lines, rtol=0, atol=1e-9)
+    assert abs(route.offsets[-1] - cor.x_end) < 1e-9 and min(route.lengths[0], cfg.vehicle_length + 0.1) == cor.x0
+    assert tuple(x.offset_ms for x in c) == cor.offsets_ms and tuple(x.cycle_ms for x in c) == cor.cycles_ms
+    assert tuple(x.windows_ms for x in c) == tuple(((0, g),) for g in cor.greens_ms)
