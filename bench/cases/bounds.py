@@ -128,7 +128,9 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
     """``results`` with the bound columns of its case, reading what the shipped bounds answer
     (``shipped``: their file, default ``bench.cases.shipped_bounds.FILE``) and solving (with
     ``runner(tasks, workers, fn)``, an executor of ``bench.harness.executors``) the rest of what
-    ``bounds.parquet`` lacks, on the run's ``scenario`` (overrides; one per run folder)."""
+    ``bounds.parquet`` lacks, on the run's ``scenario`` (overrides; one per run folder). On a network
+    corridor both signal settings pose one problem (``shipped_bounds.problem_digest``): a case with
+    the same departure and baseline time in both is solved once, and its row written for each."""
     from ecodrive_bench.bench.cases import shipped_bounds
 
     path = run_dir / "bounds.parquet"
@@ -146,12 +148,17 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
             new = pd.DataFrame(rows, columns=COLUMNS)
             atomic_parquet(pd.concat([done, new], ignore_index=True) if len(done) else new, path)
 
+        twins: dict[tuple, list[BoundTask]] = {}  # a network's settings pose one problem per case: solved once
+        for t in todo:
+            twins.setdefault((t.case, t.depart_time, t.time_limit) if network else (t.signals, t.case), []).append(t)
+        unique = [ts[0] for ts in twins.values()]
         if rows:
             save()
-        with progress_bar(total=len(rows) + len(todo), initial=len(rows), desc="bounds", unit="case",
+        with progress_bar(total=len(rows) + len(unique), initial=len(rows), desc="bounds", unit="case",
                           enabled=progress) as bar:
-            for row in runner(todo, workers, solve) if todo else ():
-                rows.append(row)
+            for row in runner(unique, workers, solve) if unique else ():
+                key = (row["case"], row["depart_time"], row["time_limit"]) if network else (row["signals"], row["case"])
+                rows += [{**row, "signals": t.signals} for t in twins[key]]
                 save()
                 bar.update(1)
         done = pd.read_parquet(path)

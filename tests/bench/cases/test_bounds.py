@@ -104,3 +104,29 @@ def test_the_manifest_measures_the_floor_and_every_commands_wall_time(tmp_path, 
     assert first["phases_s"]["before"] >= age > second["phases_s"]["before"]
     assert man["command_wall_all_commands_s"] == pytest.approx(first["command_wall_s"] + second["command_wall_s"],
                                                                abs=0.02)
+
+
+@pytest.mark.parametrize("scenario, solved", [({"network": "cologne3"}, 2), (None, 4)])
+def test_a_networks_bound_is_solved_once_for_both_settings(tmp_path, scenario, solved):
+    """On a network both settings pose one problem: a case whose departure and baseline time agree in
+    both is solved once and its row written for each; on the generated arterial each setting's."""
+    from ecodrive_bench.bench.cases import bounds
+
+    results = pd.DataFrame([{"method": "baseline", "signals": s, "case": c, "depart_time": 500.0 + c,
+                             "travel_time": 100.0 + c, "terminated": True, "seed": 7 + c, "insert_time": 490.0 + c}
+                            for s in ("coordinated", "uncoordinated") for c in (0, 1)])
+    asked = []
+
+    def runner(tasks, workers, fn):
+        asked.extend(tasks)
+        for t in tasks:  # a stand-in for the DP: the task's own numbers
+            yield {"signals": t.signals, "case": t.case, "depart_time": t.depart_time, "time_limit": t.time_limit,
+                   "cost_bound": 1.0 + t.case, "bound_energy": 0.5, "bound_travel_time": 90.0, "energy_bound": 0.4,
+                   "energy_bound_travel_time": 95.0, "bound_wall_s": 0.0, "bound_source": bounds.SOLVED}
+
+    out = bounds.attach(tmp_path, results, 1, runner, scenario=scenario, progress=False,
+                        shipped=tmp_path / "none.parquet")
+    assert len(asked) == solved
+    assert out.cost_bound.tolist() == [1.0 + c for c in out.case]  # every row of both settings has its case's bound
+    written = pd.read_parquet(tmp_path / "bounds.parquet")
+    assert sorted(zip(written.signals, written.case)) == sorted(zip(results.signals, results.case))
