@@ -11,7 +11,7 @@ traffic may slow: each case is reset once to read it, and the bounds start there
 whose problem the bounds shipped with the fixed cases answer (``bench.cases.shipped_bounds``:
 same scenario, DP version and grid, departure and time limit) is read from there, not solved;
 its row says so in ``bound_source`` ("shipped", else "solved") and keeps in ``bound_wall_s`` the
-DP's seconds where it was solved.
+DP's seconds where it was solved (NaN in the other setting's row of a network case, solved once).
 """
 from __future__ import annotations
 
@@ -158,7 +158,8 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
                           enabled=progress) as bar:
             for row in runner(unique, workers, solve) if unique else ():
                 key = (row["case"], row["depart_time"], row["time_limit"]) if network else (row["signals"], row["case"])
-                rows += [{**row, "signals": t.signals} for t in twins[key]]
+                rows += [{**row, "signals": t.signals, **({"bound_wall_s": float("nan")} if i else {})}
+                         for i, t in enumerate(twins[key])]  # a twin's row took no DP time of its own
                 save()
                 bar.update(1)
         done = pd.read_parquet(path)

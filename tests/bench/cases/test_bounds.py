@@ -130,3 +130,4 @@ def test_a_networks_bound_is_solved_once_for_both_settings(tmp_path, scenario, s
     assert out.cost_bound.tolist() == [1.0 + c for c in out.case]  # every row of both settings has its case's bound
     written = pd.read_parquet(tmp_path / "bounds.parquet")
     assert sorted(zip(written.signals, written.case)) == sorted(zip(results.signals, results.case))
+    assert written.bound_wall_s.isna().sum() == len(written) - solved  # the twins' rows took no DP time
