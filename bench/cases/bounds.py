@@ -148,16 +148,19 @@ def attach(run_dir: Path, results: pd.DataFrame, workers: int, runner,
             new = pd.DataFrame(rows, columns=COLUMNS)
             atomic_parquet(pd.concat([done, new], ignore_index=True) if len(done) else new, path)
 
-        twins: dict[tuple, list[BoundTask]] = {}  # a network's settings pose one problem per case: solved once
+        def problem(signals: str, case: int, depart: float, limit: float) -> tuple:
+            return (case, depart, limit) if network else (signals, case)  # a network's settings: one problem
+
+        twins: dict[tuple, list[BoundTask]] = {}  # the tasks of each problem, solved once
         for t in todo:
-            twins.setdefault((t.case, t.depart_time, t.time_limit) if network else (t.signals, t.case), []).append(t)
+            twins.setdefault(problem(t.signals, t.case, t.depart_time, t.time_limit), []).append(t)
         unique = [ts[0] for ts in twins.values()]
         if rows:
             save()
         with progress_bar(total=len(rows) + len(unique), initial=len(rows), desc="bounds", unit="case",
                           enabled=progress) as bar:
             for row in runner(unique, workers, solve) if unique else ():
-                key = (row["case"], row["depart_time"], row["time_limit"]) if network else (row["signals"], row["case"])
+                key = problem(row["signals"], row["case"], row["depart_time"], row["time_limit"])
                 rows += [{**row, "signals": t.signals, **({"bound_wall_s": float("nan")} if i else {})}
                          for i, t in enumerate(twins[key])]  # a twin's row took no DP time of its own
                 save()

@@ -9,6 +9,7 @@ import pytest
 from ecodrive_bench.bench.cases import clairvoyant_drives, real
 from ecodrive_bench.bench.cases.setting import setting
 from ecodrive_bench.bench.harness.episode import run_episode
+from ecodrive_bench.bench.hosts import ENERGY_RTOL, close
 from ecodrive_bench.bench.methods import clairvoyant_agent
 from ecodrive_bench.bench.methods.clairvoyant_agent import TIME_PRICES, ClairvoyantAgent
 from ecodrive_bench.bench.methods.env import make_env
@@ -34,7 +35,7 @@ def test_a_real_corridors_shipped_drive_replays_in_either_setting(signals, tmp_p
     finally:
         env.close()
     assert row["travel_time"] == about["travel_time"] and row["terminated"] and row["collisions"] == 0
-    assert abs(row["energy"] + cfg.reward.phi * row["travel_time"] - about["cost"]) < 1e-6 * about["cost"]
+    assert close(row["energy"] + cfg.reward.phi * row["travel_time"], about["cost"], ENERGY_RTOL)
 
 
 def _cost(env, agent, case):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ecodrive_bench.bench.oracle import mpc
-from ecodrive_bench.bench.oracle.corridor import Corridor
+from ecodrive_bench.bench.oracle.corridor import POSITION_EPS, Corridor
 from ecodrive_bench.bench.oracle.dp import Grid, solve
 from ecodrive_bench.envs.config import ScenarioConfig
 
@@ -81,6 +81,6 @@ def test_the_generated_arterial_read_as_a_route_is_its_corridor(overrides):
     c = route.crossings
     assert len(c) == len(cor.stop_lines) == cfg.n_intersections
     np.testing.assert_allclose([x.stop_line for x in c], cor.stop_lines, rtol=0, atol=1e-9)
-    assert abs(route.offsets[-1] - cor.x_end) < 1e-9 and min(route.lengths[0], cfg.vehicle_length + 0.1) == cor.x0
+    assert abs(route.offsets[-1] - cor.x_end) < 1e-9 and min(route.lengths[0], cfg.vehicle_length + POSITION_EPS) == cor.x0
     assert tuple(x.offset_ms for x in c) == cor.offsets_ms and tuple(x.cycle_ms for x in c) == cor.cycles_ms
     assert tuple(x.windows_ms for x in c) == tuple(((0, g),) for g in cor.greens_ms)
