@@ -48,7 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     from ecodrive_bench.bench.runlock import InUse
 
     from . import claims, headline, real
-    from .build import _manifest, build
+    from .build import build
+    from .inputs import manifest
     from .load import RunError, load_run
 
     real_only = real.present(args.run_dir) and not (args.run_dir / "results.parquet").is_file()
@@ -63,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
             return fail(ap.prog, f"--readme {args.readme}: not a UTF-8 text file")
         except ValueError as e:
             return fail(ap.prog, f"--readme {e}")
-        other = "" if real_only else claims.overrides_text(_manifest(args.run_dir).get("scenario_overrides") or {})
+        other = "" if real_only else claims.overrides_text(manifest(args.run_dir).get("scenario_overrides") or {})
         if other:
             return fail(ap.prog, f"--readme: this run's scenario is not the paper's ({other}); the headline sets "
                                  f"the paper's numbers beside the run's: give a run on the paper's scenario")

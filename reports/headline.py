@@ -41,7 +41,8 @@ def share_text(row) -> str:
 
 def phis(results: pd.DataFrame, manifest: dict) -> dict[str, float]:
     """The reward's phi [Wh/s] of each setting in the run (its manifest's scenario; 1 if absent)."""
-    return {s: manifest.get("scenario", {}).get(s, {}).get("reward", {}).get("phi", 1.0) for s in set(results.signals)}
+    return {s: manifest.get("scenario", {}).get(s, {}).get("reward", {}).get("phi", 1.0)
+            for s in sorted(set(results.signals))}  # sorted: a set's order changes with the process's hash seed
 
 
 def headroom_sentence(row: Any) -> str:

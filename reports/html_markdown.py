@@ -1,8 +1,9 @@
-"""The further experiments' markdown (``reports.experiments``) as HTML for the report page, by
-Python-Markdown (a well-kept parser: tables, escaped pipes, code and emphasis as CommonMark-like
-markdown renders them; the project no longer converts markdown by hand): headings as anchored
-sections, paragraphs, lists, tables (change columns as signed percents, claim statuses as badges)
-and images as captioned figures."""
+"""A section's markdown as the page's HTML, by Python-Markdown (its ``tables`` extension; raw HTML
+in the markdown is shown as text, never passed through) and one Treeprocessor for the page's
+styling: each table scrolls in its own box with its cells formatted (a method by its display name,
+numbers with a true minus sign, an en dash for a value that does not exist, change columns as
+signed percents, Table 4's improvements coloured by their sign, claim statuses as badges and their
+rows marked), each image alone in a paragraph a captioned figure, each ``##`` heading anchored."""
 from __future__ import annotations
 
 import re
@@ -12,9 +13,10 @@ from pathlib import Path
 import markdown
 from markdown.treeprocessors import Treeprocessor
 
-from .html_parts import DASH, MINUS, STATUS_CLASS, Figure, badge, esc, figure, missing, pct
+from .html_parts import DASH, MINUS, STATUS_CLASS, Figure, badge, esc, figure, missing, pct, signed_class
+from .names import label
 
-# ---------------------------------------------------------------- the experiments' markdown
+# ---------------------------------------------------------------- the figures' captions
 EXPERIMENT_CAPTIONS = {
     "reward study": "<b>fig:rwd_compare.</b> Energy [Wh] (left) and travel time [s] (right) of each training "
                     "episode, smoothed as in the paper (D<sub>k</sub> = 0.98 D<sub>k\u22121</sub> + 0.02 d<sub>k</sub>), "
@@ -51,6 +53,8 @@ def experiment_caption(title: str) -> str:
 
 _NUM = re.compile(r"^[+\-\u2212]?\d[\d,]*(\.\d+)?(e[+\-]?\d+)?%?$")
 _CHANGE = re.compile(r"(^|_)change(_|$)")  # a column of changes (fractions): all_energy_change, ..._change_mean
+SIGNED = ("imp.",)  # Table 4's improvements on the baseline: + is better (the published ones stay uncoloured)
+DISABLED = {"preprocessors": ("html_block",), "inlinePatterns": ("html", "autolink", "automail")}
 
 
 def md_cell(text: str, column: str) -> tuple[str, str]:
@@ -68,38 +72,67 @@ def md_cell(text: str, column: str) -> tuple[str, str]:
                 return pct(float(t), 0), "num"
             except ValueError:
                 pass
-        return esc(t.replace("-", MINUS)), "num"
+        cls = "num"
+        if column in SIGNED and t.endswith("%"):
+            cls = f"num {signed_class(float(t.rstrip('%').replace(',', '')) / 100)}".strip()
+        return esc(t.replace("-", MINUS)), cls
     return "", ""
 
 
-class _Page(Treeprocessor):
-    """After Python-Markdown's inline pass: each table wrapped to scroll, its plain cells formatted
-    (``md_cell``), each image alone in a paragraph a captioned figure (``figs`` by file name), each
-    ``##`` heading a section with an anchor (``toc``)."""
+def _slug(title: str) -> str:
+    return "x-" + re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-")
 
-    def __init__(self, md: markdown.Markdown, figs: list[Figure], toc: list[tuple[str, str]]) -> None:
+
+def short_title(title: str) -> str:
+    """A heading without its parenthesis: "Mixed traffic (fig:dd, fig:avg)" -> "Mixed traffic"."""
+    return re.sub(r"\s*\(.*\)$", "", title)
+
+
+class _Page(Treeprocessor):
+    """After Python-Markdown's inline pass: tables formatted and wrapped to scroll, images as
+    captioned figures (``figs`` by file name), the ``#`` heading dropped (the page has its own), the
+    first ``##`` heading the section's (``anchor``), each later one a section of its own; every
+    ``##`` heading an (anchor, title) of ``toc``."""
+
+    def __init__(self, md: markdown.Markdown, figs: list[Figure], toc: list[tuple[str, str]],
+                 anchor: str | None, prefix: str) -> None:
         super().__init__(md)
-        self.by_name, self.toc = {f.path.name: f for f in figs}, toc
+        self.by_name, self.toc, self.anchor, self.prefix = {f.path.name: f for f in figs}, toc, anchor, prefix
 
     def _raw(self, html_text: str) -> str:
         return self.md.htmlStash.store(html_text)
 
-    def run(self, root: etree.Element) -> None:
-        for table in root.iter("table"):
-            table.set("class", "md")
-            head = [(th.text or "") for th in table.iter("th")]
-            for row in table.iter("tr"):
-                for i, cell in enumerate(c for c in row if c.tag == "td"):
-                    if len(cell):
-                        continue  # code or bold inside: as the markdown renders it
-                    out, cls = md_cell(cell.text or "", head[i] if i < len(head) else "")
-                    if out:
-                        cell.text = self._raw(out)
-                    if cls:
-                        cell.set("class", cls)
-            for th in table.iter("th"):
+    def _table(self, table: etree.Element, n: int) -> None:
+        table.set("class", "md")
+        table.set("id", f"{self.prefix}-table" + (f"-{n}" if n > 1 else ""))
+        head = [(th.text or "") for th in table.iter("th")]
+        for row in table.iter("tr"):
+            for i, cell in enumerate(c for c in row if c.tag == "td"):
+                if len(cell):
+                    continue  # code or bold inside: as the markdown renders it
+                column = head[i] if i < len(head) else ""
+                if column == "method" and (cell.text or "").strip():
+                    name = cell.text.strip()
+                    cell.tag, cell.text = "th", None
+                    cell.set("scope", "row")
+                    extra = f" <code>{esc(name)}</code>" if label(name) != name else ""
+                    cell.text = self._raw(esc(label(name)) + extra)
+                    continue
+                out, cls = md_cell(cell.text or "", column)
+                if (cell.text or "").strip() in STATUS_CLASS:
+                    row.set("class", STATUS_CLASS[cell.text.strip()])
+                if out:
+                    cell.text = self._raw(out)
+                if cls:
+                    cell.set("class", cls)
+        for th in table.iter("th"):
+            if th.get("scope") != "row":
                 th.text = (th.text or "").replace("_", " ")
-        out, section = [], None
+
+    def run(self, root: etree.Element) -> None:
+        for n, table in enumerate(root.iter("table"), 1):
+            self._table(table, n)
+        out, section, first = [], None, True
         for child in list(root):
             root.remove(child)
             img = child[0] if child.tag == "p" and len(child) == 1 and child[0].tag == "img" else None
@@ -115,12 +148,14 @@ class _Page(Treeprocessor):
             if child.tag == "h1":
                 continue
             if child.tag == "h2":
-                title = "".join(child.itertext()).strip()
-                short = re.sub(r"\s*\(.*\)$", "", title)  # "Mixed traffic (fig:dd, fig:avg)" -> "Mixed traffic"
-                anchor = "x-" + re.sub(r"[^a-z0-9]+", "-", short.lower()).strip("-")
-                section = etree.Element("section", {"id": anchor})
-                out.append(section)
-                self.toc.append((anchor, short))
+                short = short_title("".join(child.itertext()).strip())
+                if first and self.anchor:
+                    self.toc.append((self.anchor, short))
+                else:
+                    section = etree.Element("section", {"id": _slug(short)})
+                    out.append(section)
+                    self.toc.append((_slug(short), short))
+                first = False
             if section is not None:
                 section.append(child)
             else:
@@ -129,11 +164,16 @@ class _Page(Treeprocessor):
             root.append(el)
 
 
-def experiments_html(lines: list[str], figs: list[Figure]) -> tuple[str, list[tuple[str, str]]]:
-    """The experiments' markdown (headings, paragraphs, tables, images, lists) as HTML by
-    Python-Markdown (its ``tables`` extension), each image a captioned figure, each ``##`` section
-    anchored; and the (anchor, title) of each section for the navigation."""
+def to_html(text: str, figs: list[Figure], anchor: str | None = None,
+            prefix: str = "md") -> tuple[str, list[tuple[str, str]]]:
+    """One section's markdown (headings, paragraphs, lists, tables, images) as HTML, and the
+    (anchor, title) of each of its ``##`` headings for the page's navigation; ``anchor``: the id of
+    the section's part of the page and its first heading's (None: each heading a part of its own);
+    its tables' ids are ``{prefix}-table``, ``{prefix}-table-2``, ..."""
     toc: list[tuple[str, str]] = []
     md = markdown.Markdown(extensions=["tables"])
-    md.treeprocessors.register(_Page(md, figs, toc), "ecodrive-page", 5)  # after the inline pass (20)
-    return md.convert("\n".join(lines)), toc
+    for registry, names in DISABLED.items():  # raw HTML and autolinks in a warning or a name stay text
+        for name in names:
+            getattr(md, registry).deregister(name)
+    md.treeprocessors.register(_Page(md, figs, toc, anchor, prefix), "ecodrive-page", 5)  # after the inline pass (20)
+    return md.convert(text), toc

@@ -1,9 +1,9 @@
 """The report page's values and small pieces: numbers with a true minus sign, an en dash for a value
-that does not exist, method labels, table cells, badges and figures; and the ``Page`` the sections draw."""
+that does not exist, table cells, badges, and figures with their captions."""
 from __future__ import annotations
 
 import html
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
@@ -14,7 +14,6 @@ DASH = "\u2013"
 MINUS = "\u2212"
 STATUS_CLASS = {"PASS": "pass", "FAIL": "fail", "NOT CHECKED": "absent",
                 "KNOWN FAIL": "known", "OUTSIDE BAND": "known"}
-METRIC_UNITS = {"energy": ("Energy", "Wh"), "travel_time": ("Travel time", "s")}
 
 
 @dataclass
@@ -23,36 +22,6 @@ class Figure:
     path: Path
     caption: str
     title: str = ""
-
-
-@dataclass
-class Page:
-    """Everything the page shows; a single-vehicle part is absent (None) for an experiments-only run."""
-    run_name: str
-    manifest: dict = field(default_factory=dict)
-    results: pd.DataFrame | None = None
-    claims: pd.DataFrame | None = None
-    mixed_claims: pd.DataFrame | None = None
-    table4: pd.DataFrame | None = None
-    statistics: pd.DataFrame | None = None
-    seeds: pd.DataFrame | None = None
-    parts: pd.DataFrame | None = None
-    partial_logs: int = 0
-    refused_logs: int = 0  # step logs the reader refused (a reason each under Warnings)
-    violins: list[Figure] = field(default_factory=list)
-    trajectories: list[Figure] = field(default_factory=list)
-    compare: str | None = None
-    experiments_md: list[str] = field(default_factory=list)
-    experiment_figures: list[Figure] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    bootstrap: str = ""
-    methods: list[str] = field(default_factory=list)  # the order of the tables' rows
-
-
-def ordered(page: Page, present) -> list[str]:
-    """The methods in ``present`` in the page's order, any others after them."""
-    present = list(dict.fromkeys(present))
-    return [m for m in page.methods if m in present] + [m for m in present if m not in page.methods]
 
 
 # ---------------------------------------------------------------- values
@@ -121,12 +90,6 @@ def td(text: str, cls: str = "", raw: bool = False) -> str:
 
 def badge(status: str) -> str:
     return f"<span class='badge {STATUS_CLASS.get(status, 'absent')}'>{esc(status)}</span>"
-
-
-def method_cell(method: str) -> str:
-    lab = label(method)
-    extra = f" <code>{esc(method)}</code>" if lab != method else ""
-    return f"<th scope='row'>{esc(lab)}{extra}</th>"
 
 
 def figure(fig: Figure, fig_id: str) -> str:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from .html_parts import DASH, Page, duration, esc, missing, pct, td
+from .html_parts import DASH, duration, esc, missing, pct, td
 
 
 def _floor_all(man: dict) -> str:
@@ -19,8 +19,8 @@ def _floor_all(man: dict) -> str:
             f"{wall * workers / sumo:.2f}"
             + (f", {whole * workers / sumo:.2f} over the whole commands" if whole else "") + ")</span>")
 
-def provenance_section(page: Page) -> str:
-    man = page.manifest
+def provenance_section(run_name: str, man: dict) -> str:
+    """The provenance part of the page: what ``manifest.json`` records of how the run was made."""
     out = ["<section id='provenance'><h2>Provenance</h2>"]
     if not man:
         out.append("<p>No <code>manifest.json</code> in this run folder: where these numbers came from is not "
@@ -31,7 +31,7 @@ def provenance_section(page: Page) -> str:
     overhead = man.get("harness_overhead")
     commands = man.get("commands")
     earlier = [c for c in commands[:-1] if isinstance(c, dict)] if isinstance(commands, list) else []
-    rows = [("Run folder", f"<code>{esc(page.run_name)}</code>"),
+    rows = [("Run folder", f"<code>{esc(run_name)}</code>"),
             ("Command" + (" (the latest; the rows below are its own)" if earlier else ""),
              f"<code>{esc(man.get('command', DASH))}</code>")]
     if earlier:
@@ -120,5 +120,3 @@ def _value(v) -> str:
         return f"{v:.6g}"
     return DASH if missing(v) else str(v)
 
-
-# ---------------------------------------------------------------- the page

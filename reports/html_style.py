@@ -75,20 +75,24 @@ footer { margin-top:48px; color:var(--muted); font-size:12px; border-top:1px sol
 @media print { nav { display:none; } figure { break-inside:avoid; } main { max-width:none; padding:0; } }
 """
 
-# the page skeleton: a Jinja2 template (the sections are HTML already escaped where they hold data)
-TEMPLATE = jinja2.Environment(autoescape=False, keep_trailing_newline=True).from_string("""<!DOCTYPE html>
+# the page skeleton: data escaped by Jinja2, the sections' HTML (``body``) and the stylesheet as they are
+TEMPLATE = jinja2.Environment(autoescape=True, keep_trailing_newline=True).from_string("""<!DOCTYPE html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{{ title }}</title>
-<style>{{ css }}</style>
+<style>{{ css | safe }}</style>
 </head>
 <body>
 <main>
-{{ header }}
-{{ nav }}
-{{ body }}
+<header><h1>Eco-driving benchmark: <code>{{ run_name }}</code></h1><div class='facts'>
+{%- for label, text, code in facts -%}
+<div class='fact'><span>{{ label }}</span><b>{{ text }}{% if code %}<code>{{ code }}</code>{% endif %}</b></div>
+{%- endfor -%}
+</div></header>
+<nav><ol>{% for anchor, text in toc %}<li><a href='#{{ anchor }}'>{{ text }}</a></li>{% endfor %}</ol></nav>
+{{ body | safe }}
 <footer>Written by <code>ecodrive report</code> from the run folder's <code>results.parquet</code>,
 <code>manifest.json</code> and step logs; <code>index.md</code> has the same sections as text, without the
 provenance table (<code>manifest.json</code> holds it), with the tables and figures beside it (<code>table4.csv</code>, <code>statistics.csv</code>, <code>seeds.csv</code>, <code>figures/*.pdf</code>).

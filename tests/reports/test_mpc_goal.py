@@ -74,10 +74,14 @@ def test_a_miss_on_travel_time_alone_names_that_half_and_prints_no_nan(tmp_path)
 
 
 def test_the_report_checks_the_goal_and_leaves_out_headroom_without_clairvoyant(tmp_path):
-    from ecodrive_bench.reports.bound_sections import headroom as _headroom
-    from ecodrive_bench.reports.html_parts import Page
+    from ecodrive_bench.reports import section_bounds
+    from ecodrive_bench.reports.inputs import Run
 
-    lines = "\n".join(_headroom(_table(), {}, tmp_path, Page(run_name="t"), tmp_path))
+    def section(results: pd.DataFrame) -> str | None:
+        data = section_bounds.compute(Run(tmp_path, {}, results), [])
+        return None if data is None else section_bounds.markdown(data)
+
+    lines = section(_table())
     assert "## Headroom" not in lines  # no clairvoyant in the run: no headroom section
     assert "### mpc against its goal" in lines and "**missed**" in lines
-    assert _headroom(_table()[lambda d: d.method != "mpc"], {}, tmp_path, Page(run_name="t"), tmp_path) == []
+    assert section(_table()[lambda d: d.method != "mpc"]) is None

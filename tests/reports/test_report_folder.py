@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from ecodrive_bench.bench.io import outdir
-from ecodrive_bench.reports import build as report_build
+from ecodrive_bench.reports import figures as report_figures
 from ecodrive_bench.reports.build import build
 from ecodrive_bench.reports.command import main
 
@@ -127,7 +127,7 @@ def test_a_failed_build_leaves_the_earlier_report_byte_for_byte(failure, smoke_r
     if failure == "full-disk":
         def full_disk(*args, **kw):
             raise OSError(errno.ENOSPC, "No space left on device", str(out / "figures" / "violin-coordinated.png"))
-        monkeypatch.setattr(report_build.figures, "violins", full_disk)
+        monkeypatch.setattr(report_figures, "violins", full_disk)
         words = "No space left on device"
     else:
         (out / "figures" / "violin-uncoordinated.png").mkdir()
@@ -182,13 +182,13 @@ def test_the_report_appears_in_its_folder_whole(earlier, smoke_report, tmp_path,
         (out / "index.md").write_text("the earlier report\n")
     before = snapshot(out) if out.exists() else {}
     seen = []
-    violins = report_build.figures.violins
+    violins = report_figures.violins
 
     def watch(*args, **kw):
         seen.append(snapshot(out) if out.exists() else {})
         return violins(*args, **kw)
 
-    monkeypatch.setattr(report_build.figures, "violins", watch)
+    monkeypatch.setattr(report_figures, "violins", watch)
     index, _ = build(smoke_report["run"], out, progress=False)
     assert seen and all(s == before for s in seen)
     assert index == out / "index.md" and index.read_text() == smoke_report["md"]

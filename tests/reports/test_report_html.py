@@ -1,7 +1,9 @@
 """The HTML report is a page a researcher can read: every figure exists and has a caption, no cell
-reads NaN, Table 4 is laid out as the paper's with signed percents, units and the published values
-beside ours, the claims are checked, and the provenance is the manifest's. Parsed with the standard
-library's ``html.parser``; the checks are functions, and a bad page is shown to fail them."""
+reads NaN, Table 4 shows ours beside the published values with signed percents coloured by their
+sign, the claims are checked with a badge each, every section is anchored, and the provenance is
+the manifest's. The page is ``index.md``'s sections rendered (``reports.sections``). Parsed with
+the standard library's ``html.parser``; the checks are functions, and a bad page is shown to fail
+them."""
 from __future__ import annotations
 
 import re
@@ -16,6 +18,7 @@ from ecodrive_bench.bench.paper import TABLE4, improvement
 from ecodrive_bench.reports import html_markdown, html_parts
 from ecodrive_bench.reports.build import build
 from ecodrive_bench.reports.claims import NOT_CHECKED, paper_claims
+from ecodrive_bench.reports.inputs import Run
 from ecodrive_bench.reports.tables import frame_markdown
 
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
@@ -31,7 +34,8 @@ class Doc(HTMLParser):
         self.stack: list[tuple[str, dict]] = []
         self.images: list[dict] = []
         self.figures: list[dict] = []
-        self.cells: list[dict] = []  # {"table": id, "row": n, "tag": th/td, "text": ...}
+        self.cells: list[dict] = []  # {"table": id, "row": n, "tag": th/td, "text": ..., "class": ...}
+        self.row_classes: dict[str, list[str]] = {}  # a table's rows' classes
         self.rows: dict[str, list[list[str]]] = {}
         self.sections: dict[str, str] = {}
         self.urls: list[str] = []
@@ -65,10 +69,12 @@ class Doc(HTMLParser):
             tables = self._open("table")
             tid = tables[-1].get("id", "") if tables else ""
             self.rows.setdefault(tid, []).append([])
+            self.row_classes.setdefault(tid, []).append(a.get("class", ""))
         if tag in ("td", "th"):
             tables = self._open("table")
             tid = tables[-1].get("id", "") if tables else ""
-            self._cell = {"table": tid, "row": len(self.rows.get(tid, [])) - 1, "tag": tag, "text": ""}
+            self._cell = {"table": tid, "row": len(self.rows.get(tid, [])) - 1, "tag": tag, "text": "",
+                          "class": a.get("class", "")}
         self.stack.append((tag, a))
 
     def handle_endtag(self, tag):
@@ -165,37 +171,53 @@ def test_no_cell_reads_nan_or_none_and_the_page_is_self_contained(report):
     assert not re.search(r"\bNaN\b|>\s*nan\s*<", report["text"])
 
 
-def test_table4_is_the_papers_with_signed_percents_units_and_published_values(report):
+def test_table4_shows_ours_beside_the_published_values_with_signed_percents(report):
     doc, res = report["doc"], report["results"]
     means = res.groupby(["method", "signals"])[["energy", "travel_time"]].mean()
+    rows = doc.rows["table4-table"]
+    head = rows[0]
+    assert head[:4] == ["method", "signals", "energy (Wh)", "imp."] and "time (s)" in head and "paper" in head
+    cells = [c for c in doc.cells if c["table"] == "table4-table"]
     for signals in ("coordinated", "uncoordinated"):
-        rows = doc.rows[f"table4-{signals}"]
-        head = " ".join(rows[0] + rows[1])
-        assert "[Wh]" in head and "[s]" in head and "Imp." in head and "Paper" in head
-        body = {r[0].split()[0]: r for r in rows[2:]}  # "Baseline (SUMO ...) baseline" -> "Baseline"
-        base, glosa = body["Baseline"], body["GLOSA"]
+        # a method by its display name and its name: "Baseline (SUMO's ...) baseline"
+        base = next(r for r in rows[1:] if r[0].startswith("Baseline (") and r[1] == signals)
+        glosa = next(r for r in rows[1:] if r[0].startswith("GLOSA") and r[1] == signals)
+        assert base[0].endswith(" baseline") and glosa[0].endswith(" glosa")
         paper_e, paper_t = TABLE4[("baseline", signals)]
         # ours, then the published value beside it
-        i = base.index(f"{means.loc[('baseline', signals), 'energy']:.2f}")
-        assert base[i + 1] == f"{paper_e:.2f}"
+        assert base[2] == f"{means.loc[('baseline', signals), 'energy']:.2f}" and base[4] == f"{paper_e:.2f}"
+        assert base[head.index("time (s)")] == f"{means.loc[('baseline', signals), 'travel_time']:.2f}"
         assert f"{paper_t:.2f}" in base
-        # improvement as a signed percent: + = less than the baseline
+        # improvement as a signed percent with a true minus: + = less than the baseline
         imp = improvement(means.loc[("glosa", signals), "energy"], means.loc[("baseline", signals), "energy"])
         want = f"{100 * imp:+.2f}%".replace("-", html_parts.MINUS)
-        assert want in glosa
-        assert glosa[3] == glosa[4] == html_parts.DASH  # no published GLOSA energy: an en dash, not NaN
+        assert glosa[3] == want
+        assert glosa[4] == glosa[5] == html_parts.DASH  # no published GLOSA energy: an en dash, not NaN
+        # coloured by its sign: good where the method uses less than the baseline
+        row = rows.index(glosa)
+        cell = next(c for c in cells if c["row"] == row and c["text"] == want)
+        assert cell["class"].split() == ["num", "good" if imp > 0 else "bad"]
     assert "231.13" in doc.sections["table4"] and "253.79" in doc.sections["table4"]
-    caption = doc.sections["table4"]
-    assert "+ means the method uses less energy" in caption and "\u2212 means more" in caption
+
+
+def test_a_signed_percent_takes_its_class_from_its_sign():
+    assert html_markdown.md_cell("+23.72%", "imp.") == ("+23.72%", "num good")
+    assert html_markdown.md_cell("-1.53%", "imp.") == ("\u22121.53%", "num bad")
+    assert html_markdown.md_cell("+0.00%", "imp.") == ("+0.00%", "num")  # the baseline against itself
+    assert html_markdown.md_cell("-1.53%", "vs paper") == ("\u22121.53%", "num")  # a deviation, not a merit
 
 
 def test_the_claims_headline(report):
     doc, res = report["doc"], report["results"]
-    claims = {}
-    for rows in doc.rows.values():
-        for r in rows:
-            if len(r) == 6 and r[4] in ("PASS", "FAIL", NOT_CHECKED):
-                claims[(r[0], r[1])] = r
+    rows, classes = doc.rows["claims-table"], doc.row_classes["claims-table"]
+    assert rows[0] == ["signals", "claim", "paper", "ours", "status", "detail"]
+    claims = {(r[0], r[1]): r for r in rows[1:]}
+    assert len(claims) == len(paper_claims(res))
+    # each claim's status a badge, its row marked by it
+    badges = [c for c in doc.cells if c["table"] == "claims-table" and c["text"] in html_parts.STATUS_CLASS]
+    assert len(badges) == len(claims)
+    assert re.search(r"<td><span class='badge pass'>PASS</span></td>", report["text"])
+    assert classes[1:] == [html_parts.STATUS_CLASS[r[4]] for r in rows[1:]]
     for signals in ("coordinated", "uncoordinated"):
         ours = res[(res.method == "baseline") & (res.signals == signals)].energy.mean()
         dev = ours / TABLE4[("baseline", signals)][0] - 1
@@ -203,20 +225,31 @@ def test_the_claims_headline(report):
         assert row[4] == ("PASS" if abs(dev) <= 0.10 else "FAIL") and f"{ours:.2f}" in row[3]
         assert claims[(signals, "PRL saves energy against the baseline")][4] == NOT_CHECKED  # no PRL in this run
         assert "needs prl/" + signals in claims[(signals, "PRL saves energy against the baseline")][5]
-    assert claims[("both settings", "no collisions")][4] == "PASS"
+    assert claims[("both", "no collisions")][4] == "PASS"
     assert "NOT CHECKED" in doc.sections["claims"] and "PASS" in doc.sections["claims"]
 
 
-def test_statistics_show_cis_with_units_and_one_seed(report):
+def test_statistics_show_cis_and_one_seed_has_none(report):
     doc = report["doc"]
-    stats = doc.sections["statistics"]
-    assert "Energy [Wh]" in stats and "Travel time [s]" in stats and "95% CI" in stats
-    rows = doc.rows["stats-coordinated"]
-    base = next(r for r in rows if r[0].startswith("Baseline"))
-    assert re.search(r"\d+\.\d\d \[\d+\.\d\d, \d+\.\d\d\]", base[2])  # mean [CI]
-    assert base[4] == html_parts.DASH  # P(improve) of the baseline against itself does not exist
-    seeds = doc.rows["seeds-coordinated"]
-    assert all("one seed" in r[3] for r in seeds[2:])  # rule-based methods: one "seed", no CI
+    assert "95% CI" in doc.sections["statistics"]
+    rows = doc.rows["statistics-table"]
+    head = rows[0]
+    base = next(r for r in rows[1:] if r[0].startswith("Baseline (") and r[1] == "coordinated" and r[2] == "energy")
+    assert re.fullmatch(r"\[\d+\.\d\d, \d+\.\d\d\]", base[head.index("95% CI")])  # the mean's CI
+    assert base[head.index("P(improve vs baseline)")] == html_parts.DASH  # the baseline against itself: none
+    seeds = doc.rows["seeds-table"]
+    ci = seeds[0].index("ci low")  # the header without underscores
+    assert len(seeds) > 1 and all(r[seeds[0].index("seeds")] == "1" and r[ci] == html_parts.DASH
+                                  for r in seeds[1:])  # rule-based methods: one "seed", no CI
+
+
+def test_every_section_is_anchored_and_in_the_navigation(report):
+    doc, text = report["doc"], report["text"]
+    nav = re.findall(r"<li><a href='#([^']+)'>", text.split("</nav>")[0])
+    assert nav[:5] == ["table4", "claims", "statistics", "seeds", "return"] and nav[-1] == "provenance"
+    assert "figures" in nav and any(a.startswith("x-trajectories") for a in nav)
+    assert all(a in doc.sections for a in nav)  # every entry lands on a section
+    assert text.count("<h2>") == len(nav)  # the markdown's headings and the provenance's
 
 
 def test_provenance_is_the_manifests(report):
@@ -230,13 +263,12 @@ def test_provenance_is_the_manifests(report):
 
 def test_provenance_lists_the_earlier_commands_of_a_folder():
     from ecodrive_bench.reports.html import render
-    from ecodrive_bench.reports.html_parts import Page
 
     man = {"command": "ecodrive run --methods baseline", "git_sha": "b" * 40,
            "checkpoint_sha256": {"prl-coordinated/s0": "c" * 64},
            "commands": [{"command": "ecodrive run --methods prl", "git_sha": "a" * 40, "episodes_run": 3},
                         {"command": "ecodrive run --methods baseline", "git_sha": "b" * 40, "episodes_run": 3}]}
-    prov = Doc(render(Page(run_name="x", manifest=man))).sections["provenance"]
+    prov = Doc(render(Run(Path("x"), man), [])).sections["provenance"]
     assert "Earlier commands on this folder (1, oldest first)" in prov
     assert "ecodrive run --methods prl (git aaaaaaaaaaaa, 3 episodes run)" in prov
     assert "prl-coordinated/s0" in prov and "c" * 64 in prov
@@ -246,6 +278,7 @@ def test_the_markdown_is_unchanged(report):
     md = report["md"]
     assert md.startswith("# Report: smoke") and "## Table 4" in md and "| method | signals | energy (Wh) |" in md
     assert "<figure" not in md and "<table" not in md
+    assert md == (report["dir"] / "index.md").read_text()
 
 
 # ---------------------------------------------------------------- pure helpers
@@ -264,7 +297,7 @@ def test_a_pipe_inside_a_cell_stays_in_its_cell():
     df = pd.DataFrame({"claim": ["a larger |r_p^s| shortens trips"], "status": ["PASS"]}).set_index("claim")
     md = frame_markdown(df)
     assert "a larger \\|r_p^s\\| shortens trips" in md
-    doc = Doc(html_markdown.experiments_html(md.strip().splitlines(), [])[0])
+    doc = Doc(html_markdown.to_html(md, [])[0])
     assert [c["text"] for c in doc.cells if c["tag"] == "td"] == ["a larger |r_p^s| shortens trips", "PASS"]
 
 
@@ -322,10 +355,13 @@ def test_an_experiments_only_folder_shows_the_mixed_claims_and_tables(tmp_path):
     assert image_problems(doc, tmp_path / "report") == [] and cell_problems(doc) == []
     assert [Path(i["src"]).name for i in doc.images] == ["mixed-traffic.png"]
     assert "MPR" in doc.figures[0]["caption"] and "[Wh/km]" in doc.figures[0]["caption"]
-    claims = doc.sections["claims"]
-    assert "fleet energy per km falls from MPR 0 to 1" in claims and "PASS" in claims
-    assert "no single-vehicle results" in claims
-    assert "|---" not in doc.sections["x-mixed-traffic"]  # the markdown tables became tables
+    assert "claims" not in doc.sections and "table4" not in doc.sections  # no single-vehicle results
+    mixed = doc.sections["x-mixed-traffic"]
+    claims = next(rows for rows in doc.rows.values() if rows[0][:2] == ["signals", "claim"])
+    status = claims[0].index("status")
+    assert any("fleet energy per km falls from MPR 0 to 1" in r[1] and r[status] == "PASS" for r in claims[1:])
+    assert "<span class='badge pass'>PASS</span>" in (tmp_path / "report" / "index.html").read_text()
+    assert "|---" not in mixed  # the markdown tables became tables
     assert "\u221215%" in doc.sections["x-mixed-traffic"]  # changes as signed percents
     assert "No manifest.json" in doc.sections["provenance"]
 
@@ -348,11 +384,12 @@ def test_the_claims_speak_one_status_vocabulary():
 
 def test_the_header_wall_time_counts_every_command_of_the_folder(smoke_report):
     """A rerun that reused every log took no time itself: the header gives the folder's whole time."""
-    from ecodrive_bench.reports.html import header
-    from ecodrive_bench.reports.html_parts import Page
+    from ecodrive_bench.reports.html import facts
+
+    def wall(man: dict) -> str:
+        return dict((k, t) for k, t, _ in facts(Run(Path("x"), man, smoke_report["results"])))["Wall time"]
 
     man = {**smoke_report["manifest"], "wall_time_s": 0.0, "wall_time_all_commands_s": 100.0}
-    text = header(Page(run_name="x", manifest=man, results=smoke_report["results"]))
-    assert "1 min 40 s (100 s)" in text and "0.0 s" not in text
+    assert wall(man) == "1 min 40 s (100 s)"
     older = {k: v for k, v in man.items() if k != "wall_time_all_commands_s"}  # a manifest from before the sum
-    assert "0.0 s" in header(Page(run_name="x", manifest=older, results=smoke_report["results"]))
+    assert wall(older) == "0.0 s"

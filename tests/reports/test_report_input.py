@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from html import unescape
 
 import pandas as pd
 import pytest
@@ -317,16 +318,16 @@ def test_a_run_on_another_scenario_is_not_judged_by_the_papers_claims(smoke_repo
     md, html = index.read_text(), (tmp_path / "report" / "index.html").read_text()
     assert "Scenario: **not the paper's**: `lanes=3, ev.mass=1500.0`" in md
     assert any("scenario is not the paper's (lanes=3, ev.mass=1500.0)" in w for w in warnings)
-    head = html.split("</header>")[0]
+    head = unescape(html.split("</header>")[0])
     assert "<span>Scenario</span><b>not the paper's: <code>lanes=3, ev.mass=1500.0</code>" in head
-    assert "This run's scenario is not the paper's" in html.split("id='claims'")[1]
+    claims_html = html.split("<section id='claims'>")[1].split("</section>")[0]
+    assert "this run's scenario is not the paper's (lanes=3, ev.mass=1500.0)" in unescape(claims_html)
     section = md.split("## Does the paper hold on this run?")[1].split("\n## ")[0]
     rows = [line for line in section.splitlines() if line.startswith("| ") and "claim" not in line]
     assert rows and all("| NOT CHECKED |" in r for r in rows)
     assert "PASS" not in section and "FAIL" not in section
-    claims_html = html.split("id='claims'")[1].split("</section>")[0]
-    assert "<tr class='absent'>" in claims_html and "<tr class='pass'>" not in claims_html
-    assert "<tr class='fail'>" not in claims_html
+    assert '<tr class="absent">' in claims_html and '<tr class="pass">' not in claims_html
+    assert '<tr class="fail">' not in claims_html
 
 
 def test_the_paper_scenarios_claims_are_in_index_md(smoke_report):

@@ -9,7 +9,8 @@ import sys
 
 import pytest
 
-from ecodrive_bench.reports.build import TRAJECTORY_CASES, build
+from ecodrive_bench.reports.build import build
+from ecodrive_bench.reports.section_figures import TRAJECTORY_CASES
 
 
 class Terminal(io.StringIO):
