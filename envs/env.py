@@ -12,7 +12,7 @@ from .action import make_action
 from .config import ConfigError, ScenarioConfig
 from .family import check_caller, corridors
 from .network import NetworkSpec, config_value, corridor_files
-from .observation import GridLogicObservation, RouteGridLogicObservation
+from .observation import GridLogicObservation
 from .render import RENDER_MODES, CloseUp, RerunStream, check_mode, others_in_view
 from .route import LANE_PITCH
 from .scripting import Scripting
@@ -174,7 +174,7 @@ class EcoDriveEnv(Scripting, gym.Env):
         self.cfg = cfg
         self.files = corridor_files(cfg)
         self.session = SumoSession(cfg, self.files)
-        self.obs_type = (RouteGridLogicObservation if self.files.route_frame else GridLogicObservation)(cfg, self.files)
+        self.obs_type = GridLogicObservation(cfg, self.files)
         self._route_lanes: dict[str, tuple[float, int]] | None = None  # ``traffic``'s lane table, made on first use
         self.action_type = make_action(self._action, cfg)
         self._closeup = CloseUp(self.files.lane_y, self.files.stop_lines, cfg.vehicle_length)
@@ -303,16 +303,14 @@ class EcoDriveEnv(Scripting, gym.Env):
         return self._frame()
 
     def traffic(self) -> tuple[tuple[str, ...], np.ndarray]:
-        """The other vehicles heading east now: their ids and one row each of front bumper x, y [m],
-        length [m], speed [m/s] (``SumoSession.eastbound``; on a network corridor the vehicles on the
-        route's lanes, x along the route frame and y their lane index times ``envs.route.LANE_PITCH``,
-        ``SumoSession.on_route``); for a planner that records the case's
-        traffic (``bench.methods.clairvoyant_agent``), never for an agent."""
-        if self.files.route is not None:  # a network corridor: the vehicles on the route, in its frame
-            if self._route_lanes is None:
-                self._route_lanes = self.files.route.lane_table()
-            return self.session.on_route(EGO_ID, self._route_lanes, LANE_PITCH)
-        return self.session.eastbound(EGO_ID)
+        """The other vehicles on the ego's route now (its edges' lanes and the internal lanes joining
+        them): their ids and one row each of front bumper position along the route frame [m], lane
+        index times ``envs.route.LANE_PITCH`` [m], length [m], speed [m/s] (``SumoSession.on_route``);
+        for a planner that records the case's traffic (``bench.methods.clairvoyant_agent``), never
+        for an agent."""
+        if self._route_lanes is None:
+            self._route_lanes = self.files.route.lane_table()
+        return self.session.on_route(EGO_ID, self._route_lanes, LANE_PITCH)
 
     def close(self) -> None:
         if self._stream is not None:

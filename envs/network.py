@@ -212,7 +212,7 @@ def build_network(spec: NetworkSpec, cfg: ScenarioConfig) -> ScenarioFiles:
     return ScenarioFiles(
         folder=folder, net=net, routes=demand[0], additional=folder / EGO_ADD, arterial_edges=route.edges,
         exit_edge=route.edges[-1], stop_lines=route.stop_lines, junction_x=route.stop_lines,
-        tls_ids=tuple(dict.fromkeys(route.tls)), lane_y=tuple(centres), route_frame=True, demand=demand[1:],
+        tls_ids=tuple(dict.fromkeys(route.tls)), lane_y=tuple(centres), check_junctions=False, demand=demand[1:],
         begin=begin, insert_window=(lo, hi), span=(begin, end),
         actuated=tuple(t for t in dict.fromkeys(route.tls) if types.get(t, "static") != "static"),
         route=route,

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from gymnasium import spaces
@@ -141,60 +141,6 @@ def observation_space(cfg: ScenarioConfig) -> spaces.Dict:
     })
 
 
-class GridLogicObservation:
-    """Dict observation {"grid": (rows, observed lanes) in {0,1}, "logic": (observed lanes + 4,)}."""
-
-    def __init__(self, cfg: ScenarioConfig, files: ScenarioFiles) -> None:
-        self.cfg = cfg
-        self.lane_y = tuple(files.lane_y)
-        self._lane_y = np.asarray(self.lane_y, dtype=np.float64)
-        self._rows, self._lanes = cfg.grid_shape
-        self.space = observation_space(cfg)
-        self._high = self.space["logic"].high
-
-    def signal(self, session: SumoSession, vid: str) -> SignalView | None:
-        nxt = session.next_signal(vid)
-        if nxt is None:
-            return None
-        tls, link, dist, state = nxt
-        if dist > self.cfg.v2i_range:
-            return SignalView(tls, link, dist, state, False, NO_V2I, NO_V2I)
-        red = 1.0 if state in _RED else 0.0
-        ttg = session.time_to_green(tls, link) if red else 0.0
-        return SignalView(tls, link, dist, state, True, red, ttg)
-
-    def observe(
-        self, session: SumoSession, vid: str, kin: Kinematics, neighbours: dict
-    ) -> tuple[dict[str, np.ndarray], SignalView | None, list[tuple[float, float, float, float]]]:
-        """Observation of ``vid``; also returns its signal view and the others' [x, y, angle, length]."""
-        x, _, _, speed, _, lane, _ = kin
-        others = [(*v[VAR_POSITION], v[VAR_ANGLE], v[VAR_LENGTH]) for k, v in neighbours.items() if k != vid]
-        cfg = self.cfg  # occupancy_grid, with its constants kept
-        grid = _grid(np.array(others, dtype=np.float64).reshape(-1, 4) if others else _NONE, self._lane_y, self._rows,
-                     self._lanes, x - cfg.grid_behind, 1.0 / cfg.cell_length)
-        sig = self.signal(session, vid)
-        if sig is None:
-            logic = logic_vector(lane, self.cfg.observed_lanes, 0.0, speed, NO_V2I, NO_V2I)
-        else:
-            logic = logic_vector(lane, self.cfg.observed_lanes, min(sig.distance, self._high[-4]), speed, sig.red,
-                                 min(sig.time_to_green, self._high[-1]))
-        return {"grid": grid, "logic": logic}, sig, others
-
-    def along(self, session: SumoSession, vid: str, kin: Kinematics) -> float:
-        """The vehicle's position along its corridor [m]: x, on the generated arterial."""
-        return kin.x
-
-    @staticmethod
-    def same_road(edge0: str, edge1: str) -> bool:
-        """Whether a lane index read on ``edge0`` and one on ``edge1`` number the same lanes: always on
-        the generated arterial, whose edges all have its lanes."""
-        return True
-
-    def mask(self, session: SumoSession, vid: str, lane: int) -> np.ndarray:
-        """The lateral mask over k: the road's lanes and LC2013's verdict (``safety.lane_mask``)."""
-        return safety.lane_mask(lane, self.cfg.lanes, session.could_change(vid, 1), session.could_change(vid, -1))
-
-
 def lane_frame(shape: Sequence[tuple[float, float]], pos: float) -> tuple[float, float, float, float]:
     """(x, y) of the point ``pos`` [m] along the polyline ``shape``, and the unit direction (dx, dy)
     of its segment there (the first segment extended before the start, the last past the end)."""
@@ -234,68 +180,100 @@ def _to_frame(others: np.ndarray, cx: float, cy: float, dx: float, dy: float, ax
     return out
 
 
-class RouteGridLogicObservation(GridLogicObservation):
-    """The same observation on a corridor of any network (``envs.network``), taken in the ego's
-    route frame: its x axis along the ego's lane where the ego is, its origin on that lane's centre
-    line; the grid's lanes are those of the edge the ego is on (on a junction's internal lane, the
-    edge it came from), lane 0 rightmost. A lane change is allowed only towards a lane that
-    continues the route (SUMO's best lanes), and LC2013's verdict applies as on the arterial.
-    Positions (``along``) are the distance driven along the route."""
+@dataclass
+class RoutePlace:
+    """Where one vehicle is on its route, kept from step to step (each vehicle has its own)."""
+
+    widths: tuple[float, ...] = ()  # [m] lane widths of the last route edge it was on, rightmost first
+    lane: int = 0  # its lane index there
+    edge: str = ""  # the edge it is on (an internal one inside a junction)
+    internal: bool = False  # it is on a junction's internal lane
+    exit: tuple[int, float] = (0, 0.0)  # (last route edge it was on, the odometer at that edge's end [m])
+    lane_place: tuple[str, float] | None = None  # ``along``'s (lane id, position), which the next ``observe`` reuses
+    best: dict[str, dict[int, bool]] = field(default_factory=dict)  # edge -> lane index -> it continues the route
+
+
+class GridLogicObservation:
+    """Dict observation {"grid": (rows, observed lanes) in {0,1}, "logic": (observed lanes + 4,)},
+    taken in the vehicle's route frame (``envs.route``; the generated arterial is one such route,
+    whose frame is its x axis): the grid's x axis runs along the vehicle's lane where the vehicle is,
+    its origin on that lane's centre line; its lanes are those of the edge the vehicle is on (on a
+    junction's internal lane, the edge it came from), lane 0 rightmost. A lane change is allowed
+    only towards a lane that continues the route (SUMO's best lanes), and LC2013's verdict applies.
+    Positions (``along``) are the distance driven along the route. What a vehicle's place was is
+    its own ``RoutePlace``, so one observation type serves any number of vehicles."""
 
     def __init__(self, cfg: ScenarioConfig, files: ScenarioFiles) -> None:
-        super().__init__(cfg, files)
-        self._edge: tuple[tuple[float, ...], int] = ((LANE_WIDTH,) * len(files.lane_y), 0)  # set at the first observe
-        self._internal = False  # the ego is on a junction's internal lane
-        assert files.route is not None, "a route-frame observation needs the route (envs.route)"
+        self.cfg = cfg
+        self._rows, self._lanes = cfg.grid_shape
+        self.space = observation_space(cfg)
+        self._high = self.space["logic"].high
         self.route = files.route
         self._index = {e: r for r, e in enumerate(self.route.edges)}  # route edge -> its index
-        self._exit: tuple[int, float] = (0, 0.0)  # (last route edge the ego was on, the odometer at its end [m])
-        self._place: tuple[str, float] | None = None  # ``along``'s lane place, which the next ``observe`` reuses
+        self._first = (tuple(self.route.lane_widths), 0)  # before a vehicle's first edge is read
 
-    def _lanes_here(self, session: SumoSession, kin: Kinematics) -> tuple[tuple[float, ...], int]:
-        """(lane widths of the ego's edge, the ego's lane index there), kept over internal lanes."""
-        if kin.edge and not kin.edge.startswith(":"):
-            n = session.edge_lanes(kin.edge)
-            self._edge = (tuple(session.lane_geometry(f"{kin.edge}_{i}")[1] for i in range(n)), kin.lane)
-        return self._edge
+    def place(self) -> RoutePlace:
+        """A new vehicle's place (``ControlledVehicle`` keeps one)."""
+        widths, lane = self._first
+        return RoutePlace(widths=widths, lane=lane)
 
-    def along(self, session: SumoSession, vid: str, kin: Kinematics) -> float:
+    def signal(self, session: SumoSession, vid: str) -> SignalView | None:
+        nxt = session.next_signal(vid)
+        if nxt is None:
+            return None
+        tls, link, dist, state = nxt
+        if dist > self.cfg.v2i_range:
+            return SignalView(tls, link, dist, state, False, NO_V2I, NO_V2I)
+        red = 1.0 if state in _RED else 0.0
+        ttg = session.time_to_green(tls, link) if red else 0.0
+        return SignalView(tls, link, dist, state, True, red, ttg)
+
+    def along(self, session: SumoSession, vid: str, kin: Kinematics, place: RoutePlace) -> float:
         """The front bumper's position in the route frame (``envs.route``): the edge's offset plus
         the lane position on a route edge; on a junction's internal lane, the end of the edge it
         came from plus the distance driven since, at most the next edge's offset."""
-        lane_id, pos = self._place = session.lane_place(vid)
+        lane_id, pos = place.lane_place = session.lane_place(vid)
         odo = session.odometer(vid)
         route = self.route
         r = self._index.get(lane_id.rsplit("_", 1)[0])
         if r is not None:
-            self._exit = (r, odo + route.lengths[r] - pos)
+            place.exit = (r, odo + route.lengths[r] - pos)
             return route.offsets[r] + pos
-        r, odo_end = self._exit
+        r, odo_end = place.exit
         x = route.offsets[r] + route.lengths[r] + max(0.0, odo - odo_end)
         return min(x, route.offsets[r + 1]) if r + 1 < len(route.offsets) else x
 
     @staticmethod
     def same_road(edge0: str, edge1: str) -> bool:
-        return edge0 == edge1  # a real network's edges differ in their lanes
+        """Whether a lane index read on ``edge0`` and one on ``edge1`` number the same lanes."""
+        return edge0 == edge1
 
-    def mask(self, session: SumoSession, vid: str, lane: int) -> np.ndarray:
-        widths, _ = self._edge
-        if self._internal:
-            return safety.lane_mask(lane, 1, False, False)  # no change inside a junction
-        cont = session.route_lanes(vid)
+    def mask(self, session: SumoSession, vid: str, lane: int, place: RoutePlace) -> np.ndarray:
+        """The lateral mask over k: the edge's lanes, those that continue the route, and LC2013's
+        verdict (``safety.lane_mask``); no change inside a junction."""
+        if place.internal:
+            return safety.lane_mask(lane, 1, False, False)
+        cont = place.best.get(place.edge)
+        if cont is None:  # a vehicle's route is fixed: which lanes of an edge continue it is read once
+            cont = place.best[place.edge] = session.route_lanes(vid)
         left = cont.get(lane + 1, False) and session.could_change(vid, 1)
         right = cont.get(lane - 1, False) and session.could_change(vid, -1)
-        return safety.lane_mask(lane, len(widths), left, right)
+        return safety.lane_mask(lane, len(place.widths), left, right)
 
     def observe(
-        self, session: SumoSession, vid: str, kin: Kinematics, neighbours: dict
+        self, session: SumoSession, vid: str, kin: Kinematics, neighbours: dict, place: RoutePlace
     ) -> tuple[dict[str, np.ndarray], SignalView | None, list[tuple[float, float, float, float]]]:
+        """Observation of ``vid``; also returns its signal view and the others' [x, y, angle, length]
+        (SUMO's coordinates). ``along`` has just been read for the same state: its lane place is
+        not read again."""
         x, y, _, speed, _, _, edge = kin
-        self._internal = edge.startswith(":")
-        widths, lane = self._lanes_here(session, kin)
-        # the vehicle reads ``along`` just before (the same state): its lane place is not read again
-        lane_id, pos = self._place if self._place is not None else session.lane_place(vid)
-        self._place = None
+        place.edge, place.internal = edge, edge.startswith(":")
+        if edge and not place.internal:
+            n = session.edge_lanes(edge)
+            place.widths, place.lane = tuple(session.lane_geometry(f"{edge}_{i}")[1] for i in range(n)), kin.lane
+        widths, lane = place.widths, place.lane
+        lane_id, pos = place.lane_place if place.lane_place is not None else session.lane_place(vid)
+        place.lane_place = None
         shape, _ = session.lane_geometry(lane_id)
         cx, cy, dx, dy = lane_frame(shape, pos)
         others = [(*v[VAR_POSITION], v[VAR_ANGLE], v[VAR_LENGTH]) for k, v in neighbours.items() if k != vid]

@@ -15,6 +15,7 @@ the file, the folder and why.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -31,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .config import OPTIONAL_FIELDS, ScenarioConfig
-from .route import Route
+from .route import Route, programs, read_net, route_of
 
 EGO_TYPE = "ev"  # vType of the controlled / measured vehicle
 GLOSA_TYPE = "ev_glosa"  # the same EV with SUMO's GLOSA device (range = V2I range)
@@ -64,14 +65,15 @@ class ScenarioFiles:
     junction_x: tuple[float, ...]  # [m] x of each junction centre
     tls_ids: tuple[str, ...]
     lane_y: tuple[float, ...]  # [m] y of each W->E lane centre, index 0 = rightmost
-    # a corridor on any network (envs.network): the observation is taken in the ego's route frame
-    route_frame: bool = False
+    route: Route  # the ego's route and its frame (``envs.route``): positions, signals and lanes along it
+    # SUMO's collision check inside junctions: on for the generated arterial; off on a real network,
+    # whose junction shapes overlap where its lanes do not meet (as the network's authors ran it)
+    check_junctions: bool = True
     demand: tuple[Path, ...] = ()  # route files loaded beside ``routes`` (the network's own traffic)
     begin: float = 0.0  # [s] simulation start (a demand's first second)
     insert_window: tuple[float, float] | None = None  # [s] the ego's insertion times drawn from, if not the config's
     span: tuple[float, float] | None = None  # [s] the demand's time span: an insertion time must lie in it
     actuated: tuple[str, ...] = ()  # signals on the route whose plan is not fixed (no planner can know their future)
-    route: Route | None = None  # a network corridor's route frame (``envs.route``)
 
 
 class ScenarioBuildError(RuntimeError):
@@ -261,7 +263,19 @@ def _files(cfg: ScenarioConfig, folder: Path) -> ScenarioFiles:
         junction_x=tuple(meta["junction_x"]),
         tls_ids=tuple(f"J{k}" for k in range(1, n + 1)),
         lane_y=tuple(meta["lane_y"]),
+        route=arterial_route(folder, arterial),
     )
+
+
+@functools.lru_cache(maxsize=64)
+def arterial_route(folder: Path, edges: tuple[str, ...]) -> Route:
+    """The generated arterial read as a network corridor (``envs.route``): its W->E edges in its
+    own network, with the programs of ``signals.add.xml`` (which SUMO runs over the network's).
+    Its frame is the arterial's x: positions along the route equal the network's x to within float
+    summation (``tests/bench/oracle/test_network_plans.py``). Kept per cache folder (the folder is
+    named by the digest of everything it was built from)."""
+    progs = {**programs(folder / "corridor.net.xml"), **programs(folder / "signals.add.xml")}
+    return route_of(read_net(folder / "corridor.net.xml"), edges, progs)
 
 
 def _node(k: int, n: int) -> str:

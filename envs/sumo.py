@@ -89,11 +89,10 @@ _GREEN = frozenset("gG")
 # HDV stopping at a yellow light at its decel of 4.5 m/s^2 in front of a CV (mixed traffic) ended
 # in a collision. Commanded speeds never need more than the action bound a_min.
 SPEED_MODE_SAFE = 27
-# lane-change mode 512: no autonomous changes; TraCI requests respect the others' gaps
-LC_MODE_EXTERNAL = 512
-# on a route through a network (envs.network): 512 plus SUMO's strategic changes where no TraCI
-# request conflicts, so the ego takes the lanes its route needs (a turn) while the agent decides the rest
-LC_MODE_ROUTE = 513
+# lane-change mode 513: TraCI requests respect the others' gaps, and SUMO makes only the strategic
+# changes a route needs (a lane that does not continue it, before a turn) where no TraCI request
+# conflicts; the agent decides every other change
+LC_MODE_EXTERNAL = 513
 LC_MODE_DEFAULT = 1621  # SUMO's default (LC2013 decides)
 
 
@@ -136,7 +135,6 @@ class SumoSession:
         self._plans: dict[str, TlsPlan] = {}
         self._lanes: dict[str, tuple[tuple[tuple[float, float], ...], float]] = {}  # lane id -> (shape, width)
         self._edge_lanes: dict[str, int] = {}
-        self._lc_external = LC_MODE_ROUTE if files.route_frame else LC_MODE_EXTERNAL
         self._finalizer: weakref.finalize | None = None  # gives libsumo up if this is dropped holding it
         self._context_range = max(cfg.grid_ahead, cfg.grid_behind) + 2 * cfg.vehicle_length
 
@@ -149,9 +147,7 @@ class SumoSession:
             "--step-length", f"{self.cfg.step_length:g}", "--seed", str(int(seed)),
             "--lanechange.duration", f"{self.cfg.lane_change_duration:g}",
             "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true",
-            # a real network's junction shapes overlap where its lanes do not meet: there, SUMO's default (off),
-            # as the network's authors ran it; on the generated arterial, checked
-            "--collision.check-junctions", "false" if f.route_frame else "true", "--xml-validation", "never",
+            "--collision.check-junctions", "true" if f.check_junctions else "false", "--xml-validation", "never",
         ]
 
     def start(self, seed: int) -> None:
@@ -236,21 +232,8 @@ class SumoSession:
                 return False
             raise
 
-    def eastbound(self, exclude: str) -> tuple[tuple[str, ...], np.ndarray]:
-        """Every vehicle but ``exclude`` heading east (SUMO angle within 45 deg of 90): their ids,
-        and one row each of front bumper x, y [m], length [m], speed [m/s] ((0, 4) for none)."""
-        v = self._api.vehicle
-        ids, rows = [], []
-        for vid in v.getIDList():
-            if vid == exclude or abs(v.getAngle(vid) - 90.0) > 45.0:
-                continue
-            x, y = v.getPosition(vid)
-            ids.append(vid)
-            rows.append((x, y, v.getLength(vid), v.getSpeed(vid)))
-        return tuple(ids), np.array(rows, dtype=float).reshape(-1, 4)
-
     def on_route(self, exclude: str, lanes: dict[str, tuple[float, int]], pitch: float) -> tuple[tuple[str, ...], np.ndarray]:
-        """``eastbound`` on a network corridor: every vehicle but ``exclude`` on a lane of the route
+        """Every vehicle but ``exclude`` on a lane of the route
         (``lanes``: lane id -> its start along the route frame [m], its lane index), one row each of
         front bumper position along the route [m], lane index times ``pitch`` [m], length [m], speed [m/s]."""
         v = self._api.vehicle
@@ -293,10 +276,10 @@ class SumoSession:
 
     def take_control(self, vid: str) -> None:
         self._api.vehicle.setSpeedMode(vid, SPEED_MODE_SAFE)
-        self._api.vehicle.setLaneChangeMode(vid, self._lc_external)
+        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_EXTERNAL)
 
     def lateral_to_sumo(self, vid: str, lc2013: bool) -> None:
-        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_DEFAULT if lc2013 else self._lc_external)
+        self._api.vehicle.setLaneChangeMode(vid, LC_MODE_DEFAULT if lc2013 else LC_MODE_EXTERNAL)
 
     def kinematics(self, vid: str) -> Kinematics:
         v = self._api.vehicle

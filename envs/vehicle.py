@@ -12,7 +12,7 @@ import numpy as np
 from . import safety
 from .action import Command
 from .config import ScenarioConfig
-from .observation import GridLogicObservation, SignalView
+from .observation import GridLogicObservation, RoutePlace, SignalView
 from .sumo import SumoSession
 
 
@@ -53,6 +53,11 @@ class ControlledVehicle:
     _prev_accel: float = 0.0
     _pending: tuple = ()
     _manoeuvre: int = 0  # SUMO direction of a change charged at its start whose lane index has not flipped yet
+    place: RoutePlace | None = None  # where it is on its route (``obs_type.place()`` at the start)
+
+    def __post_init__(self) -> None:
+        if self.place is None:
+            self.place = self.obs_type.place()
 
     def observe(self, measured: bool = False) -> dict[str, np.ndarray]:
         """The vehicle's observation now, its signal view, neighbours and lateral mask updated.
@@ -60,10 +65,10 @@ class ControlledVehicle:
         s = self.session
         if not measured:
             self.kin = s.kinematics(self.vid)
-            self.along = self.obs_type.along(s, self.vid, self.kin)
-        obs, self.signal, self.others = self.obs_type.observe(s, self.vid, self.kin, s.neighbours(self.vid))
+            self.along = self.obs_type.along(s, self.vid, self.kin, self.place)
+        obs, self.signal, self.others = self.obs_type.observe(s, self.vid, self.kin, s.neighbours(self.vid), self.place)
         # the road's lanes, not the observation's: a change into a padded lane is masked
-        self.mask = self.obs_type.mask(s, self.vid, self.kin.lane)
+        self.mask = self.obs_type.mask(s, self.vid, self.kin.lane, self.place)
         return obs
 
     def apply(self, cmd: Command) -> None:
@@ -84,7 +89,7 @@ class ControlledVehicle:
         s, cfg = self.session, self.cfg
         cmd, sent, v0, lane0, x0, y0, edge0 = self._pending
         kin = s.kinematics(self.vid)
-        along = self.obs_type.along(s, self.vid, kin)
+        along = self.obs_type.along(s, self.vid, kin, self.place)
         distance, self.along = max(0.0, along - self.along), along
         dt = cfg.step_length
         applied = safety.applied_acceleration(v0, kin.speed, dt)

@@ -41,7 +41,7 @@ from ecodrive_bench.bench.cases.case import Case
 from ecodrive_bench.bench.io import read_parquet_meta
 
 FILE = Path(__file__).with_name("clairvoyant_drives.parquet")
-VERSION = 6  # [-] of the planner's drives and their choice: bump with any change that moves one
+VERSION = 7  # [-] of the planner's drives and their choice: bump with any change that moves one
 META_KEY = b"ecodrive_clairvoyant_drives"
 MAX_BYTES = 16 << 20  # [bytes] a larger file is refused before it is read
 REBUILD = "ecodrive cases --write --clairvoyant"

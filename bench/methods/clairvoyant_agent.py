@@ -3,7 +3,7 @@
 It knows what no causal method can: the signal plans, and the future of every other vehicle of
 the case (the traffic is deterministic given the case's SUMO seed). Before its episode the harness
 calls ``prepare(env, case)``, which drives the case on the worker's own env to record that future
-(``bench.oracle.clairvoyant.Recording``, every eastbound vehicle at every step).
+(``bench.oracle.clairvoyant.Recording``, every vehicle on the ego's route at every step).
 
 Then it drives in closed loop, as ``mpc`` does, but with the future known instead of guessed. It
 follows the departure's first plan (the DP's free-flow optimum with Krauss' red cap, on the fine
@@ -319,10 +319,8 @@ class ClairvoyantAgent(NotLearning):
 
 
 def traffic_lanes(env: Any) -> tuple[float, ...]:
-    """The lateral coordinate of each lane as ``env.traffic()`` gives it: the generated arterial's
-    lane centres; on a network corridor each lane index times ``envs.route.LANE_PITCH``."""
-    if env.files.route is None:
-        return tuple(env.files.lane_y)
+    """The lateral coordinate of each lane as ``env.traffic()`` gives it: its index times
+    ``envs.route.LANE_PITCH``."""
     return tuple(i * LANE_PITCH for i in range(env.cfg.observed_lanes))
 
 

@@ -2,8 +2,8 @@
 
 A case's traffic is deterministic given its SUMO seed, so a drive of the case records the future
 of every other vehicle. ``Recording`` holds it: per step from the ego's departure, every vehicle
-heading east (id, front bumper x, y, length, speed; ``envs.sumo.SumoSession.eastbound``) and where
-the recorded ego was; ``Tracks`` holds the same by vehicle.
+on the ego's route (id, front bumper along the route, lane index times a pitch, length, speed;
+``envs.env.EcoDriveEnv.traffic``) and where the recorded ego was; ``Tracks`` holds the same by vehicle.
 
 ``ahead_future`` gives, over a re-plan's look-ahead, the nearest vehicle ahead of the ego in a lane:
 the vehicles in the lane ahead of the ego now, each moved as the recording moved it from now (a
@@ -36,7 +36,7 @@ NO_CAP = 1 << 40  # [rows] a step without a vehicle ahead
 @dataclass(frozen=True)
 class Recording:
     """A drive of one case: per step k from the ego's departure (time ``t0 + k dt``), the ego's front
-    bumper ``ego_x[k]`` and the other eastbound vehicles ``traffic[k]``: their ids and rows of front
+    bumper ``ego_x[k]`` and the other vehicles on the route ``traffic[k]``: their ids and rows of front
     bumper x, y [m], length [m], speed [m/s]."""
 
     t0: float  # [s] the ego's departure
@@ -47,7 +47,7 @@ class Recording:
 @dataclass(frozen=True)
 class Tracks:
     """A recording by vehicle: ``front[vid][k]``, ``y[vid][k]`` and ``speed[vid][k]`` at step k (NaN
-    where the vehicle is not on the road, or not eastbound)."""
+    where the vehicle is not on the route)."""
 
     front: dict[str, np.ndarray]
     y: dict[str, np.ndarray]

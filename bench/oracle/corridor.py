@@ -1,24 +1,29 @@
-"""What the DP needs of a built scenario: the ego's start, the corridor's end, the stop lines,
-SUMO's signal timing and the speed limits, read from the network SUMO runs: the generated
-arterial's (``envs.scenario.build``, x coordinates, one green window per cycle, one speed limit)
-or a network corridor's route frame (``envs.route``: positions along the route, the green windows
-of the route's links, the limits of its edges and junctions)."""
+"""What the DP needs of a corridor: the ego's start, the corridor's end, the stop lines, SUMO's
+signal timing and the speed limits, read from the network SUMO runs in the ego's route frame
+(``envs.route``: positions along the route, the green windows of the route's links, the limits of
+its edges and junctions). The generated arterial is one such corridor: its frame is its x axis,
+one green window per cycle and one speed limit."""
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
 
 from ecodrive_bench.envs.config import ConfigError, ScenarioConfig
-from ecodrive_bench.envs.scenario import build
+from ecodrive_bench.envs.network import corridor_files
 
 POSITION_EPS = 0.1  # [m] SUMO's POSITION_EPS: departPos "base" = vehicle length + this
 MS = 1000  # [ms/s] SUMO's time unit
 STOP_EPS = 1e-3  # [m] a stop line at the ego's start (a first edge shorter than the ego) lies this far ahead
 LIMIT_TOL = 0.05  # [m/s] a network's limit this close to speed_limit is taken as it (13.89 for 50 km/h)
+NET_PRECISION = 2  # decimals of a SUMO network file's lengths and coordinates ([m], 0.01 m)
+
+
+def _net(x: float) -> float:
+    """``x`` [m] (a sum of a network's lengths along a route) to the network's precision."""
+    return round(x, NET_PRECISION)
 
 
 @dataclass(frozen=True)
@@ -41,36 +46,14 @@ class Corridor:
 
     @classmethod
     def from_config(cls, cfg: ScenarioConfig) -> Corridor:
-        if cfg.network is not None:
-            return cls.from_route(cfg)
-        files = build(cfg)
-        net = ET.parse(files.net).getroot()
-
-        def lane_start(edge: str) -> float:
-            lane = net.find(f"./edge[@id='{edge}']/lane")
-            if lane is None:
-                raise RuntimeError(f"edge {edge} not found in {files.net}")
-            return float(lane.get("shape").split()[0].split(",")[0])
-
-        def sumo_ms(seconds: float) -> int:  # the .add.xml writes "%g"; SUMO keeps milliseconds
-            return int(round(float(f"{seconds:g}") * MS))
-
-        timing, y = cfg.timing, cfg.yellow  # a cycle is the sum of the phases SUMO read
-        return cls(
-            x0=lane_start(files.arterial_edges[0]) + cfg.vehicle_length + POSITION_EPS,
-            v0=cfg.speed_limit, x_end=lane_start(files.exit_edge), stop_lines=tuple(files.stop_lines),
-            offsets_ms=tuple(sumo_ms(t.offset) for t in timing), greens_ms=tuple(sumo_ms(t.green) for t in timing),
-            cycles_ms=tuple(sumo_ms(t.green) + 2 * sumo_ms(y) + sumo_ms(t.cycle - t.green - 2 * y) for t in timing),
-        )
-
-    @classmethod
-    def from_route(cls, cfg: ScenarioConfig) -> Corridor:
-        """A network corridor's, in its route frame; a ``PlanError`` where a signal on the route is
-        not fixed-time or a limit on it is above ``cfg.speed_limit`` (the lattice's top speed)."""
-        from ecodrive_bench.envs.network import corridor_files  # noqa: PLC0415
-
+        """The corridor of ``cfg`` in its route frame (``envs.route``; on the generated arterial the
+        frame is its x axis). Positions are the network's, to its precision (``NET_PRECISION``:
+        float summation along the route is rounded away). A corridor whose every signal is green in
+        one window from its cycle's start and whose limits are all the speed limit is stored in that
+        one-window form (``windows_ms`` and ``limits`` empty), as the generated arterial is. A
+        ``PlanError`` where a signal on the route is not fixed-time or a limit on it is above
+        ``cfg.speed_limit`` (the lattice's top speed)."""
         route = corridor_files(cfg).route
-        assert route is not None
         moving = [c.tls for c in route.crossings if not c.static]
         if moving:
             raise PlanError(f"signal {moving[0]!r:.60} on the route is not fixed-time; accepted for the planners: "
@@ -79,14 +62,16 @@ class Corridor:
         if top > cfg.speed_limit + LIMIT_TOL:
             raise PlanError(f"the route's speed limit {top:g} m/s is above speed_limit={cfg.speed_limit:g}; "
                             f"accepted for the planners: limits up to speed_limit")
-        below = tuple((a, b, v) for a, b, v in route.limits if v < cfg.speed_limit - LIMIT_TOL)
+        below = tuple((_net(a), _net(b), v) for a, b, v in route.limits if v < cfg.speed_limit - LIMIT_TOL)
         c = route.crossings
-        x0 = min(route.lengths[0], cfg.vehicle_length + POSITION_EPS)  # SUMO puts a longer vehicle at the lane's end
+        x0 = min(_net(route.lengths[0]), cfg.vehicle_length + POSITION_EPS)  # SUMO puts a longer vehicle at the lane's end
+        windows = tuple(x.windows_ms for x in c)
+        one_window = not below and all(len(w) == 1 and w[0][0] == 0 for w in windows)
         return cls(
-            x0=x0, v0=min(cfg.speed_limit, route.limits[0][2]), x_end=route.offsets[-1],
-            stop_lines=tuple(max(x.stop_line, x0 + STOP_EPS) for x in c), offsets_ms=tuple(x.offset_ms for x in c),
-            cycles_ms=tuple(x.cycle_ms for x in c), greens_ms=tuple(sum(b - a for a, b in x.windows_ms) for x in c),
-            windows_ms=tuple(x.windows_ms for x in c), limits=below)
+            x0=x0, v0=min(cfg.speed_limit, route.limits[0][2]), x_end=_net(route.offsets[-1]),
+            stop_lines=tuple(max(_net(x.stop_line), x0 + STOP_EPS) for x in c), offsets_ms=tuple(x.offset_ms for x in c),
+            cycles_ms=tuple(x.cycle_ms for x in c), greens_ms=tuple(sum(b - a for a, b in w) for w in windows),
+            windows_ms=() if one_window else windows, limits=below)
 
     def starting(self, speed: float, dv: float) -> Corridor:
         """The corridor from a start at ``speed`` [m/s] (the ego's at its insertion, which traffic

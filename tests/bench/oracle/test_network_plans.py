@@ -1,4 +1,4 @@
-"""The DP on a network corridor's route frame (bench.oracle.corridor.Corridor.from_route): plans keep
+"""The DP on a corridor's route frame (bench.oracle.corridor.Corridor.from_config): plans keep
 the route's speed limits and cross each stop line only in a step its links are green, from any
 start speed, and a corridor of green windows reads as the one-window form where they agree."""
 from __future__ import annotations
@@ -66,21 +66,30 @@ def test_one_green_window_reads_as_the_generated_form():
                                         "spacings": [300.0, 610.0, 450.0], "junction_offsets": [0.0, 17.0, 55.0, 3.0],
                                         "junction_cycles": [75.0] * 4, "junction_greens": [30.0, 41.0, 27.0, 44.0]}])
 def test_the_generated_arterial_read_as_a_route_is_its_corridor(overrides):
-    """The generated arterial's own net and programs read through ``envs.route`` give the corridor the
-    DP reads of it (``Corridor.from_config``): the same start, stop lines and end within float
-    summation (1e-9 m), the same offsets and cycles, and one green window (0, green] per cycle: the
-    route frame holds the generated corridors as one kind of network corridor."""
-    from ecodrive_bench.envs.route import programs, read_net, route_of
+    """The generated arterial is one kind of network corridor: the DP's corridor, read in its route
+    frame (``Corridor.from_config``), is the one its generator laid out. Its start is the first
+    lane's start plus the ego's length and POSITION_EPS, its stop lines are the x of each junction's
+    incoming lane end (``geometry.json``), its end is the exit edge's start, and each signal is green
+    once per cycle from the cycle's start for its green time, at its offset (the config's timing as
+    SUMO reads it, in ms), with no speed limit below the corridor's: the one-window form."""
+    import xml.etree.ElementTree as ET
+
     from ecodrive_bench.envs.scenario import build
 
     cfg = ScenarioConfig.from_dict(overrides)
     files = build(cfg)
     cor = Corridor.from_config(cfg)
-    route = route_of(read_net(files.net), list(dict.fromkeys([*files.arterial_edges, files.exit_edge])),
-                     programs(files.additional))
-    c = route.crossings
-    assert len(c) == len(cor.stop_lines) == cfg.n_intersections
-    np.testing.assert_allclose([x.stop_line for x in c], cor.stop_lines, rtol=0, atol=1e-9)
-    assert abs(route.offsets[-1] - cor.x_end) < 1e-9 and min(route.lengths[0], cfg.vehicle_length + POSITION_EPS) == cor.x0
-    assert tuple(x.offset_ms for x in c) == cor.offsets_ms and tuple(x.cycle_ms for x in c) == cor.cycles_ms
-    assert tuple(x.windows_ms for x in c) == tuple(((0, g),) for g in cor.greens_ms)
+    net = ET.parse(files.net).getroot()
+
+    def lane_start(edge: str) -> float:
+        return float(net.find(f"./edge[@id='{edge}']/lane").get("shape").split()[0].split(",")[0])
+
+    x_first = lane_start(files.arterial_edges[0])
+    assert x_first == 0.0  # the frame's origin is the arterial's start: positions are its x
+    assert cor.x0 == cfg.vehicle_length + POSITION_EPS and cor.v0 == cfg.speed_limit
+    assert cor.stop_lines == files.stop_lines and len(cor.stop_lines) == cfg.n_intersections
+    assert cor.x_end == lane_start(files.exit_edge)
+    ms = [(round(t.offset * 1000), round(t.green * 1000), round(t.cycle * 1000)) for t in cfg.timing]
+    assert cor.offsets_ms == tuple(o for o, _, _ in ms) and cor.greens_ms == tuple(g for _, g, _ in ms)
+    assert cor.cycles_ms == tuple(c for _, _, c in ms)
+    assert cor.windows_ms == () and cor.limits == ()
