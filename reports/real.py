@@ -3,8 +3,8 @@
 on the same corridor and cases, and each learned method's zero-shot edge over steady driving
 beside its edge on the paper's corridor and on the held-out family.
 
-``summary`` and ``edge_rows`` are pure functions of results tables; ``section`` renders them.
-Reads only the real run's ``real.parquet`` and ``manifest.json`` (and, for the edges beside, a
+``summary``, ``edge_rows`` and ``scale_rows`` are pure functions of results tables;
+``reports.section_real`` renders them. Reads only the real run's ``real.parquet`` and ``manifest.json`` (and, for the edges beside, a
 paper run's and a generalisation run's tables).
 """
 from __future__ import annotations
@@ -16,7 +16,6 @@ import numpy as np
 import pandas as pd
 
 from ecodrive_bench.bench import registry
-from ecodrive_bench.bench.io import atomic_csv
 
 from . import headline, metrics, tables
 from .edge import REFERENCE, edges
@@ -113,7 +112,7 @@ def bound_line(results: pd.DataFrame) -> str:
     if per_case.empty:
         return ""
     return (f"DP bound (the ego alone through the route's signal programs, from its insertion state; "
-            f"`ecodrive run --bounds`): cost {_ci_text(*mean_ci(per_case.to_numpy()))} over {len(per_case)} cases.")
+            f"`ecodrive run --bounds`): cost {ci_text(*mean_ci(per_case.to_numpy()))} over {len(per_case)} cases.")
 
 
 def scale_checks(summ: pd.DataFrame) -> list[str]:
@@ -165,88 +164,16 @@ def _value(frame: pd.DataFrame, method: str, col: str) -> float:
     return float(hit[col].iloc[0]) if len(hit) and col in hit else float("nan")
 
 
-def _ci_text(v: float, lo: float, hi: float, digits: int = 1) -> str:
+def ci_text(v: float, lo: float, hi: float, digits: int = 1) -> str:
     if pd.isna(v):
         return ""
     return f"{v:.{digits}f}" + ("" if pd.isna(lo) else f" [{lo:.{digits}f}, {hi:.{digits}f}]")
 
 
-def _pct(v: float, lo: float = float("nan"), hi: float = float("nan")) -> str:
+def pct(v: float, lo: float = float("nan"), hi: float = float("nan")) -> str:
     if pd.isna(v):
         return ""
     return f"{100 * v:+.1f}%" + ("" if pd.isna(lo) else f" [{100 * lo:+.1f}, {100 * hi:+.1f}]")
-
-
-def section(run_dir: Path, out: Path, methods_order: tuple[str, ...], paper: pd.DataFrame | None = None,
-            heldout: pd.DataFrame | None = None) -> list[str]:
-    """Markdown lines; CSVs ``real.csv`` (per corridor) and ``real_edges.csv`` into ``out``."""
-    table, manifest, _ = load(run_dir)
-    phis = headline.phis(table, manifest)
-    order = {m: i for i, m in enumerate([*methods_order, *sorted(set(table.method) - set(methods_order))])}
-    summ = summary(table, phis).sort_values(["variant", "signals", "method"],
-                                            key=lambda c: c.map(order) if c.name == "method" else c)
-    edge = edge_rows(table, phis, paper, heldout)
-    atomic_csv(summ, out / "real.csv")
-    atomic_csv(edge, out / "real_edges.csv")
-    fam = manifest.get("family", {})
-    md = ["## Real corridors", "",
-          f"Run `{run_dir.name}`: {table.variant.nunique()} real corridor(s) of the real case set (version "
-          f"{fam.get('version', '?')}, master seed {fam.get('master_seed', '?')}; RESCO's networks read from the "
-          f"installed sumo-rl package, docs/networks.md), {len(table)} episodes. Each is a route through a real city "
-          "network with its own static signal programs and an hour of its own traffic; every shipped policy drives "
-          "it zero-shot (none trained or selected on it). The signal setting names which specialists drive (those "
-          "trained on the paper's coordinated or uncoordinated corridor); the corridor's signals are its own in both. "
-          "Means with 95% CIs over cases (a learned method's training seeds averaged per case); cost = E + phi T; "
-          "change = method's mean cost / the reference's on the same cases - 1 (negative: cheaper); finished = the "
-          "share of episodes that reached the route's end (the others were cut at max_episode_time); ego teleports: "
-          "SUMO moved the ego on after it stood blocked for its time-to-teleport (300 s).", ""]
-    for (variant, signals), sub in summ.groupby(["variant", "signals"], sort=False):
-        rows = [{"method": name(r.method), "energy [Wh]": _ci_text(r.energy, r.energy_ci_low, r.energy_ci_high),
-                 "travel time [s]": _ci_text(r.travel_time, r.travel_time_ci_low, r.travel_time_ci_high),
-                 "cost": _ci_text(r.cost, r.cost_ci_low, r.cost_ci_high),
-                 "vs SUMO's driver": _pct(r.cost_vs_driver), "vs Baseline0": _pct(r.cost_vs_baseline0),
-                 "finished": "" if pd.isna(r.finished) else f"{100 * r.finished:.0f}%", "ego teleports": r.teleports}
-                for r in sub.itertuples(index=False)]
-        md += [f"### {variant}, {signals} (phi = {phis.get(signals, 1.0):g} Wh/s)", "",
-               tables.frame_markdown(pd.DataFrame(rows).set_index("method"))]
-        bound = bound_line(table[(table.variant == variant) & (table.signals == signals)])
-        md += [bound, ""] if bound else []
-    if not edge.empty:
-        md += ["### Zero-shot edge over steady driving", "",
-               "Edge = 1 - mean cost / Baseline0's on the same cases and corridor (positive: cheaper than steady "
-               "driving), 95% CI over training seeds; on the real corridors and the held-out family the mean of the "
-               "corridors' edges, and the worst corridor. The paper's corridor and the held-out family need their "
-               "runs (`ecodrive report PAPER_RUN --generalisation GEN_RUN --real REAL_RUN`).", ""]
-        rows = [{"setting": r.signals, "method": name(r.method), "seeds": r.seeds,
-                 "real corridors": _pct(r.real_cost, r.real_cost_ci_low, r.real_cost_ci_high),
-                 "worst real corridor": _pct(r.real_cost_worst),
-                 "paper corridor": _pct(r.paper_cost, r.paper_cost_ci_low, r.paper_cost_ci_high),
-                 "held-out family": _pct(r.heldout_cost, r.heldout_cost_ci_low, r.heldout_cost_ci_high)}
-                for r in edge.itertuples(index=False)]
-        md += [tables.frame_markdown(pd.DataFrame(rows).set_index(["setting", "method"]))]
-    scale = scale_rows(table, phis)
-    atomic_csv(scale, out / "real_headroom.csv")
-    if scale.empty:
-        md += ["No corridor of this run has both Baseline0 and `clairvoyant`, so the headroom from steady driving "
-               "to the top of the scale is not measured here (`ecodrive run --profile real` runs the planners by "
-               "default).", ""]
-        return md
-    md += ["### Headroom from steady driving to the top of the scale", "",
-           "Share = (Baseline0's cost - the method's) / (Baseline0's - `clairvoyant`'s), over the cases all three "
-           "share (100%: as cheap as `clairvoyant`; negative: dearer than steady driving), 95% CI by a paired "
-           "bootstrap over cases and training seeds (`reports.metrics.headroom`, as on the paper's corridor). "
-           "`clairvoyant`, `mpc` and `oracle` plan on the route frame from the network's own static "
-           "programs (the green windows of the links the route uses) and its speed limits (docs/networks.md). The "
-           "top of the scale holds on a corridor when `clairvoyant`'s mean cost is at least "
-           f"{100 * TOP_MARGIN:g}% below every learned and rule-based method's, no higher than `mpc`'s and "
-           "`oracle`'s, and its mean travel time no longer than SUMO's driver's:", "", *scale_checks(summ), ""]
-    rows = [{"corridor": r.variant, "setting": r.signals, "method": name(r.method),
-             "headroom [Wh]": f"{r.headroom:.1f}", "share": _pct(r.share, r.share_ci_low, r.share_ci_high),
-             "cases below clairvoyant": int(r.beaten)}
-            for r in scale.sort_values(["variant", "signals", "method"],
-                                       key=lambda c: c.map(order) if c.name == "method" else c).itertuples(index=False)]
-    md += [tables.frame_markdown(pd.DataFrame(rows).set_index(["corridor", "setting", "method"]))]
-    return md
 
 
 def headline_line(real_dir: Path) -> str:
@@ -260,8 +187,8 @@ def headline_line(real_dir: Path) -> str:
         best = sub.loc[sub.real_cost.idxmax()] if sub.real_cost.notna().any() else None
         if best is not None:
             parts.append(f"{signals} specialists: best {name(best.method)} "
-                         f"{_pct(best.real_cost, best.real_cost_ci_low, best.real_cost_ci_high)} "
-                         f"(worst corridor {_pct(best.real_cost_worst)})")
+                         f"{pct(best.real_cost, best.real_cost_ci_low, best.real_cost_ci_high)} "
+                         f"(worst corridor {pct(best.real_cost_worst)})")
     return "; ".join(parts)
 
 
@@ -288,9 +215,9 @@ def readme_table(real_dir: Path) -> str:
             if best is not None and not scale.empty else pd.DataFrame()
         rows.append({"corridor": variant, "specialists of": signals, "SUMO's driver": driver, "Baseline0": steady,
                      "Clairvoyant": top, "best learned (zero-shot)": "" if best is None else
-                     f"{name(best.method)} {_ci_text(best.cost, best.cost_ci_low, best.cost_ci_high)}",
-                     "vs Baseline0": "" if best is None else _pct(best.cost_vs_baseline0),
-                     "its share of the headroom": "" if hit.empty else _pct(hit.share.iloc[0])})
+                     f"{name(best.method)} {ci_text(best.cost, best.cost_ci_low, best.cost_ci_high)}",
+                     "vs Baseline0": "" if best is None else pct(best.cost_vs_baseline0),
+                     "its share of the headroom": "" if hit.empty else pct(hit.share.iloc[0])})
     fam = manifest.get("family", {})
     shown = real_dir.as_posix() if not real_dir.is_absolute() else real_dir.name  # as typed; no machine's paths
     return "\n".join([REAL_START, f"<!-- generated by `ecodrive report {shown} --readme README.md` from run "

@@ -1,13 +1,12 @@
 """The further experiments found in the run folder: reward study, sensitivity heatmap, lateral
-scenarios, mixed traffic (``reports.experiments``). ``experiments.sections`` computes, writes its
-figures and renders in one call, made from ``write``: ``markdown`` returns what it rendered, and
-its warnings join the report's."""
+scenarios, mixed traffic (``reports.experiments``); their warnings (unfinished sweeps, missing
+logs) join the report's."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import experiments
+from .experiments import Found
 from .html_markdown import experiment_caption
 from .html_parts import Figure
 from .inputs import Run
@@ -16,25 +15,17 @@ ANCHOR = None  # each experiment a part of the page of its own (x-mixed-traffic,
 PHASE = "the experiments' sections"
 
 
-@dataclass
-class Experiments:
-    run_dir: Path
-    lines: list[str] = field(default_factory=list)  # set by ``write``
-    images: list[tuple[str, Path]] = field(default_factory=list)  # (title, PNG)
-    warnings: list[str] = field(default_factory=list)
+def compute(run: Run, warnings: list[str]) -> Found | None:
+    return experiments.compute(run.dir) if experiments.present(run.dir) else None
 
 
-def compute(run: Run, warnings: list[str]) -> Experiments | None:
-    return Experiments(run.dir) if experiments.present(run.dir) else None
+def write(d: Found, out: Path) -> None:
+    experiments.write(d, out)
 
 
-def write(d: Experiments, out: Path) -> None:
-    d.lines, d.images, d.warnings = experiments.sections(d.run_dir, out)
+def figures_of(d: Found) -> list[Figure]:
+    return [Figure(p, experiment_caption(t), t) for t, p in experiments.images(d)]
 
 
-def figures_of(d: Experiments) -> list[Figure]:
-    return [Figure(p, experiment_caption(t), t) for t, p in d.images]
-
-
-def markdown(d: Experiments) -> str:
-    return "\n".join(d.lines)
+def markdown(d: Found) -> str:
+    return "\n".join(experiments.markdown(d))
