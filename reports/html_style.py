@@ -1,4 +1,4 @@
-"""The report page's inline stylesheet and its HTML skeleton (no script, nothing fetched)."""
+"""The report page's inline stylesheet and its Jinja2 skeleton (no script, nothing fetched)."""
 from __future__ import annotations
 
 import jinja2
@@ -75,8 +75,9 @@ footer { margin-top:48px; color:var(--muted); font-size:12px; border-top:1px sol
 @media print { nav { display:none; } figure { break-inside:avoid; } main { max-width:none; padding:0; } }
 """
 
-# the page skeleton: data escaped by Jinja2, the sections' HTML (``body``) and the stylesheet as they are
-TEMPLATE = jinja2.Environment(autoescape=True, keep_trailing_newline=True).from_string("""<!DOCTYPE html>
+ENV = jinja2.Environment(autoescape=True, keep_trailing_newline=True)  # the page's templates: data escaped
+# the page skeleton: the sections' HTML (``body``) and the stylesheet as they are
+TEMPLATE = ENV.from_string("""<!DOCTYPE html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
