@@ -36,16 +36,6 @@ def missing(v) -> bool:
         return False
 
 
-def num(v, digits: int = 2) -> str:
-    """A number with ``digits`` decimals and a true minus sign; an en dash where there is none."""
-    if missing(v):
-        return DASH
-    x = float(v)
-    if abs(x) < 0.5 * 10 ** -digits:  # no "-0.00"
-        x = 0.0
-    return f"{x:.{digits}f}".replace("-", MINUS)
-
-
 def pct(v, digits: int = 2) -> str:
     """A fraction as a signed percent (0.237 -> '+23.70%'); an en dash where there is none."""
     if missing(v):
@@ -54,10 +44,6 @@ def pct(v, digits: int = 2) -> str:
     if abs(x) < 0.5 * 10 ** -digits:
         return f"{0:.{digits}f}%"
     return f"{x:+.{digits}f}%".replace("-", MINUS)
-
-
-def ci(lo, hi, digits: int = 2) -> str:
-    return DASH if missing(lo) or missing(hi) else f"[{num(lo, digits)}, {num(hi, digits)}]"
 
 
 def esc(v) -> str:
@@ -83,11 +69,6 @@ def signed_class(v) -> str:
 
 
 # ---------------------------------------------------------------- pieces
-def td(text: str, cls: str = "", raw: bool = False) -> str:
-    c = f" class='{cls.strip()}'" if cls.strip() else ""
-    return f"<td{c}>{text if raw else esc(text)}</td>"
-
-
 def badge(status: str) -> str:
     return f"<span class='badge {STATUS_CLASS.get(status, 'absent')}'>{esc(status)}</span>"
 

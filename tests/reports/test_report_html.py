@@ -284,8 +284,8 @@ def test_the_markdown_is_unchanged(report):
 # ---------------------------------------------------------------- pure helpers
 def test_formatting():
     assert html_parts.pct(0.237) == "+23.70%" and html_parts.pct(-0.0793) == "\u22127.93%"
-    assert html_parts.pct(float("nan")) == html_parts.num(None) == html_parts.ci(1.0, np.nan) == html_parts.DASH
-    assert html_parts.pct(-1e-9) == "0.00%" and html_parts.num(-3.14159) == "\u22123.14"
+    assert html_parts.pct(float("nan")) == html_parts.pct(None) == html_parts.DASH
+    assert html_parts.pct(-1e-9) == "0.00%" and html_parts.pct(-0.0314159, 1) == "\u22123.1%"
     assert html_markdown.md_cell("nan", "x") == (html_parts.DASH, "num")
     assert html_markdown.md_cell("-0.14", "all_energy_change")[0] == "\u221214%"
     assert html_markdown.md_cell("0.05", "all_speed_change_max")[0] == "+5%"
