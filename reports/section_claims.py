@@ -21,7 +21,14 @@ def compute(run: Run, warnings: list[str]) -> pd.DataFrame | None:
 
 
 def markdown(table: pd.DataFrame) -> str:
+    counts = table.status.value_counts()
+    summary = ", ".join(f"{s} {int(counts[s])}" for s in claims.STATUSES if counts.get(s, 0))
     return "\n".join(["## Does the paper hold on this run?", "",
+                      f"**{len(table)} claims** from the paper: {summary}.", "",
                       "Section 5.3's and Table 4's claims on this run's own episodes, with the published numbers and "
                       "tolerances of `bench/paper.py`; a claim about a method or setting not in the run is NOT CHECKED.",
+                      "*paper*: what the paper reports (improvements recomputed from Table 4's means); *ours*: the same "
+                      "quantity from this run's mean over its test cases. Energy savings and travel-time changes are "
+                      "against the SUMO baseline of the same setting. `ecodrive regress` checks the same claims on "
+                      "20 cases against a recorded reference.",
                       "", tables.frame_markdown(table.set_index(["signals", "claim"]))])

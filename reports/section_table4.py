@@ -37,7 +37,12 @@ def write(d: Table4, out: Path) -> None:
 
 
 def markdown(d: Table4) -> str:
-    lines = ["## Table 4", "", tables.table4_markdown(d.table)]
+    lines = ["## Table 4", "",
+             "Each method's mean over its episodes: the fixed test cases times its training seeds (the paper: 100 "
+             "cases, one policy). *imp.* = (baseline - method) / baseline, as in the paper: + means less energy or "
+             "less time than the baseline of the same setting (better), - more (worse). *vs paper* = this run / "
+             "published - 1. The *paper* columns are the published Table 4 (the baseline and PRL; the paper's "
+             "imp. recomputed from its means).", "", tables.table4_markdown(d.table)]
     if not d.costs.empty:
         lines += ["Table 4 compares energy and travel time apart; the reward's cost, E + phi T (eq. 11, the criterion "
                   "the learning methods' checkpoints are selected by), weighs them together. Ours against the cost "
