@@ -119,8 +119,11 @@ def _train(out: Path, rate: float, episodes: int = 2, **kw) -> pd.DataFrame:
 def test_training_with_leaders_is_reproducible_resumes_and_refuses_another_rate(tmp_path):
     straight = _train(tmp_path / "a", 1.0)
     assert list(straight.columns[-len(ROW_KEYS):]) == list(ROW_KEYS)
-    assert (straight.braking_event == "inserted").all()
-    assert (straight.braking_entry_gap - straight.braking_gap).abs().max() < 5.0  # <= |a_min| x 1 s^2
+    # at rate 1 every episode draws an event; whether its spot comes depends on how the exploring ego
+    # drives the first edge (an episode that never gets there is "no_spot"), so one at least is placed
+    assert (straight.braking_event != "none").all() and (straight.braking_event == "inserted").any()
+    placed = straight[straight.braking_event == "inserted"]
+    assert (placed.braking_entry_gap - placed.braking_gap).abs().max() < 5.0  # <= |a_min| x 1 s^2
     _train(tmp_path / "b", 1.0, stop_after=1)
     resumed = _train(tmp_path / "b", 1.0)
     pd.testing.assert_frame_equal(resumed, straight)
