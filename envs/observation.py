@@ -185,6 +185,7 @@ class RoutePlace:
     """Where one vehicle is on its route, kept from step to step (each vehicle has its own)."""
 
     widths: tuple[float, ...] = ()  # [m] lane widths of the last route edge it was on, rightmost first
+    road: str = ""  # that edge (``widths`` are read again only when it changes)
     lane: int = 0  # its lane index there
     edge: str = ""  # the edge it is on (an internal one inside a junction)
     internal: bool = False  # it is on a junction's internal lane
@@ -269,8 +270,10 @@ class GridLogicObservation:
         x, y, _, speed, _, _, edge = kin
         place.edge, place.internal = edge, edge.startswith(":")
         if edge and not place.internal:
-            n = session.edge_lanes(edge)
-            place.widths, place.lane = tuple(session.lane_geometry(f"{edge}_{i}")[1] for i in range(n)), kin.lane
+            if edge != place.road:  # a new edge: its lanes' widths, read once per edge
+                n = session.edge_lanes(edge)
+                place.widths, place.road = tuple(session.lane_geometry(f"{edge}_{i}")[1] for i in range(n)), edge
+            place.lane = kin.lane
         widths, lane = place.widths, place.lane
         lane_id, pos = place.lane_place if place.lane_place is not None else session.lane_place(vid)
         place.lane_place = None
